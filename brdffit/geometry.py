@@ -1,0 +1,193 @@
+"""Directions in the local shading frame, the quantities models share, and safe maths.
+
+Convention (docs/conventions.md): z is the surface normal and x the tangent; ωi points to the light and ωo to the
+detector, both leaving the surface; θ is the polar angle from z and φ the azimuth from x, in radians.
+
+The "safe" helpers keep values *and* gradients finite where the plain formula divides by zero or takes the root
+of zero: at normal incidence (θ = 0, where the half vector equals the normal and every azimuth is undefined) and
+at grazing angles (θ -> π/2, where cosines vanish).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+
+__all__ = [
+    "LocalPair",
+    "spherical_to_vector",
+    "vector_to_spherical",
+    "half_vector",
+    "mirror",
+    "to_half_diff",
+    "from_half_diff",
+    "safe_sqrt",
+    "safe_div",
+    "safe_normalize",
+    "safe_pow",
+    "logistic",
+    "TINY",
+]
+
+# Smallest magnitude the safe helpers let through; far below any physically meaningful cosine.
+TINY = 1e-12
+
+
+def safe_sqrt(x):
+    """√x for x > TINY and 0 otherwise; the gradient is finite everywhere (0 where x <= TINY)."""
+    positive = x > TINY
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
+
+
+def safe_div(num, den, fallback=0.0):
+    """num / den where |den| > TINY, else ``fallback``; no NaN leaks into values or gradients."""
+    ok = jnp.abs(den) > TINY
+    return jnp.where(ok, num / jnp.where(ok, den, 1.0), fallback)
+
+
+def safe_normalize(v):
+    """v / |v| along the last axis; a zero vector maps to the normal (0, 0, 1) with a finite gradient."""
+    norm2 = jnp.sum(v * v, axis=-1, keepdims=True)
+    ok = norm2 > TINY * TINY
+    unit = v / jnp.sqrt(jnp.where(ok, norm2, 1.0))
+    return jnp.where(ok, unit, jnp.array([0.0, 0.0, 1.0], dtype=v.dtype))
+
+
+def safe_pow(x, n):
+    """max(0, x)^n with n > 0, written as exp(n ln x) so that d/dn is finite (0) where x <= 0."""
+    positive = x > TINY
+    return jnp.where(positive, jnp.exp(n * jnp.log(jnp.where(positive, x, 1.0))), 0.0)
+
+
+def logistic(u):
+    """The logistic function 1 / (1 + e^(-u)), written with tanh so it is stable for large |u|."""
+    return 0.5 * (jnp.tanh(0.5 * u) + 1.0)
+
+
+def spherical_to_vector(theta, phi):
+    """Unit vector(s) of polar angle θ and azimuth φ.
+
+    Arguments:
+        theta: polar angle from the normal (radians), any shape.
+        phi: azimuth from the tangent x (radians), broadcastable with ``theta``.
+
+    Returns:
+        Array of shape ``broadcast(theta, phi).shape + (3,)``.
+    """
+    theta, phi = jnp.broadcast_arrays(jnp.asarray(theta, dtype=float), jnp.asarray(phi, dtype=float))
+    s = jnp.sin(theta)
+    return jnp.stack([s * jnp.cos(phi), s * jnp.sin(phi), jnp.cos(theta)], axis=-1)
+
+
+def vector_to_spherical(w):
+    """Polar angle and azimuth of vector(s) ``w`` (last axis of size 3).
+
+    Arguments:
+        w: direction(s), not necessarily normalised.
+
+    Returns:
+        ``(theta, phi)`` with θ in [0, π] and φ in [0, 2π); φ is 0 along the normal.
+    """
+    w = safe_normalize(jnp.asarray(w, dtype=float))
+    theta = jnp.arccos(jnp.clip(w[..., 2], -1.0, 1.0))
+    phi = jnp.mod(jnp.arctan2(w[..., 1], w[..., 0]), 2 * jnp.pi)
+    return theta, phi
+
+
+def half_vector(wi, wo):
+    """The half vector h = normalize(ωi + ωo) (Cook & Torrance 1982)."""
+    return safe_normalize(wi + wo)
+
+
+def mirror(w):
+    """Mirror reflection of ``w`` about the normal: 2 (n·w) n − w = (−wx, −wy, wz)."""
+    return w * jnp.array([-1.0, -1.0, 1.0], dtype=w.dtype)
+
+
+def _rotate_z(v, angle):
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    return jnp.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1], v[..., 2]], axis=-1)
+
+
+def _rotate_y(v, angle):
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    return jnp.stack([c * v[..., 0] + s * v[..., 2], v[..., 1], -s * v[..., 0] + c * v[..., 2]], axis=-1)
+
+
+def to_half_diff(theta_i, phi_i, theta_o, phi_o):
+    """Rusinkiewicz (1998) half/difference angles of a pair of directions.
+
+    The difference vector d is ωi expressed in a frame where the half vector h is the pole:
+    d = Rot_y(−θh) Rot_z(−φh) ωi (Rusinkiewicz 1998, Sec. 3).
+
+    Arguments:
+        theta_i, phi_i, theta_o, phi_o: spherical angles (radians), broadcastable.
+
+    Returns:
+        ``(theta_h, phi_h, theta_d, phi_d)``, with φ values in [0, 2π).
+    """
+    wi = spherical_to_vector(theta_i, phi_i)
+    wo = spherical_to_vector(theta_o, phi_o)
+    h = half_vector(wi, wo)
+    theta_h, phi_h = vector_to_spherical(h)
+    d = _rotate_y(_rotate_z(wi, -phi_h), -theta_h)
+    theta_d, phi_d = vector_to_spherical(d)
+    return theta_h, phi_h, theta_d, phi_d
+
+
+def from_half_diff(theta_h, phi_h, theta_d, phi_d):
+    """Inverse of `to_half_diff`: spherical angles of ωi and ωo from half/difference angles.
+
+    Arguments:
+        theta_h, phi_h, theta_d, phi_d: Rusinkiewicz angles (radians), broadcastable.
+
+    Returns:
+        ``(theta_i, phi_i, theta_o, phi_o)``; a direction below the horizon has θ > π/2.
+    """
+    d = spherical_to_vector(theta_d, phi_d)
+    wi = _rotate_z(_rotate_y(d, theta_h), phi_h)
+    h = spherical_to_vector(theta_h, phi_h)
+    wo = 2.0 * jnp.sum(wi * h, axis=-1, keepdims=True) * h - wi
+    theta_i, phi_i = vector_to_spherical(wi)
+    theta_o, phi_o = vector_to_spherical(wo)
+    return theta_i, phi_i, theta_o, phi_o
+
+
+class LocalPair(NamedTuple):
+    """Quantities of a direction pair that many lobes need, computed once per evaluation.
+
+    Fields:
+        wi, wo: unit directions to the light and the detector, shape ``(..., 3)``.
+        cos_i, cos_o: n·ωi and n·ωo, clamped to at least TINY so that lobes may divide by them.
+        h: half vector, shape ``(..., 3)``.
+        cos_h: n·h.
+        cos_d: ωi·h (= ωo·h), the angle the Fresnel term sees.
+        above: True where both directions are strictly above the horizon; the model is zero elsewhere.
+    """
+
+    wi: jnp.ndarray
+    wo: jnp.ndarray
+    cos_i: jnp.ndarray
+    cos_o: jnp.ndarray
+    h: jnp.ndarray
+    cos_h: jnp.ndarray
+    cos_d: jnp.ndarray
+    above: jnp.ndarray
+
+    @classmethod
+    def from_dirs(cls, wi, wo) -> "LocalPair":
+        """Build the shared quantities from unit vectors ``wi`` and ``wo`` (broadcastable, last axis 3)."""
+        wi, wo = jnp.broadcast_arrays(jnp.asarray(wi, dtype=float), jnp.asarray(wo, dtype=float))
+        h = half_vector(wi, wo)
+        above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        return cls(
+            wi=wi,
+            wo=wo,
+            cos_i=jnp.maximum(wi[..., 2], TINY),
+            cos_o=jnp.maximum(wo[..., 2], TINY),
+            h=h,
+            cos_h=jnp.maximum(h[..., 2], TINY),
+            cos_d=jnp.maximum(jnp.sum(wi * h, axis=-1), TINY),
+            above=above,
+        )

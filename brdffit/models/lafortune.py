@@ -1,0 +1,75 @@
+"""Lafortune et al.'s generalized cosine lobes, with Ngan et al.'s normalisation."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+
+from ..geometry import LocalPair, safe_pow
+from ..params import ParamSpec
+from .lobe import Lobe
+from .specs import KS, exponent
+
+__all__ = ["Lafortune"]
+
+
+def _coefficient(name: str, default: float, doc: str) -> ParamSpec:
+    return ParamSpec(name, default, -1.0, 1.0, unit="1", doc=doc)
+
+
+@dataclasses.dataclass(frozen=True)
+class Lafortune(Lobe):
+    r"""Sum of K generalized cosine lobes (Lafortune et al. 1997, Eq. 3) normalised as in Ngan et al. (2005):
+
+    lobe j: ks_j (n_j + 2)/(2π) max(0, cxy_j (ωi.x ωo.x + ωi.y ωo.y) + cz_j ωi.z ωo.z)^n_j / max(cxy_j², cz_j²)^(n_j/2).
+
+    With ``anisotropic=True`` the tangent and bitangent terms have their own coefficients cx_j and cy_j and the
+    normalisation uses max(cx_j², cy_j², cz_j²). cxy = −cz gives a specular lobe, cxy = cz a retro-reflective
+    one and cxy = 0 an off-specular lobe towards the normal. Because of the normalisation, only the direction of
+    (cxy, cz) matters, not its length. Reciprocal.
+
+    Options:
+        lobes: number of lobes K (parameters ``ks_j``, ``cxy_j``, ``cz_j``, ``n_j`` for j = 1..K).
+        anisotropic: separate ``cx_j`` and ``cy_j`` instead of ``cxy_j``.
+    """
+
+    name = "lafortune"
+    reference = ("Lafortune et al., Non-linear approximation of reflectance functions, SIGGRAPH 1997, Eq. 3; "
+                 "Ngan et al., Experimental analysis of BRDF models, EGSR 2005")
+
+    lobes: int = 1
+    anisotropic: bool = False
+
+    def __post_init__(self):
+        if not isinstance(self.lobes, int) or isinstance(self.lobes, bool) or self.lobes < 1:
+            raise ValueError(f"lafortune: lobes must be a positive integer, got {self.lobes!r}")
+        if not isinstance(self.anisotropic, bool):
+            raise ValueError(f"lafortune: anisotropic must be True or False, got {self.anisotropic!r}")
+
+    def param_specs(self):
+        specs = []
+        for j in range(1, self.lobes + 1):
+            specs.append(KS.renamed(f"ks_{j}"))
+            if self.anisotropic:
+                specs.append(_coefficient(f"cx_{j}", -1.0, f"lobe {j}: weight of ωi.x ωo.x"))
+                specs.append(_coefficient(f"cy_{j}", -1.0, f"lobe {j}: weight of ωi.y ωo.y"))
+            else:
+                specs.append(_coefficient(f"cxy_{j}", -1.0, f"lobe {j}: weight of ωi.x ωo.x + ωi.y ωo.y"))
+            specs.append(_coefficient(f"cz_{j}", 1.0, f"lobe {j}: weight of ωi.z ωo.z"))
+            specs.append(exponent(f"n_{j}", 10.0, doc=f"lobe {j}: exponent"))
+        return tuple(specs)
+
+    def __call__(self, params, pair: LocalPair):
+        wi, wo = pair.wi, pair.wo
+        total = 0.0
+        for j in range(1, self.lobes + 1):
+            cx = params[f"cx_{j}"] if self.anisotropic else params[f"cxy_{j}"]
+            cy = params[f"cy_{j}"] if self.anisotropic else params[f"cxy_{j}"]
+            cz, n = params[f"cz_{j}"], params[f"n_{j}"]
+            dot = cx * wi[..., 0] * wo[..., 0] + cy * wi[..., 1] * wo[..., 1] + cz * wi[..., 2] * wo[..., 2]
+            norm2 = jnp.maximum(jnp.maximum(cx * cx, cy * cy), cz * cz)
+            # max(0, dot)^n / (norm2)^(n/2) = max(0, dot/√norm2)^n, computed in that stabler form.
+            lobe = (n + 2.0) / (2.0 * jnp.pi) * safe_pow(dot / jnp.sqrt(norm2), n)
+            total = total + params[f"ks_{j}"] * lobe[..., None]
+        return total

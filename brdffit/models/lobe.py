@@ -1,0 +1,61 @@
+"""The abstract lobe: one reflection term with declared parameters and a pure evaluation.
+
+A lobe is a small immutable value (its fields are options such as the microfacet distribution), hashable so that
+it can sit in a model's static structure. Concrete lobes fill `name`, declare their parameters in `param_specs`
+and evaluate in `__call__`; they never override anything else.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+from typing import ClassVar
+
+from ..geometry import LocalPair
+from ..params import ParamSpec
+
+__all__ = ["Lobe"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Lobe(abc.ABC):
+    """Abstract base of every lobe.
+
+    Subclasses are frozen dataclasses whose fields are the lobe's options, and they provide:
+
+    - ``name``: the registry name (``"cook-torrance"``);
+    - ``reference``: the paper the formula comes from;
+    - ``reciprocal``: whether f(ωi, ωo) = f(ωo, ωi) holds for every parameter value;
+    - ``param_specs()``: the parameter declarations, in order;
+    - ``__call__(params, pair)``: the BRDF value in 1/sr, without the cosine factor.
+    """
+
+    name: ClassVar[str]
+    reference: ClassVar[str]
+    reciprocal: ClassVar[bool] = True
+
+    @classmethod
+    def option_names(cls) -> tuple[str, ...]:
+        """Names of the options this lobe accepts (its dataclass fields)."""
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    def options(self) -> dict:
+        """The option values of this lobe, as a dict."""
+        return {name: getattr(self, name) for name in self.option_names()}
+
+    @abc.abstractmethod
+    def param_specs(self) -> tuple[ParamSpec, ...]:
+        """The parameter declarations of this lobe with its local names."""
+
+    @abc.abstractmethod
+    def __call__(self, params: dict, pair: LocalPair):
+        """Evaluate the lobe.
+
+        Arguments:
+            params: local parameter name -> value; colour parameters have shape ``(C,)``, shape parameters are
+                scalars.
+            pair: the shared direction quantities (`brdffit.geometry.LocalPair`), leading shape ``S``.
+
+        Returns:
+            Array broadcastable to ``S + (C,)``, in 1/sr. Values below the horizon are masked by the caller.
+        """

@@ -1,0 +1,155 @@
+"""The model: a sum of lobes with its parameter values, as a JAX pytree.
+
+A `Model` can be passed straight into `jax.jit`, `jax.vmap` and `jax.grad`: its parameter values are the leaves,
+the lobes and channel count are static structure.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from ..geometry import LocalPair, spherical_to_vector
+from ..params import ParamSpec, ParamTable
+from .lobe import Lobe
+
+__all__ = ["Model", "evaluate", "evaluate_dirs"]
+
+
+def global_names(lobes: tuple[Lobe, ...]) -> tuple[tuple[str, ...], ...]:
+    """Model-level parameter names of each lobe: a name already used gets the suffix ``_2``, ``_3``, ...
+
+    Arguments:
+        lobes: the lobes of the sum, in order.
+
+    Returns:
+        For each lobe, the model-level names of its parameters in declaration order.
+    """
+    seen: Counter[str] = Counter()
+    names = []
+    for lobe in lobes:
+        lobe_names = []
+        for spec in lobe.param_specs():
+            seen[spec.name] += 1
+            count = seen[spec.name]
+            lobe_names.append(spec.name if count == 1 else f"{spec.name}_{count}")
+        names.append(tuple(lobe_names))
+    return tuple(names)
+
+
+class Model(eqx.Module):
+    """A BRDF model: a sum of lobes and the values of their parameters.
+
+    Build one with `brdffit.models.get`; evaluate it with `brdffit.evaluate` or `brdffit.evaluate_dirs`.
+
+    Attributes:
+        params: parameter name -> value (colour parameters ``(channels,)``, shape parameters scalars).
+        lobes: the lobes of the sum (static).
+        channels: number of channels (static).
+    """
+
+    params: dict
+    lobes: tuple = eqx.field(static=True)
+    channels: int = eqx.field(static=True)
+
+    @property
+    def spec(self) -> str:
+        """The spec string of the sum, with non-default lobe options in brackets."""
+        from .registry import lobe_token
+
+        return "+".join(lobe_token(lobe) for lobe in self.lobes)
+
+    @property
+    def names_by_lobe(self) -> tuple[tuple[str, ...], ...]:
+        """For each lobe, the model-level names of its parameters."""
+        return global_names(self.lobes)
+
+    @property
+    def param_specs(self) -> ParamTable:
+        """The parameter declarations under their model-level names, in order."""
+        specs: list[ParamSpec] = []
+        for lobe, names in zip(self.lobes, self.names_by_lobe):
+            specs.extend(spec.renamed(name) for spec, name in zip(lobe.param_specs(), names))
+        return ParamTable(specs)
+
+    @property
+    def reciprocal(self) -> bool:
+        """True if every lobe of the sum is reciprocal by construction."""
+        return all(lobe.reciprocal for lobe in self.lobes)
+
+    def replace(self, **params) -> "Model":
+        """Return a new model with some parameter values replaced.
+
+        Arguments:
+            **params: name -> value; a colour parameter accepts a scalar (all channels) or ``(channels,)``.
+
+        Returns:
+            The new `Model`; the original is unchanged.
+
+        Raises:
+            KeyError: for an unknown name. ValueError: for a value of the wrong shape.
+        """
+        table = self.param_specs
+        new = dict(self.params)
+        for name, value in params.items():
+            new[name] = coerce_value(table[name], value, self.channels)
+        return Model(params=new, lobes=self.lobes, channels=self.channels)
+
+    def __call__(self, wi, wo):
+        """Same as `evaluate_dirs(self, wi, wo)`."""
+        return evaluate_dirs(self, wi, wo)
+
+
+def coerce_value(spec: ParamSpec, value, channels: int):
+    """Turn a user-given value into the stored shape of ``spec``, or raise a ValueError that names it."""
+    value = jnp.asarray(value, dtype=float)
+    if spec.colour:
+        if value.ndim == 0:
+            return jnp.full((channels,), value)
+        if value.shape != (channels,):
+            raise ValueError(
+                f"colour parameter {spec.name!r} needs a scalar or shape ({channels},), got shape {value.shape}"
+            )
+        return value
+    if value.ndim != 0:
+        raise ValueError(f"shape parameter {spec.name!r} is shared by all channels and needs a scalar, "
+                         f"got shape {value.shape}")
+    return value
+
+
+def evaluate_dirs(model: Model, wi, wo):
+    """Evaluate a model for pairs of unit direction vectors.
+
+    Arguments:
+        model: the `Model`.
+        wi: directions to the light, shape ``(..., 3)``, unit length, local frame (z = normal).
+        wo: directions to the detector, broadcastable with ``wi``.
+
+    Returns:
+        f_r in 1/sr without the cosine factor, shape ``broadcast(...) + (channels,)``; zero unless both directions
+        lie strictly above the horizon.
+    """
+    pair = LocalPair.from_dirs(wi, wo)
+    out_shape = pair.above.shape + (model.channels,)
+    total = jnp.zeros(out_shape, dtype=pair.wi.dtype)
+    for lobe, names in zip(model.lobes, model.names_by_lobe):
+        local = {spec.name: model.params[name] for spec, name in zip(lobe.param_specs(), names)}
+        total = total + jnp.broadcast_to(lobe(local, pair), out_shape)
+    return jnp.where(pair.above[..., None], total, 0.0)
+
+
+def evaluate(model: Model, theta_i, phi_i, theta_o, phi_o):
+    """Evaluate a model at spherical angles.
+
+    Arguments:
+        model: the `Model`.
+        theta_i, phi_i: polar angle and azimuth of the direction to the light (radians).
+        theta_o, phi_o: polar angle and azimuth of the direction to the detector (radians).
+            All four broadcast against each other.
+
+    Returns:
+        f_r in 1/sr, shape ``broadcast(...) + (channels,)`` (``(N, channels)`` for 1-d inputs).
+    """
+    return evaluate_dirs(model, spherical_to_vector(theta_i, phi_i), spherical_to_vector(theta_o, phi_o))

@@ -1,0 +1,178 @@
+"""Parameter declarations and the smooth transforms that keep fitted parameters in bounds.
+
+A model declares each parameter once, as a `ParamSpec`. Everything else that needs to know about a parameter
+(defaults, bounds, the unconstrained transform used by the least-squares solver, priors, CLI help, HDF5 keys,
+documentation tables, report labels) is derived from that declaration.
+
+optimistix has no box constraints for least squares, so a bounded parameter p is fitted through an unconstrained
+variable u (the STYLE guide's "bounds through transforms"):
+
+- lower and upper finite:  p = lower + (upper - lower) * sigmoid(u)
+- lower finite only:       p = lower + softplus(u)
+- upper finite only:       p = upper - softplus(-u)
+- neither:                 p = u
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from .geometry import logistic
+
+__all__ = ["ParamSpec", "ParamTable", "to_unconstrained", "from_unconstrained", "at_bound"]
+
+# Distance kept from a bound when a value sitting exactly on it is mapped to the unconstrained space.
+_BOUND_MARGIN = 1e-9
+
+
+@dataclasses.dataclass(frozen=True)
+class ParamSpec:
+    """The one declaration of a model parameter.
+
+    Arguments:
+        name: parameter name as the model exposes it (e.g. ``"rho_d"``).
+        default: default value (the same for every channel of a colour parameter).
+        lower: lower bound (``-inf`` for none). Bounds are open for the transforms.
+        upper: upper bound (``inf`` for none).
+        colour: True for a colour parameter (one value per channel), False for a shape parameter shared by all
+            channels.
+        unit: unit of the parameter ("1", "1/sr", "rad", ...).
+        doc: one-line meaning.
+        scale: True for a scale parameter (roughness, exponent, amplitude): priors are log-uniform.
+        fixed: True if the parameter is held at its value unless a fit frees it explicitly.
+    """
+
+    name: str
+    default: float
+    lower: float = -math.inf
+    upper: float = math.inf
+    colour: bool = False
+    unit: str = "1"
+    doc: str = ""
+    scale: bool = False
+    fixed: bool = False
+
+    def __post_init__(self):
+        if not self.lower < self.upper:
+            raise ValueError(f"parameter {self.name!r}: lower bound {self.lower} is not below upper {self.upper}")
+        if not self.lower <= self.default <= self.upper:
+            raise ValueError(
+                f"parameter {self.name!r}: default {self.default} outside [{self.lower}, {self.upper}]"
+            )
+
+    @property
+    def kind(self) -> str:
+        """``"colour"`` or ``"shape"``."""
+        return "colour" if self.colour else "shape"
+
+    def renamed(self, name: str) -> "ParamSpec":
+        """Return the same declaration under another name (used when lobes of a sum share a name)."""
+        return dataclasses.replace(self, name=name)
+
+    def initial(self, channels: int):
+        """The default value with the parameter's shape: ``(channels,)`` for colour, scalar for shape."""
+        if self.colour:
+            return jnp.full((channels,), self.default, dtype=float)
+        return jnp.asarray(self.default, dtype=float)
+
+    def to_unconstrained(self, value):
+        """Map a value inside the bounds to the unconstrained fitting variable (inverse of `from_unconstrained`)."""
+        return to_unconstrained(value, self.lower, self.upper)
+
+    def from_unconstrained(self, u):
+        """Map the unconstrained fitting variable to a value strictly inside the bounds."""
+        return from_unconstrained(u, self.lower, self.upper)
+
+
+class ParamTable(tuple):
+    """The parameter declarations of a model, in order; iterate for `ParamSpec`s or index by position or name."""
+
+    def __getitem__(self, key):
+        if isinstance(key, str):
+            for spec in self:
+                if spec.name == key:
+                    return spec
+            raise KeyError(f"no parameter {key!r}; parameters are {', '.join(self.names)}")
+        return super().__getitem__(key)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The parameter names in declaration order."""
+        return tuple(spec.name for spec in self)
+
+
+def _softplus(u):
+    return jnp.logaddexp(u, 0.0)
+
+
+def _softplus_inverse(y):
+    # log(exp(y) - 1), written to stay accurate for small and for large y.
+    return y + jnp.log(-jnp.expm1(-y))
+
+
+def from_unconstrained(u, lower: float, upper: float):
+    """Map an unconstrained value to the open interval (lower, upper).
+
+    Arguments:
+        u: unconstrained value(s), any shape.
+        lower: lower bound or ``-inf``.
+        upper: upper bound or ``inf``.
+
+    Returns:
+        The constrained value(s), same shape as ``u``.
+    """
+    lo_finite, up_finite = math.isfinite(lower), math.isfinite(upper)
+    if lo_finite and up_finite:
+        return lower + (upper - lower) * logistic(u)
+    if lo_finite:
+        return lower + _softplus(u)
+    if up_finite:
+        return upper - _softplus(-u)
+    return u
+
+
+def to_unconstrained(value, lower: float, upper: float):
+    """Inverse of `from_unconstrained`; values on or beyond a bound are first moved just inside it.
+
+    Arguments:
+        value: constrained value(s).
+        lower: lower bound or ``-inf``.
+        upper: upper bound or ``inf``.
+
+    Returns:
+        The unconstrained value(s).
+    """
+    value = jnp.asarray(value, dtype=float)
+    lo_finite, up_finite = math.isfinite(lower), math.isfinite(upper)
+    if lo_finite and up_finite:
+        width = upper - lower
+        t = jnp.clip((value - lower) / width, _BOUND_MARGIN, 1 - _BOUND_MARGIN)
+        return jnp.log(t) - jnp.log1p(-t)
+    if lo_finite:
+        return _softplus_inverse(jnp.maximum(value - lower, _BOUND_MARGIN * max(1.0, abs(lower))))
+    if up_finite:
+        return -_softplus_inverse(jnp.maximum(upper - value, _BOUND_MARGIN * max(1.0, abs(upper))))
+    return value
+
+
+def at_bound(value, spec: ParamSpec, rtol: float = 1e-6) -> np.ndarray:
+    """True where ``value`` lies within ``rtol`` (relative to the bound's scale) of one of the spec's bounds.
+
+    Arguments:
+        value: parameter value(s).
+        spec: the declaration whose bounds are tested.
+        rtol: closeness, relative to max(1, |bound|).
+
+    Returns:
+        Boolean array of the value's shape.
+    """
+    value = np.asarray(value, dtype=float)
+    hit = np.zeros(value.shape, dtype=bool)
+    for bound in (spec.lower, spec.upper):
+        if math.isfinite(bound):
+            hit |= np.abs(value - bound) <= rtol * max(1.0, abs(bound))
+    return hit
