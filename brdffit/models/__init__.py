@@ -6,6 +6,7 @@
 
 from .lobe import Lobe
 from .model import Model, evaluate, evaluate_dirs
-from .registry import describe, get, lobe_class, names, parse_spec
+from .registry import describe, get, lobe_class, model_from_dict, model_to_dict, names, parse_spec
 
-__all__ = ["Lobe", "Model", "names", "get", "lobe_class", "parse_spec", "describe", "evaluate", "evaluate_dirs"]
+__all__ = ["Lobe", "Model", "names", "get", "lobe_class", "parse_spec", "describe", "evaluate", "evaluate_dirs",
+           "model_to_dict", "model_from_dict"]

@@ -19,7 +19,7 @@ from .phong import BlinnPhong, Phong
 from .toon import ToonDiffuse, ToonSpecular
 from .ward import Ward, WardAniso, WardDuer
 
-__all__ = ["names", "get", "lobe_class", "parse_spec", "lobe_token"]
+__all__ = ["names", "get", "lobe_class", "parse_spec", "lobe_token", "describe", "model_to_dict", "model_from_dict"]
 
 _LOBES: dict[str, type[Lobe]] = {
     cls.name: cls
@@ -166,3 +166,30 @@ def describe(spec_class: type[Lobe]) -> str:
     """One paragraph on a lobe class: name, reference and options (used by ``brdffit models``)."""
     opts = ", ".join(f"{f.name}={f.default!r}" for f in dataclasses.fields(spec_class)) or "none"
     return f"{spec_class.name}: {spec_class.reference} (options: {opts})"
+
+
+def model_to_dict(model: Model) -> dict:
+    """A JSON-ready description of a model: its spec (with lobe options), channel count and parameter values.
+
+    Arguments:
+        model: the `Model`.
+
+    Returns:
+        ``{"spec": str, "channels": int, "params": {name: float or list of floats}}``; `model_from_dict` inverts it.
+    """
+    import numpy as np
+
+    params = {name: np.asarray(value).tolist() for name, value in model.params.items()}
+    return {"spec": model.spec, "channels": model.channels, "params": params}
+
+
+def model_from_dict(description: dict) -> Model:
+    """Rebuild a model from `model_to_dict`'s output.
+
+    Arguments:
+        description: a dict with ``spec``, ``channels`` and ``params``.
+
+    Returns:
+        The `Model`.
+    """
+    return get(description["spec"], channels=int(description["channels"]), **description["params"])
