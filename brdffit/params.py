@@ -23,7 +23,7 @@ import numpy as np
 
 from .geometry import logistic
 
-__all__ = ["ParamSpec", "ParamTable", "to_unconstrained", "from_unconstrained", "at_bound"]
+__all__ = ["ParamSpec", "ParamTable", "to_unconstrained", "from_unconstrained", "at_bound", "bound_margin"]
 
 # Distance kept from a bound when a value sitting exactly on it is mapped to the unconstrained space.
 _BOUND_MARGIN = 1e-9
@@ -159,20 +159,40 @@ def to_unconstrained(value, lower: float, upper: float):
     return value
 
 
-def at_bound(value, spec: ParamSpec, rtol: float = 1e-6) -> np.ndarray:
-    """True where ``value`` lies within ``rtol`` (relative to the bound's scale) of one of the spec's bounds.
+def bound_margin(spec: ParamSpec, fraction: float) -> float:
+    """A distance from the bounds that counts as "on the bound": ``fraction`` of the bounded range, or of the
+    default's magnitude (at least 1e-3) when a bound is infinite.
+
+    Arguments:
+        spec: the parameter declaration.
+        fraction: the fraction of the parameter's scale.
+
+    Returns:
+        The distance, in the parameter's unit.
+    """
+    if math.isfinite(spec.lower) and math.isfinite(spec.upper):
+        return fraction * (spec.upper - spec.lower)
+    return fraction * max(abs(spec.default), 1e-3)
+
+
+def at_bound(value, spec: ParamSpec, fraction: float = 1e-4) -> np.ndarray:
+    """True where ``value`` lies within `bound_margin` of one of the spec's finite bounds.
+
+    Fits approach a bound only asymptotically through the transforms, so "at the bound" means "closer than a
+    small fraction of the parameter's scale".
 
     Arguments:
         value: parameter value(s).
         spec: the declaration whose bounds are tested.
-        rtol: closeness, relative to max(1, |bound|).
+        fraction: see `bound_margin`.
 
     Returns:
         Boolean array of the value's shape.
     """
     value = np.asarray(value, dtype=float)
+    margin = bound_margin(spec, fraction)
     hit = np.zeros(value.shape, dtype=bool)
     for bound in (spec.lower, spec.upper):
         if math.isfinite(bound):
-            hit |= np.abs(value - bound) <= rtol * max(1.0, abs(bound))
+            hit |= np.abs(value - bound) <= margin
     return hit

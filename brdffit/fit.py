@@ -1,0 +1,481 @@
+"""Least-squares fitting of a model to measurements with optimistix (docs/fitting.md).
+
+`fit` fits one data set (all starts of a multistart in one vmapped solve); `fit_many` fits equally shaped data
+sets in one vmapped, jitted solve. Bounds are enforced by the transforms of `brdffit.params`; the Laplace
+covariance comes from the Gauss-Newton approximation JᵀJ of the residual Jacobian in physical units.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .fit_result import FitResult, param_labels
+from .initial_guess import MAX_INIT_SAMPLES, initial_guesses
+from .losses import LOSSES, ROBUST, relative_epsilon
+from .metrics import fit_metrics
+from .models.model import Model
+from .models.registry import get as get_model
+from .params import at_bound
+from .problem import FitData, Problem, compiled_solve, make_fit_data, physical_params, residual_fn, stack_data
+from .solvers import make_solver, solver_name
+
+__all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
+
+CHANNEL_MODES = ("shared-shape", "independent")
+_CORRELATION_WARNING = 0.99
+_JACOBIAN_BYTES = 256 * 2**20
+
+
+class FitError(RuntimeError):
+    """Raised by a strict fit that did not converge; ``.result`` holds the `FitResult`."""
+
+    def __init__(self, message: str, result: FitResult):
+        super().__init__(message)
+        self.result = result
+
+
+def _parse_robust(robust):
+    if robust is None or isinstance(robust, str):
+        kind, scale = robust, None
+    else:
+        kind, scale = robust
+    if kind not in ROBUST:
+        raise ValueError(f"robust must be None, 'huber', 'cauchy' or a (kind, scale) pair, got {robust!r}")
+    if scale is not None and not scale > 0:
+        raise ValueError(f"the robust scale must be positive, got {scale!r}")
+    return kind, scale
+
+
+def _resolve_model(model, channels: int) -> Model:
+    if isinstance(model, Model):
+        if model.channels != channels:
+            raise ValueError(f"the model has {model.channels} channels but the measurements have {channels}")
+        return model
+    return get_model(model, channels=channels)
+
+
+def _split_fixed(model: Model, fixed, free) -> dict:
+    """name -> value of every parameter held fixed: declared-fixed ones unless freed, plus the user's."""
+    specs = model.param_specs
+    free = set(free or ())
+    for name in free:
+        specs[name]  # raises KeyError naming the valid parameters
+    values = {s.name: model.params[s.name] for s in specs if s.fixed and s.name not in free}
+    if isinstance(fixed, dict):
+        for name, value in fixed.items():
+            values[name] = model.replace(**{name: value}).params[name]
+    else:
+        for name in fixed or ():
+            values[name] = model.params[specs[name].name]
+    return values
+
+
+def _subsample(measurements, limit: int, seed: int):
+    if measurements.n <= limit:
+        return measurements
+    return measurements.subsample(limit, seed=seed)
+
+
+def _unconstrained(problem: Problem, starts: list[dict], dtype) -> dict:
+    specs = problem.specs
+    return {name: jnp.stack([jnp.asarray(specs[name].to_unconstrained(s[name]), dtype=dtype) for s in starts])
+            for name in problem.free}
+
+
+@functools.lru_cache(maxsize=32)
+def _jtj_fn(problem: Problem):
+    """Jitted (JᵀJ, Jᵀ diag(r²) J, Σr²) of one chunk of data, J the residual Jacobian w.r.t. the free physical
+    parameters."""
+
+    def jtj(free_params: dict, data: FitData):
+        # Flatten in model order (ravel_pytree would sort the names), matching `param_labels`.
+        shapes = [jnp.shape(free_params[name]) for name in problem.free]
+        sizes = [int(np.prod(shape)) for shape in shapes]
+        flat = jnp.concatenate([jnp.ravel(free_params[name]) for name in problem.free])
+
+        def unravel(theta):
+            pieces = jnp.split(theta, np.cumsum(sizes)[:-1])
+            return {name: piece.reshape(shape) for name, piece, shape in zip(problem.free, pieces, shapes)}
+
+        def r(theta):
+            params = physical_params(problem, {}, dict(data.fixed, **unravel(theta)))
+            return residual_fn(problem, params, data).ravel()
+
+        jac = jax.jacfwd(r)(flat)
+        res = r(flat)
+        scaled = jac * res[:, None]
+        return jac.T @ jac, scaled.T @ scaled, jnp.sum(res * res)
+
+    return jax.jit(jtj)
+
+
+def _chunks(data: FitData, size: int):
+    """Split FitData along the samples into chunks of ``size`` (the last padded with masked samples)."""
+    n = data.wi.shape[0]
+    for start in range(0, n, size):
+        stop = min(start + size, n)
+        pad = size - (stop - start)
+
+        def take(a, start=start, stop=stop, pad=pad):
+            piece = a[start:stop]
+            if pad:
+                piece = jnp.concatenate([piece, jnp.zeros((pad,) + piece.shape[1:], piece.dtype)])
+            return piece
+
+        per_sample = {"wi", "wo", "values", "mask", "cos_i", "sqrt_weight", "sigma"}
+        yield data._replace(**{k: take(getattr(data, k)) for k in per_sample})
+
+
+def _laplace(problem: Problem, params: dict, data: FitData, n_valid: int):
+    """Gauss-Newton covariance s² (JᵀJ)⁻¹ of the free parameters, with s² = Σr²/dof (1 for ``loss="sigma"``),
+    and the sandwich covariance that stays valid when the residuals' variance differs between samples.
+
+    Directions of JᵀJ with eigenvalues below 1e-12 of the largest are undetermined by the data: parameters with
+    a component along them get infinite variance.
+    """
+    free = {k: params[k] for k in problem.free}
+    p = sum(int(np.size(v)) for v in free.values())
+    channels = problem.channels
+    chunk = int(max(1024, min(data.wi.shape[0], _JACOBIAN_BYTES // (8 * channels * max(p, 1)))))
+    data = data._replace(fixed={k: v for k, v in params.items() if k not in problem.free})
+    jtj = np.zeros((p, p))
+    meat = np.zeros((p, p))
+    rss = 0.0
+    fn = _jtj_fn(problem)
+    for piece in _chunks(data, chunk):
+        a, b, c = fn(free, piece)
+        jtj += np.asarray(a, dtype=float)
+        meat += np.asarray(b, dtype=float)
+        rss += float(c)
+    dof = max(n_valid - p, 1)
+    variance = 1.0 if problem.loss == "sigma" else rss / dof
+    eigval, eigvec = np.linalg.eigh(jtj)
+    good = eigval > 1e-12 * max(eigval.max(initial=0.0), 1e-300)
+    inv = (eigvec[:, good] / eigval[good]) @ eigvec[:, good].T
+    cov = variance * inv
+    # Heteroscedasticity-consistent "sandwich" covariance (White 1980, HC0): (JᵀJ)⁻¹ Jᵀ diag(r²) J (JᵀJ)⁻¹.
+    sandwich = inv @ meat @ inv
+    undetermined = np.any(np.abs(eigvec[:, ~good]) > 1e-6, axis=1) if (~good).any() else np.zeros(p, bool)
+    for matrix in (cov, sandwich):
+        matrix[undetermined, :] = np.inf
+        matrix[:, undetermined] = np.inf
+    return cov, sandwich, variance, undetermined
+
+
+def _per_param(params: dict, free, flat_std) -> dict:
+    """Split a flat vector over the free parameters (model order) into name -> array; 0 for fixed ones."""
+    out, offset = {}, 0
+    for name in params:
+        size = np.asarray(params[name]).size
+        if name in free:
+            out[name] = flat_std[offset:offset + size].reshape(np.shape(params[name]))
+            offset += size
+        else:
+            out[name] = np.zeros(np.shape(params[name]))
+    return out
+
+
+def _information_criteria(loss: str, cost: float, n: int, k: int) -> tuple[float, float]:
+    """AIC and BIC of a least-squares fit (docs/fitting.md): from χ² with known σ, else from the profile
+    Gaussian likelihood n ln(RSS/n)."""
+    if loss == "sigma":
+        base = cost
+    else:
+        base = n * np.log(max(cost, 1e-300) / max(n, 1))
+    return float(base + 2 * k), float(base + k * np.log(max(n, 1)))
+
+
+def _status(problem: Problem, outcome: dict, params: dict) -> tuple[str, list]:
+    specs = problem.specs
+    hit = []
+    for name in problem.free:
+        flags = np.atleast_1d(at_bound(params[name], specs[name]))
+        labels = param_labels(params, [name])
+        hit.extend(label for label, flag in zip(labels, flags) if flag)
+    if bool(outcome["nonfinite"]):
+        return "nonfinite", hit
+    if bool(outcome["max_steps"]):
+        return "max-steps", hit
+    return ("converged-at-bound" if hit else "converged"), hit
+
+
+def _start_status(outcome: dict) -> str:
+    if bool(outcome["nonfinite"]):
+        return "nonfinite"
+    return "max-steps" if bool(outcome["max_steps"]) else "converged"
+
+
+def _json_params(params: dict) -> dict:
+    return {k: np.asarray(v, dtype=float).tolist() for k, v in params.items()}
+
+
+def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict, outcome: dict, *, config: dict,
+            starts: list, times: dict) -> FitResult:
+    """Build the `FitResult` of the kept solution ``y`` (one material, one start)."""
+    params = {k: np.asarray(v) for k, v in physical_params(problem, y, data.fixed).items()}
+    fitted = model.replace(**params)
+    n_valid = int(np.isfinite(measurements.values).sum())
+    labels = param_labels(params, problem.free)
+    if problem.free:
+        cov, sandwich, variance, undetermined = _laplace(problem, fitted.params, data, n_valid)
+    else:
+        cov, sandwich = np.zeros((0, 0)), np.zeros((0, 0))
+        variance, undetermined = float("nan"), np.zeros(0, bool)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        std = np.sqrt(np.diag(cov))
+        std_sandwich = np.sqrt(np.diag(sandwich))
+        correlation = cov / np.outer(std, std)
+    stderr = _per_param(params, problem.free, std)
+    stderr_robust = _per_param(params, problem.free, std_sandwich)
+    warnings = []
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = std_sandwich / std
+    if np.any(np.isfinite(ratio) & ((ratio > 2.0) | (ratio < 0.5))):
+        warnings.append("Laplace and sandwich standard errors differ by more than 2x: the residuals' variance "
+                        "is not uniform (use loss='sigma' with known sigma, or read stderr_robust)")
+    if undetermined.any():
+        names = [label for label, u in zip(labels, undetermined) if u]
+        warnings.append(f"JᵀJ is singular: {', '.join(names)} not determined by these data (stderr = inf)")
+    for a, b in itertools.combinations(range(len(labels)), 2):
+        rho = correlation[a, b]
+        if np.isfinite(rho) and abs(rho) > _CORRELATION_WARNING:
+            warnings.append(f"{labels[a]} and {labels[b]} are correlated (ρ = {rho:+.4f}): not separately "
+                            "identifiable from these data")
+    status, hit = _status(problem, outcome, params)
+    if hit:
+        warnings.append(f"parameters at a bound: {', '.join(hit)}")
+    cost = float(outcome["cost"])
+    k = len(labels)
+    aic, bic = _information_criteria(problem.loss, cost, n_valid, k)
+    metrics = {"rmse_loss": np.sqrt(cost / max(n_valid, 1)) * np.ones(problem.channels)}
+    per_channel_cost = np.asarray(jnp.sum(residual_fn(problem, fitted.params, data) ** 2, axis=0))
+    counts = np.maximum(np.isfinite(measurements.values).sum(axis=0), 1)
+    metrics["rmse_loss"] = np.sqrt(per_channel_cost / counts)
+    metrics.update(fit_metrics(fitted, measurements))
+    return FitResult(
+        model=fitted, params=dict(fitted.params), stderr=stderr, stderr_robust=stderr_robust, covariance=cov, correlation=correlation,
+        labels=labels, metrics=metrics, n_samples=n_valid, n_params=k, dof=n_valid - k, cost=cost, aic=aic,
+        bic=bic, status=status, bounds_hit=hit, warnings=warnings, steps=int(outcome["steps"]),
+        compile_time=times["compile"], run_time=times["run"], init_time=times["init"], loss=problem.loss,
+        solver=solver_name(problem.solver), channel_mode="shared-shape", fixed=sorted(data.fixed), starts=starts,
+        noise_variance=float(variance), models=[fitted],
+    )
+
+
+def _prepare(measurements, model, *, loss, solver, fixed, free, robust, max_steps, rtol, atol, dtype):
+    """Validate the arguments and build the `Problem`, the base model and the fixed values."""
+    if loss not in LOSSES:
+        raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
+    if loss == "sigma" and measurements.sigma is None:
+        raise ValueError("loss='sigma' needs measurements with per-sample sigma; these have none")
+    robust_kind, robust_scale = _parse_robust(robust)
+    model = _resolve_model(model, measurements.n_channels)
+    fixed_values = _split_fixed(model, fixed, free)
+    problem = Problem(
+        lobes=model.lobes, channels=model.channels,
+        free=tuple(s.name for s in model.param_specs if s.name not in fixed_values),
+        loss=loss, robust=robust_kind, solver=make_solver(solver, rtol, atol), max_steps=int(max_steps),
+    )
+    dtype = jnp.dtype(dtype)
+    return problem, model, fixed_values, robust_scale, dtype
+
+
+def _starting_points(problem: Problem, model: Model, measurements, fixed_values: dict, init, multistart: int,
+                     seed: int, robust_scale, dtype):
+    """The starts (physical dicts) and the robust scale, from a subsample of the data."""
+    eps = relative_epsilon(measurements.values)
+    sub = make_fit_data(_subsample(measurements, MAX_INIT_SAMPLES, seed), fixed_values, eps, 1.0, dtype)
+    base = dict(model.params, **fixed_values)
+    plain = Problem(problem.lobes, problem.channels, problem.free, problem.loss, None, problem.solver,
+                    problem.max_steps)
+    if isinstance(init, str) and init == "auto":
+        starts = initial_guesses(plain, base, sub, multistart, seed)
+    elif isinstance(init, str) and init == "model":
+        starts = [base] + initial_guesses(plain, base, sub, multistart, seed)[1:]
+    elif isinstance(init, (dict, Model)):
+        given = init.params if isinstance(init, Model) else model.replace(**init).params
+        starts = [dict(base, **{k: v for k, v in given.items() if k not in fixed_values})]
+        starts += initial_guesses(plain, base, sub, multistart, seed)[1:]
+    else:
+        raise ValueError(f"init must be 'auto', 'model', a Model or a dict of values, got {init!r}")
+    if problem.robust is not None and robust_scale is None:
+        r = np.asarray(residual_fn(plain, {k: jnp.asarray(v) for k, v in starts[0].items()}, sub))
+        mask = np.asarray(sub.mask)
+        robust_scale = float(max(1.4826 * np.median(np.abs(r[mask])), 1e-12)) if mask.any() else 1.0
+    return starts, eps, robust_scale if robust_scale is not None else 1.0
+
+
+def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", fixed=None, free=None,
+        multistart: int = 0, channel_mode: str = "shared-shape", robust=None, max_steps: int = 256,
+        rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0, dtype="float64", strict: bool = False) -> FitResult:
+    """Fit a model to measurements by nonlinear least squares.
+
+    Arguments:
+        measurements: `brdffit.Measurements`.
+        model: a spec string (``"lambert+ggx"``) or a `Model` (its values are the start when ``init="model"``).
+        loss: ``"cosine"`` (default), ``"log"``, ``"relative"``, ``"absolute"`` or ``"sigma"`` (docs/fitting.md).
+        solver: a name from `brdffit.solvers.SOLVERS` (``"lm"``, ``"gauss-newton"``, ``"dogleg"``,
+            ``"indirect-lm"``, ``"bfgs"``) or any optimistix least-squares solver or minimiser.
+        init: ``"auto"`` (data-driven guess, `brdffit.initial_guess`), ``"model"`` (the model's values), a
+            `Model`, or a dict of starting values.
+        fixed: parameters held fixed: a dict name -> value, or names held at the model's values.
+        free: names of parameters declared fixed by default (e.g. the toon ``width``) that this fit frees.
+        multistart: extra quasi-random starts over the bounds; all run in one vmapped solve, the lowest cost is
+            kept and every start is recorded in ``result.starts``.
+        channel_mode: ``"shared-shape"`` (colour parameters per channel, shape parameters shared and fitted
+            jointly) or ``"independent"`` (one fit per channel).
+        robust: None, ``"huber"``, ``"cauchy"`` or ``(kind, scale)``; without a scale it is 1.4826 times the
+            median absolute residual of the initial guess.
+        max_steps: the solver's step limit.
+        rtol, atol: the solver's convergence tolerances (optimistix's Cauchy termination).
+        seed: seed of the subsample and of the quasi-random starts.
+        dtype: ``"float64"`` (default) or ``"float32"`` for the data and the solve.
+        strict: raise `FitError` instead of returning a non-converged result.
+
+    Returns:
+        A `FitResult`.
+    """
+    if channel_mode not in CHANNEL_MODES:
+        raise ValueError(f"channel_mode must be one of {', '.join(CHANNEL_MODES)}, got {channel_mode!r}")
+    kwargs = dict(loss=loss, solver=solver, init=init, fixed=fixed, free=free, multistart=multistart,
+                  robust=robust, max_steps=max_steps, rtol=rtol, atol=atol, seed=seed, dtype=dtype, strict=strict)
+    if channel_mode == "independent":
+        return _fit_independent(measurements, model, **kwargs)
+    problem, model, fixed_values, robust_scale, dt = _prepare(
+        measurements, model, loss=loss, solver=solver, fixed=fixed, free=free, robust=robust,
+        max_steps=max_steps, rtol=rtol, atol=atol, dtype=dtype)
+    t0 = time.perf_counter()
+    starts, eps, robust_scale = _starting_points(problem, model, measurements, fixed_values, init, multistart,
+                                                 seed, robust_scale, dt)
+    init_time = time.perf_counter() - t0
+    data = make_fit_data(measurements, fixed_values, eps, robust_scale, dt)
+    y0 = _unconstrained(problem, starts, dt)
+    if problem.free:
+        executable, compile_time = compiled_solve(problem, y0, data, data_batched=False)
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(executable(y0, data))
+        run_time = time.perf_counter() - t0
+    else:
+        compile_time = run_time = 0.0
+        r = residual_fn(problem, dict(fixed_values), data)
+        out = {"y": {}, "cost": jnp.sum(r * r)[None], "steps": jnp.zeros(1, int),
+               "successful": jnp.ones(1, bool), "max_steps": jnp.zeros(1, bool), "nonfinite": jnp.zeros(1, bool)}
+    out = jax.tree_util.tree_map(np.asarray, out)
+    costs = np.where(out["nonfinite"], np.inf, out["cost"])
+    best = int(np.argmin(costs)) if np.isfinite(costs).any() else 0
+    records = [{"init": _json_params(s), "cost": float(out["cost"][i]), "status": _start_status(
+        {k: v[i] for k, v in out.items() if k != "y"}), "steps": int(out["steps"][i])} for i, s in enumerate(starts)]
+    y = {k: v[best] for k, v in out["y"].items()}
+    outcome = {k: v[best] for k, v in out.items() if k != "y"}
+    result = _finish(problem, model, measurements, data, y, outcome, config=kwargs, starts=records,
+                     times={"compile": compile_time, "run": run_time, "init": init_time})
+    if strict and not result.converged:
+        raise FitError(f"fit of {result.spec} did not converge: {result.status}", result)
+    return result
+
+
+def _fit_independent(measurements, model, **kwargs) -> FitResult:
+    """One shared-shape fit per channel, assembled: shape parameters become per-channel arrays."""
+    channels = measurements.n_channels
+    base = _resolve_model(model, channels)
+    results = []
+    for c in range(channels):
+        single = get_model(base.spec, channels=1, **{
+            name: (value[c:c + 1] if spec.colour else value)
+            for (name, value), spec in zip(base.params.items(), base.param_specs)})
+        results.append(fit(measurements.select_channels([c]), single, channel_mode="shared-shape", **kwargs))
+
+    def merge(attr):
+        merged = {}
+        for name, spec in zip(base.params, base.param_specs):
+            parts = [np.atleast_1d(np.asarray(getattr(r, attr)[name])) for r in results]
+            merged[name] = np.concatenate(parts) if spec.colour else np.stack([p[0] for p in parts])
+        return merged
+
+    order = {"nonfinite": 3, "max-steps": 2, "converged-at-bound": 1, "converged": 0}
+    worst = max((r.status for r in results), key=order.get)
+    k = sum(r.n_params for r in results)
+    n = sum(r.n_samples for r in results)
+    cost = sum(r.cost for r in results)
+    aic, bic = _information_criteria(results[0].loss, cost, n, k)
+    labels = [f"{label}@{c}" for c, r in enumerate(results) for label in r.labels]
+    size = len(labels)
+    cov = np.zeros((size, size))
+    cor = np.zeros((size, size))
+    offset = 0
+    for r in results:
+        s = len(r.labels)
+        cov[offset:offset + s, offset:offset + s] = r.covariance
+        cor[offset:offset + s, offset:offset + s] = r.correlation
+        offset += s
+    return FitResult(
+        model=None, params=merge("params"), stderr=merge("stderr"), stderr_robust=merge("stderr_robust"),
+        covariance=cov, correlation=cor,
+        labels=labels, metrics={m: np.concatenate([r.metrics[m] for r in results]) for m in results[0].metrics},
+        n_samples=n, n_params=k, dof=n - k, cost=cost, aic=aic, bic=bic, status=worst,
+        bounds_hit=[f"{b}@{c}" for c, r in enumerate(results) for b in r.bounds_hit],
+        warnings=[f"channel {c}: {w}" for c, r in enumerate(results) for w in r.warnings],
+        steps=max(r.steps for r in results), compile_time=sum(r.compile_time for r in results),
+        run_time=sum(r.run_time for r in results), init_time=sum(r.init_time for r in results),
+        loss=results[0].loss, solver=results[0].solver, channel_mode="independent", fixed=results[0].fixed,
+        starts=[s for r in results for s in r.starts], noise_variance=float(np.mean([r.noise_variance
+                                                                                      for r in results])),
+        models=[r.model for r in results],
+    )
+
+
+def fit_many(measurements_list, model, *, loss: str = "cosine", solver="lm", init="auto", fixed=None,
+             free=None, robust=None, max_steps: int = 256, rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0,
+             dtype="float64") -> list[FitResult]:
+    """Fit one model to many equally shaped data sets in one vmapped, jitted solve.
+
+    This is the path for databases and spatially varying materials: every data set must have the same number of
+    samples and channels (missing samples may differ). Each gets its own initial guess; the solves run together.
+
+    Arguments:
+        measurements_list: a sequence of `brdffit.Measurements` of equal shape.
+        model, loss, solver, init, fixed, free, robust, max_steps, rtol, atol, seed, dtype: as for `fit`.
+
+    Returns:
+        One `FitResult` per data set, in order; each has the same answer as `fit` on that data set alone.
+    """
+    items = list(measurements_list)
+    if not items:
+        raise ValueError("fit_many needs at least one data set")
+    shape = np.shape(items[0].values)
+    for i, m in enumerate(items):
+        if np.shape(m.values) != shape:
+            raise ValueError(f"fit_many needs equally shaped data sets: item 0 has values of shape {shape}, "
+                             f"item {i} has {np.shape(m.values)}; fit them separately with fit()")
+    prepared = [_prepare(m, model, loss=loss, solver=solver, fixed=fixed, free=free, robust=robust,
+                         max_steps=max_steps, rtol=rtol, atol=atol, dtype=dtype) for m in items]
+    problem = prepared[0][0]
+    t0 = time.perf_counter()
+    datas, firsts = [], []
+    for m, (_, base_model, fixed_values, robust_scale, dt) in zip(items, prepared):
+        starts, eps, scale = _starting_points(problem, base_model, m, fixed_values, init, 0, seed, robust_scale, dt)
+        datas.append(make_fit_data(m, fixed_values, eps, scale, dt))
+        firsts.append(starts[0])
+    init_time = (time.perf_counter() - t0) / len(items)
+    dt = prepared[0][4]
+    y0 = _unconstrained(problem, firsts, dt)
+    data = stack_data(datas)
+    executable, compile_time = compiled_solve(problem, y0, data, data_batched=True)
+    t0 = time.perf_counter()
+    out = jax.tree_util.tree_map(np.asarray, jax.block_until_ready(executable(y0, data)))
+    run_time = (time.perf_counter() - t0) / len(items)
+    results = []
+    for i, (m, d, start) in enumerate(zip(items, datas, firsts)):
+        outcome = {k: v[i] for k, v in out.items() if k != "y"}
+        record = [{"init": _json_params(start), "cost": float(outcome["cost"]), "status": _start_status(outcome),
+                   "steps": int(outcome["steps"])}]
+        results.append(_finish(problem, prepared[i][1], m, d, {k: v[i] for k, v in out["y"].items()}, outcome,
+                               config={}, starts=record,
+                               times={"compile": compile_time, "run": run_time, "init": init_time}))
+    return results

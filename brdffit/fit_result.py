@@ -1,0 +1,252 @@
+"""The result of a fit: parameters, Laplace uncertainties, metrics, information criteria and status."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+
+from .models.model import Model, evaluate
+from .models.registry import model_from_dict, model_to_dict
+
+__all__ = ["FitResult", "STATUSES", "param_labels"]
+
+# Every status a fit can end with (docs/fitting.md explains each).
+STATUSES = ("converged", "converged-at-bound", "max-steps", "nonfinite")
+
+
+def param_labels(params: dict, names) -> list[str]:
+    """Labels of the scalar entries of the named parameters: ``name`` for a scalar, ``name[i]`` per channel."""
+    labels = []
+    for name in names:
+        size = np.asarray(params[name]).size
+        labels.extend([name] if np.ndim(params[name]) == 0 else [f"{name}[{i}]" for i in range(size)])
+    return labels
+
+
+def _json_value(value):
+    value = np.asarray(value)
+    if value.ndim == 0:
+        v = float(value)
+        return v if math.isfinite(v) else None
+    return [x if math.isfinite(x) else None for x in value.astype(float).tolist()]
+
+
+@dataclasses.dataclass
+class FitResult:
+    """What `brdffit.fit` returns.
+
+    Attributes:
+        model: the fitted `Model` (None in ``channel_mode="independent"``, where `models` holds one per channel).
+        params: name -> fitted value (as ``model.params``; independent mode stacks shape parameters per channel).
+        stderr: name -> Laplace (Gauss-Newton) standard error in physical units; 0 for fixed parameters.
+        stderr_robust: name -> sandwich (White 1980, HC0) standard error, valid also when the residual variance
+            differs between samples (e.g. relative noise fitted with the cosine loss).
+        covariance: covariance matrix of the free scalar parameters, rows labelled by `labels`.
+        correlation: the matching correlation matrix.
+        labels: labels of the covariance rows (``name`` or ``name[i]`` per channel).
+        metrics: name -> per-channel array: ``rmse_loss``, ``rmse_abs``, ``rmse_rel``, ``ngan``, ``low``.
+        n_samples: valid (sample, channel) values that entered the fit.
+        n_params: number of free scalar parameters.
+        dof: n_samples − n_params.
+        cost: the minimised sum of squared residuals.
+        aic, bic: information criteria (docs/fitting.md).
+        status: one of `STATUSES`.
+        bounds_hit: labels of parameters that ended on a bound.
+        warnings: human-readable warnings (non-identifiable parameter pairs, ...).
+        steps: solver steps of the kept start.
+        compile_time, run_time: seconds spent compiling the solve and running it (all starts).
+        init_time: seconds spent on the initial guess.
+        loss, solver, channel_mode, fixed: how the fit was configured.
+        starts: one record per start: initial parameters, final cost, status, steps.
+        noise_variance: the residual variance used to scale the covariance (1 for ``loss="sigma"``).
+        models: one model per channel in independent mode, else ``[model]``.
+    """
+
+    model: Model | None
+    params: dict
+    stderr: dict
+    stderr_robust: dict
+    covariance: np.ndarray
+    correlation: np.ndarray
+    labels: list
+    metrics: dict
+    n_samples: int
+    n_params: int
+    dof: int
+    cost: float
+    aic: float
+    bic: float
+    status: str
+    bounds_hit: list
+    warnings: list
+    steps: int
+    compile_time: float
+    run_time: float
+    init_time: float
+    loss: str
+    solver: str
+    channel_mode: str
+    fixed: list
+    starts: list
+    noise_variance: float
+    models: list = dataclasses.field(default_factory=list)
+
+    @property
+    def converged(self) -> bool:
+        """True for ``converged`` and ``converged-at-bound``."""
+        return self.status in ("converged", "converged-at-bound")
+
+    @property
+    def spec(self) -> str:
+        """The spec string of the fitted model."""
+        return self.models[0].spec
+
+    def predict(self, theta_i, phi_i, theta_o, phi_o):
+        """Evaluate the fitted model(s) at spherical angles; shape ``(N, channels)``."""
+        if self.model is not None:
+            return np.asarray(evaluate(self.model, theta_i, phi_i, theta_o, phi_o))
+        return np.concatenate([np.asarray(evaluate(m, theta_i, phi_i, theta_o, phi_o)) for m in self.models],
+                              axis=-1)
+
+    def summary(self) -> str:
+        """A readable table of parameters (value ± stderr, bounds, fixed), metrics and status."""
+        specs = self.models[0].param_specs
+        lines = [f"model {self.spec}  loss {self.loss}  solver {self.solver}  channel mode {self.channel_mode}",
+                 f"status {self.status}  steps {self.steps}  compile {self.compile_time:.2f} s  "
+                 f"run {self.run_time:.2f} s  init {self.init_time:.2f} s",
+                 f"{'parameter':<14}{'value':>14}{'± stderr':>14}   bounds"]
+        for label, value, err in zip(*self._flat_entries()):
+            name = label.split("[")[0]
+            spec = specs[name]
+            note = " fixed" if name in self.fixed else (" AT BOUND" if label in self.bounds_hit else "")
+            lines.append(f"{label:<14}{value:>14.6g}{err:>14.3g}   [{spec.lower:g}, {spec.upper:g}] "
+                         f"{spec.unit}{note}")
+        lines.append(f"samples {self.n_samples}  free parameters {self.n_params}  dof {self.dof}  "
+                     f"AIC {self.aic:.6g}  BIC {self.bic:.6g}")
+        for name, values in self.metrics.items():
+            lines.append(f"{name:<10}" + "  ".join(f"{v:.4g}" for v in np.atleast_1d(values)))
+        lines.extend(f"warning: {w}" for w in self.warnings)
+        return "\n".join(lines)
+
+    def _flat_entries(self):
+        labels, values, errors = [], [], []
+        for name, value in self.params.items():
+            value = np.asarray(value, dtype=float)
+            err = np.asarray(self.stderr[name], dtype=float)
+            if value.ndim == 0:
+                labels.append(name), values.append(float(value)), errors.append(float(err))
+            else:
+                for i, (v, e) in enumerate(zip(value, err)):
+                    labels.append(f"{name}[{i}]"), values.append(float(v)), errors.append(float(e))
+        return labels, values, errors
+
+    def __str__(self) -> str:
+        return self.summary()
+
+    def to_dict(self) -> dict:
+        """A JSON-ready dict of the result (NaN and inf become None)."""
+        return {
+            "model": self.spec,
+            "models": [model_to_dict(m) for m in self.models],
+            "params": {k: _json_value(v) for k, v in self.params.items()},
+            "stderr": {k: _json_value(v) for k, v in self.stderr.items()},
+            "stderr_robust": {k: _json_value(v) for k, v in self.stderr_robust.items()},
+            "labels": list(self.labels),
+            "covariance": [_json_value(row) for row in np.atleast_2d(self.covariance)] if self.labels else [],
+            "correlation": [_json_value(row) for row in np.atleast_2d(self.correlation)] if self.labels else [],
+            "metrics": {k: _json_value(v) for k, v in self.metrics.items()},
+            "n_samples": self.n_samples,
+            "n_params": self.n_params,
+            "dof": self.dof,
+            "cost": _json_value(self.cost),
+            "aic": _json_value(self.aic),
+            "bic": _json_value(self.bic),
+            "noise_variance": _json_value(self.noise_variance),
+            "status": self.status,
+            "bounds_hit": list(self.bounds_hit),
+            "warnings": list(self.warnings),
+            "steps": self.steps,
+            "compile_time": self.compile_time,
+            "run_time": self.run_time,
+            "init_time": self.init_time,
+            "loss": self.loss,
+            "solver": self.solver,
+            "channel_mode": self.channel_mode,
+            "fixed": list(self.fixed),
+            "starts": self.starts,
+        }
+
+    def save(self, path, name: str | None = None) -> str:
+        """Write the result under ``/fits/<name>`` of an HDF5 file (created if absent; other groups are kept).
+
+        The group holds the JSON of `to_dict` as attribute ``result`` and the covariance as a dataset. The file
+        is written to a temporary copy and renamed into place.
+
+        Arguments:
+            path: HDF5 file path.
+            name: group name; defaults to the model spec.
+
+        Returns:
+            The group path written, e.g. ``"/fits/lambert+ggx"``.
+        """
+        from .io.hdf5 import update_hdf5
+
+        group = f"fits/{(name or self.spec).replace('/', '_')}"
+        payload = json.dumps(self.to_dict())
+
+        def write(g):
+            g.attrs["result"] = payload
+            g.create_dataset("covariance", data=np.atleast_2d(np.asarray(self.covariance, dtype=float)))
+
+        update_hdf5(path, group, write)
+        return "/" + group
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "FitResult":
+        """Rebuild a result from `to_dict` output (None values come back as NaN)."""
+        models = [model_from_dict(m) for m in d["models"]]
+        as_array = lambda v: np.asarray(np.nan if v is None else v, dtype=float)  # noqa: E731
+        fix = lambda v: np.array([np.nan if x is None else x for x in v], dtype=float) if isinstance(v, list) \
+            else as_array(v)  # noqa: E731
+        labels = list(d["labels"])
+        cov = np.array([[np.nan if x is None else x for x in row] for row in d["covariance"]], dtype=float)
+        cor = np.array([[np.nan if x is None else x for x in row] for row in d["correlation"]], dtype=float)
+        return cls(
+            model=models[0] if d["channel_mode"] != "independent" else None,
+            params={k: fix(v) for k, v in d["params"].items()},
+            stderr={k: fix(v) for k, v in d["stderr"].items()},
+            stderr_robust={k: fix(v) for k, v in d["stderr_robust"].items()},
+            covariance=cov.reshape(len(labels), len(labels)),
+            correlation=cor.reshape(len(labels), len(labels)),
+            labels=labels,
+            metrics={k: fix(v) for k, v in d["metrics"].items()},
+            n_samples=d["n_samples"], n_params=d["n_params"], dof=d["dof"], cost=float(fix(d["cost"])),
+            aic=float(fix(d["aic"])), bic=float(fix(d["bic"])), status=d["status"],
+            bounds_hit=list(d["bounds_hit"]), warnings=list(d["warnings"]), steps=d["steps"],
+            compile_time=d["compile_time"], run_time=d["run_time"], init_time=d["init_time"], loss=d["loss"],
+            solver=d["solver"], channel_mode=d["channel_mode"], fixed=list(d["fixed"]), starts=d["starts"],
+            noise_variance=float(fix(d["noise_variance"])), models=models,
+        )
+
+    @classmethod
+    def load(cls, path, name: str | None = None) -> "FitResult":
+        """Read a result written by `save`; with no ``name``, the only (or first) fit in the file.
+
+        Raises:
+            brdffit.io.FormatError: the file has no such fit.
+        """
+        import h5py
+
+        from .io import FormatError
+
+        with h5py.File(path, "r") as f:
+            fits = f.get("fits")
+            if fits is None or len(fits) == 0:
+                raise FormatError(f"{path}: no /fits group; write one with FitResult.save or `brdffit fit`")
+            key = name if name is not None else sorted(fits)[0]
+            if key not in fits:
+                raise FormatError(f"{path}: no fit named {key!r}; fits in the file: {', '.join(sorted(fits))}")
+            return cls.from_dict(json.loads(fits[key].attrs["result"]))

@@ -1,0 +1,206 @@
+"""The least-squares problem a fit solves: static structure, data arrays, residuals and the compiled solve.
+
+`Problem` is the hashable static part (lobes, which parameters are free, loss, solver, step limit); `FitData`
+holds the arrays. Compiled solves are cached by (problem, array shapes, batch layout), so fitting the same model
+to data of the same shape again never recompiles (`compiled_solve`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from .losses import residuals, robust_residuals
+from .models.model import Model, evaluate_dirs, global_names
+from .params import ParamTable
+
+__all__ = ["Problem", "FitData", "make_fit_data", "physical_params", "residual_fn", "compiled_solve",
+           "param_table", "stack_data"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Problem:
+    """Static description of a fit (hashable, so it can key the compile cache).
+
+    Attributes:
+        lobes: the lobes of the model.
+        channels: number of channels.
+        free: names of the fitted parameters, in model order; all others are held at values in `FitData.fixed`.
+        loss: residual definition (`brdffit.losses.LOSSES`).
+        robust: None, ``"huber"`` or ``"cauchy"``.
+        solver: the optimistix solver object.
+        max_steps: the solver's step limit.
+    """
+
+    lobes: tuple
+    channels: int
+    free: tuple
+    loss: str
+    robust: str | None
+    solver: Any
+    max_steps: int
+
+    @property
+    def specs(self) -> ParamTable:
+        """The model's parameter declarations under their model-level names."""
+        return param_table(self.lobes)
+
+    def model(self, params: dict) -> Model:
+        """A `Model` of this problem's lobes with the given parameter values."""
+        return Model(params=params, lobes=self.lobes, channels=self.channels)
+
+
+def param_table(lobes) -> ParamTable:
+    """Parameter declarations of a sum of lobes under their model-level names."""
+    return ParamTable(spec.renamed(name) for lobe, names in zip(lobes, global_names(lobes))
+                      for spec, name in zip(lobe.param_specs(), names))
+
+
+class FitData(NamedTuple):
+    """The arrays of a fit (a pytree; a leading batch axis is added by `stack_data` for `fit_many`).
+
+    Fields:
+        wi, wo: ``(N, 3)`` unit directions.
+        values: ``(N, C)`` data with missing samples set to 0.
+        mask: ``(N, C)`` True where the sample is valid.
+        cos_i: ``(N,)``.
+        sqrt_weight: ``(N,)`` square roots of the quadrature weights (ones when the data have none).
+        sigma: ``(N, C)`` per-sample σ (ones where unknown).
+        eps: ``(C,)`` the relative loss's ε.
+        robust_scale: scalar scale of the robust loss (unused without one).
+        fixed: name -> value of every parameter that is not fitted.
+    """
+
+    wi: Any
+    wo: Any
+    values: Any
+    mask: Any
+    cos_i: Any
+    sqrt_weight: Any
+    sigma: Any
+    eps: Any
+    robust_scale: Any
+    fixed: dict
+
+
+def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, dtype=jnp.float64) -> FitData:
+    """Build `FitData` from `brdffit.Measurements`.
+
+    Arguments:
+        measurements: the data.
+        fixed: name -> value of the parameters held fixed.
+        eps: ``(C,)`` the relative loss's ε.
+        robust_scale: scale of the robust loss.
+        dtype: floating dtype of the arrays (float64 by default; float32 for speed studies).
+
+    Returns:
+        The `FitData`.
+    """
+    values = np.asarray(measurements.values, dtype=float)
+    mask = np.isfinite(values)
+    sigma = measurements.sigma
+    sigma = np.ones_like(values) if sigma is None else np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
+    weights = measurements.weights
+    weights = np.ones(len(values)) if weights is None else np.asarray(weights, dtype=float)
+    wi = np.asarray(measurements.wi(), dtype=float)
+    as_array = lambda a: jnp.asarray(a, dtype=dtype)  # noqa: E731
+    return FitData(
+        wi=as_array(wi),
+        wo=as_array(measurements.wo()),
+        values=as_array(np.where(mask, values, 0.0)),
+        mask=jnp.asarray(mask),
+        cos_i=as_array(np.maximum(wi[:, 2], 0.0)),
+        sqrt_weight=as_array(np.sqrt(weights)),
+        sigma=as_array(sigma),
+        eps=as_array(eps),
+        robust_scale=as_array(robust_scale),
+        fixed={k: as_array(v) for k, v in fixed.items()},
+    )
+
+
+def stack_data(items: list[FitData]) -> FitData:
+    """Stack equally shaped `FitData` along a new leading axis (for the vmapped `fit_many`)."""
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
+
+
+def physical_params(problem: Problem, y: dict, fixed: dict) -> dict:
+    """Map unconstrained solver variables to physical parameter values and merge the fixed ones.
+
+    Arguments:
+        problem: the `Problem`.
+        y: free name -> unconstrained value.
+        fixed: fixed name -> physical value.
+
+    Returns:
+        name -> physical value for every parameter of the model, in model order.
+    """
+    specs = problem.specs
+    out = {}
+    for spec in specs:
+        out[spec.name] = spec.from_unconstrained(y[spec.name]) if spec.name in y else fixed[spec.name]
+    return out
+
+
+def residual_fn(problem: Problem, params: dict, data: FitData):
+    """Residuals ``(N, C)`` of the model with physical ``params`` against ``data``; missing samples give 0."""
+    f_model = evaluate_dirs(problem.model(params), data.wi, data.wo)
+    r = residuals(problem.loss, f_model, data.values, data.cos_i, data.sqrt_weight, data.sigma, data.eps)
+    r = robust_residuals(problem.robust, r, data.robust_scale)
+    return jnp.where(data.mask, r, 0.0)
+
+
+def _solve_one(y0: dict, data: FitData, problem: Problem):
+    def fn(y, args):
+        return residual_fn(problem, physical_params(problem, y, data.fixed), data)
+
+    sol = optx.least_squares(fn, problem.solver, y0, max_steps=problem.max_steps, throw=False)
+    r = fn(sol.value, None)
+    cost = jnp.sum(r * r)
+    return {
+        "y": sol.value,
+        "cost": cost,
+        "steps": sol.stats["num_steps"],
+        "successful": sol.result == optx.RESULTS.successful,
+        "max_steps": sol.result == optx.RESULTS.nonlinear_max_steps_reached,
+        "nonfinite": (sol.result == optx.RESULTS.nonfinite) | ~jnp.isfinite(cost),
+    }
+
+
+_COMPILED: dict = {}
+
+
+def _signature(tree) -> tuple:
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    return treedef, tuple((leaf.shape, str(leaf.dtype)) for leaf in leaves)
+
+
+def compiled_solve(problem: Problem, y0: dict, data: FitData, data_batched: bool):
+    """The compiled, vmapped solve for this problem and these shapes, and the seconds spent compiling it.
+
+    The solve is vmapped over the leading axis of every leaf of ``y0`` (several starts, or several materials) and,
+    when ``data_batched``, of ``data`` too. Executables are cached in this process, keyed by the problem and the
+    shapes, so a second fit of the same model and shapes compiles nothing (compile time 0).
+
+    Arguments:
+        problem: the `Problem`.
+        y0: free name -> unconstrained starting values with a leading batch axis.
+        data: the `FitData` (batched or not).
+        data_batched: whether ``data`` has the leading batch axis.
+
+    Returns:
+        ``(executable, compile_seconds)``; call ``executable(y0, data)``.
+    """
+    key = (problem, _signature(y0), _signature(data), data_batched)
+    if key in _COMPILED:
+        return _COMPILED[key], 0.0
+    start = time.perf_counter()
+    batched = jax.vmap(lambda y, d: _solve_one(y, d, problem), in_axes=(0, 0 if data_batched else None))
+    executable = jax.jit(batched).lower(y0, data).compile()
+    _COMPILED[key] = executable
+    return executable, time.perf_counter() - start
