@@ -22,12 +22,18 @@ from .metrics import fit_metrics
 from .models.model import Model
 from .models.registry import get as get_model
 from .params import at_bound
-from .problem import FitData, Problem, compiled_solve, make_fit_data, physical_params, residual_fn, stack_data
+from .problem import (FitData, Problem, chunk_data, compiled_solve, flatten_free, make_fit_data, physical_params,
+                      residual_fn, stack_data)
+from .refine import refine
 from .solvers import make_solver, solver_name
 
 __all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
 
 CHANNEL_MODES = ("shared-shape", "independent")
+# Data with more (sample, channel) values than this is first solved on a subsample of COARSE_SAMPLES samples and
+# then refined on all of it (`brdffit.refine`).
+COARSE_RESIDUALS = 300_000
+COARSE_SAMPLES = 100_000
 _CORRELATION_WARNING = 0.99
 _JACOBIAN_BYTES = 256 * 2**20
 
@@ -94,14 +100,7 @@ def _jtj_fn(problem: Problem):
     parameters."""
 
     def jtj(free_params: dict, data: FitData):
-        # Flatten in model order (ravel_pytree would sort the names), matching `param_labels`.
-        shapes = [jnp.shape(free_params[name]) for name in problem.free]
-        sizes = [int(np.prod(shape)) for shape in shapes]
-        flat = jnp.concatenate([jnp.ravel(free_params[name]) for name in problem.free])
-
-        def unravel(theta):
-            pieces = jnp.split(theta, np.cumsum(sizes)[:-1])
-            return {name: piece.reshape(shape) for name, piece, shape in zip(problem.free, pieces, shapes)}
+        flat, unravel = flatten_free(problem, free_params)  # model order, matching `param_labels`
 
         def r(theta):
             params = physical_params(problem, {}, dict(data.fixed, **unravel(theta)))
@@ -115,23 +114,6 @@ def _jtj_fn(problem: Problem):
     return jax.jit(jtj)
 
 
-def _chunks(data: FitData, size: int):
-    """Split FitData along the samples into chunks of ``size`` (the last padded with masked samples)."""
-    n = data.wi.shape[0]
-    for start in range(0, n, size):
-        stop = min(start + size, n)
-        pad = size - (stop - start)
-
-        def take(a, start=start, stop=stop, pad=pad):
-            piece = a[start:stop]
-            if pad:
-                piece = jnp.concatenate([piece, jnp.zeros((pad,) + piece.shape[1:], piece.dtype)])
-            return piece
-
-        per_sample = {"wi", "wo", "values", "mask", "cos_i", "sqrt_weight", "sigma"}
-        yield data._replace(**{k: take(getattr(data, k)) for k in per_sample})
-
-
 def _laplace(problem: Problem, params: dict, data: FitData, n_valid: int):
     """Gauss-Newton covariance s² (JᵀJ)⁻¹ of the free parameters, with s² = Σr²/dof (1 for ``loss="sigma"``),
     and the sandwich covariance that stays valid when the residuals' variance differs between samples.
@@ -142,13 +124,13 @@ def _laplace(problem: Problem, params: dict, data: FitData, n_valid: int):
     free = {k: params[k] for k in problem.free}
     p = sum(int(np.size(v)) for v in free.values())
     channels = problem.channels
-    chunk = int(max(1024, min(data.wi.shape[0], _JACOBIAN_BYTES // (8 * channels * max(p, 1)))))
+    chunk = int(max(1024, min(data.values.shape[0], _JACOBIAN_BYTES // (8 * channels * max(p, 1)))))
     data = data._replace(fixed={k: v for k, v in params.items() if k not in problem.free})
     jtj = np.zeros((p, p))
     meat = np.zeros((p, p))
     rss = 0.0
     fn = _jtj_fn(problem)
-    for piece in _chunks(data, chunk):
+    for piece in chunk_data(data, chunk):
         a, b, c = fn(free, piece)
         jtj += np.asarray(a, dtype=float)
         meat += np.asarray(b, dtype=float)
@@ -179,6 +161,12 @@ def _per_param(params: dict, free, flat_std) -> dict:
         else:
             out[name] = np.zeros(np.shape(params[name]))
     return out
+
+
+@functools.lru_cache(maxsize=32)
+def _channel_cost(problem: Problem):
+    """Jitted Σr² per channel."""
+    return jax.jit(lambda params, data: jnp.sum(residual_fn(problem, params, data) ** 2, axis=0))
 
 
 def _information_criteria(loss: str, cost: float, n: int, k: int) -> tuple[float, float]:
@@ -215,8 +203,16 @@ def _json_params(params: dict) -> dict:
     return {k: np.asarray(v, dtype=float).tolist() for k, v in params.items()}
 
 
-def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict, outcome: dict, *, config: dict,
-            starts: list, times: dict) -> FitResult:
+def _use_coarse(coarse, measurements) -> bool:
+    if coarse not in ("auto", True, False):
+        raise ValueError(f"coarse must be 'auto', True or False, got {coarse!r}")
+    if coarse == "auto":
+        return measurements.n * measurements.n_channels > COARSE_RESIDUALS and measurements.n > COARSE_SAMPLES
+    return bool(coarse) and measurements.n > COARSE_SAMPLES
+
+
+def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict, outcome: dict, *, starts: list,
+            times: dict, strategy: str = "full") -> FitResult:
     """Build the `FitResult` of the kept solution ``y`` (one material, one start)."""
     params = {k: np.asarray(v) for k, v in physical_params(problem, y, data.fixed).items()}
     fitted = model.replace(**params)
@@ -253,18 +249,17 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
     cost = float(outcome["cost"])
     k = len(labels)
     aic, bic = _information_criteria(problem.loss, cost, n_valid, k)
-    metrics = {"rmse_loss": np.sqrt(cost / max(n_valid, 1)) * np.ones(problem.channels)}
-    per_channel_cost = np.asarray(jnp.sum(residual_fn(problem, fitted.params, data) ** 2, axis=0))
+    per_channel_cost = np.asarray(_channel_cost(problem)(fitted.params, data))
     counts = np.maximum(np.isfinite(measurements.values).sum(axis=0), 1)
-    metrics["rmse_loss"] = np.sqrt(per_channel_cost / counts)
-    metrics.update(fit_metrics(fitted, measurements))
+    metrics = {"rmse_loss": np.sqrt(per_channel_cost / counts)}
+    metrics.update(fit_metrics(fitted, measurements, pair=data.pair))
     return FitResult(
         model=fitted, params=dict(fitted.params), stderr=stderr, stderr_robust=stderr_robust, covariance=cov, correlation=correlation,
         labels=labels, metrics=metrics, n_samples=n_valid, n_params=k, dof=n_valid - k, cost=cost, aic=aic,
         bic=bic, status=status, bounds_hit=hit, warnings=warnings, steps=int(outcome["steps"]),
         compile_time=times["compile"], run_time=times["run"], init_time=times["init"], loss=problem.loss,
         solver=solver_name(problem.solver), channel_mode="shared-shape", fixed=sorted(data.fixed), starts=starts,
-        noise_variance=float(variance), models=[fitted],
+        noise_variance=float(variance), strategy=strategy, models=[fitted],
     )
 
 
@@ -313,7 +308,8 @@ def _starting_points(problem: Problem, model: Model, measurements, fixed_values:
 
 def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", fixed=None, free=None,
         multistart: int = 0, channel_mode: str = "shared-shape", robust=None, max_steps: int = 256,
-        rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0, dtype="float64", strict: bool = False) -> FitResult:
+        rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0, dtype="float64", coarse="auto",
+        strict: bool = False) -> FitResult:
     """Fit a model to measurements by nonlinear least squares.
 
     Arguments:
@@ -336,6 +332,9 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
         rtol, atol: the solver's convergence tolerances (optimistix's Cauchy termination).
         seed: seed of the subsample and of the quasi-random starts.
         dtype: ``"float64"`` (default) or ``"float32"`` for the data and the solve.
+        coarse: ``"auto"`` solves data with more than `COARSE_RESIDUALS` values on a seeded subsample of
+            `COARSE_SAMPLES` samples first and then refines on all of it (`brdffit.refine`); True forces and
+            False disables this. The answer is the full-data optimum either way; only the time differs.
         strict: raise `FitError` instead of returning a non-converged result.
 
     Returns:
@@ -344,7 +343,8 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
     if channel_mode not in CHANNEL_MODES:
         raise ValueError(f"channel_mode must be one of {', '.join(CHANNEL_MODES)}, got {channel_mode!r}")
     kwargs = dict(loss=loss, solver=solver, init=init, fixed=fixed, free=free, multistart=multistart,
-                  robust=robust, max_steps=max_steps, rtol=rtol, atol=atol, seed=seed, dtype=dtype, strict=strict)
+                  robust=robust, max_steps=max_steps, rtol=rtol, atol=atol, seed=seed, dtype=dtype, coarse=coarse,
+                  strict=strict)
     if channel_mode == "independent":
         return _fit_independent(measurements, model, **kwargs)
     problem, model, fixed_values, robust_scale, dt = _prepare(
@@ -356,10 +356,16 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
     init_time = time.perf_counter() - t0
     data = make_fit_data(measurements, fixed_values, eps, robust_scale, dt)
     y0 = _unconstrained(problem, starts, dt)
+    two_stage = bool(problem.free) and _use_coarse(coarse, measurements)
+    strategy = f"coarse ({COARSE_SAMPLES} samples) + refine" if two_stage else "full"
     if problem.free:
-        executable, compile_time = compiled_solve(problem, y0, data, data_batched=False)
+        solve_data = data
+        if two_stage:
+            solve_data = make_fit_data(measurements.subsample(COARSE_SAMPLES, seed=seed), fixed_values, eps,
+                                       robust_scale, dt)
+        executable, compile_time = compiled_solve(problem, y0, solve_data, data_batched=False)
         t0 = time.perf_counter()
-        out = jax.block_until_ready(executable(y0, data))
+        out = jax.block_until_ready(executable(y0, solve_data))
         run_time = time.perf_counter() - t0
     else:
         compile_time = run_time = 0.0
@@ -373,7 +379,13 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
         {k: v[i] for k, v in out.items() if k != "y"}), "steps": int(out["steps"][i])} for i, s in enumerate(starts)]
     y = {k: v[best] for k, v in out["y"].items()}
     outcome = {k: v[best] for k, v in out.items() if k != "y"}
-    result = _finish(problem, model, measurements, data, y, outcome, config=kwargs, starts=records,
+    if two_stage:
+        t0 = time.perf_counter()
+        coarse_steps = int(outcome["steps"])
+        y, outcome = refine(problem, y, data, rtol=rtol, atol=atol)
+        outcome["steps"] = coarse_steps + int(outcome["steps"])
+        run_time += time.perf_counter() - t0
+    result = _finish(problem, model, measurements, data, y, outcome, starts=records, strategy=strategy,
                      times={"compile": compile_time, "run": run_time, "init": init_time})
     if strict and not result.converged:
         raise FitError(f"fit of {result.spec} did not converge: {result.status}", result)
@@ -426,7 +438,7 @@ def _fit_independent(measurements, model, **kwargs) -> FitResult:
         loss=results[0].loss, solver=results[0].solver, channel_mode="independent", fixed=results[0].fixed,
         starts=[s for r in results for s in r.starts], noise_variance=float(np.mean([r.noise_variance
                                                                                       for r in results])),
-        models=[r.model for r in results],
+        strategy=results[0].strategy, models=[r.model for r in results],
     )
 
 
@@ -476,6 +488,6 @@ def fit_many(measurements_list, model, *, loss: str = "cosine", solver="lm", ini
         record = [{"init": _json_params(start), "cost": float(outcome["cost"]), "status": _start_status(outcome),
                    "steps": int(outcome["steps"])}]
         results.append(_finish(problem, prepared[i][1], m, d, {k: v[i] for k, v in out["y"].items()}, outcome,
-                               config={}, starts=record,
+                               starts=record,
                                times={"compile": compile_time, "run": run_time, "init": init_time}))
     return results

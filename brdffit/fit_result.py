@@ -62,6 +62,7 @@ class FitResult:
         loss, solver, channel_mode, fixed: how the fit was configured.
         starts: one record per start: initial parameters, final cost, status, steps.
         noise_variance: the residual variance used to scale the covariance (1 for ``loss="sigma"``).
+        strategy: ``"full"``, or the coarse subsample solve followed by the full-data refinement.
         models: one model per channel in independent mode, else ``[model]``.
     """
 
@@ -92,6 +93,7 @@ class FitResult:
     fixed: list
     starts: list
     noise_variance: float
+    strategy: str = "full"
     models: list = dataclasses.field(default_factory=list)
 
     @property
@@ -165,6 +167,7 @@ class FitResult:
             "aic": _json_value(self.aic),
             "bic": _json_value(self.bic),
             "noise_variance": _json_value(self.noise_variance),
+            "strategy": self.strategy,
             "status": self.status,
             "bounds_hit": list(self.bounds_hit),
             "warnings": list(self.warnings),
@@ -228,7 +231,7 @@ class FitResult:
             bounds_hit=list(d["bounds_hit"]), warnings=list(d["warnings"]), steps=d["steps"],
             compile_time=d["compile_time"], run_time=d["run_time"], init_time=d["init_time"], loss=d["loss"],
             solver=d["solver"], channel_mode=d["channel_mode"], fixed=list(d["fixed"]), starts=d["starts"],
-            noise_variance=float(fix(d["noise_variance"])), models=models,
+            noise_variance=float(fix(d["noise_variance"])), strategy=d.get("strategy", "full"), models=models,
         )
 
     @classmethod

@@ -24,7 +24,7 @@ import numpy as np
 from scipy.optimize import lsq_linear
 from scipy.stats import qmc
 
-from .models.model import evaluate_dirs
+from .models.model import evaluate_pair
 from .params import bound_margin
 from .problem import FitData, Problem, residual_fn
 
@@ -120,7 +120,7 @@ def _loss_weights(loss: str, data: FitData) -> np.ndarray:
 @functools.lru_cache(maxsize=64)
 def _eval_fn(problem: Problem):
     """Jitted model values ``(B, N, C)`` for a batch of parameter dicts (leading axis B on every value)."""
-    return jax.jit(jax.vmap(lambda params, data: evaluate_dirs(problem.model(params), data.wi, data.wo),
+    return jax.jit(jax.vmap(lambda params, data: evaluate_pair(problem.model(params), data.pair),
                             in_axes=(0, None)))
 
 

@@ -2,16 +2,41 @@
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
-from .models.model import Model, evaluate_dirs
+from .geometry import LocalPair
+from .models.model import Model, evaluate_pair
 
 __all__ = ["fit_metrics", "METRICS"]
 
 METRICS = ("rmse_abs", "rmse_rel", "ngan", "low")
 
 
-def fit_metrics(model: Model, measurements) -> dict:
+@jax.jit
+def _metrics(model: Model, pair: LocalPair, values, cos_i, weights):
+    f_model = evaluate_pair(model, pair)
+    valid = jnp.isfinite(values)
+    f_data = jnp.where(valid, values, 0.0)
+    c = cos_i[:, None]
+    w = jnp.where(valid, weights[:, None], 0.0)
+    diff = f_model - f_data
+    positive = valid & (f_data > 0)
+
+    def weighted_rms(x, weights):
+        return jnp.sqrt(jnp.sum(weights * x * x, axis=0) / jnp.maximum(jnp.sum(weights, axis=0), 1e-300))
+
+    return {
+        "rmse_abs": weighted_rms(diff, valid.astype(diff.dtype)),
+        "rmse_rel": weighted_rms(jnp.where(positive, diff / jnp.where(positive, f_data, 1.0), 0.0),
+                                 positive.astype(diff.dtype)),
+        "ngan": weighted_rms(diff * c, w),
+        "low": weighted_rms(jnp.log1p(jnp.maximum(f_model * c, -0.999)) - jnp.log1p(f_data * c), w),
+    }
+
+
+def fit_metrics(model: Model, measurements, pair: LocalPair | None = None) -> dict:
     """Error metrics of ``model`` on the valid samples of ``measurements``, one value per channel.
 
     - ``rmse_abs``: √(mean (f_m − f_d)²), in 1/sr;
@@ -23,28 +48,14 @@ def fit_metrics(model: Model, measurements) -> dict:
     Arguments:
         model: the model to score.
         measurements: `brdffit.Measurements` with the same number of channels.
+        pair: the data's precomputed `LocalPair`, if at hand.
 
     Returns:
         name -> NumPy array ``(C,)``.
     """
-    f_model = np.asarray(evaluate_dirs(model, measurements.wi(), measurements.wo()), dtype=float)
-    f_data = np.asarray(measurements.values, dtype=float)
-    valid = np.isfinite(f_data)
-    f_data = np.where(valid, f_data, 0.0)
-    cos_i = np.cos(np.asarray(measurements.theta_i))[:, None]
-    w = np.ones(len(f_data)) if measurements.weights is None else np.asarray(measurements.weights, dtype=float)
-    w = np.where(valid, w[:, None], 0.0)
-    diff = f_model - f_data
-    positive = valid & (f_data > 0)
-    count = np.maximum(valid.sum(axis=0), 1)
-
-    def weighted_rms(x, weights):
-        return np.sqrt(np.sum(weights * x * x, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-300))
-
-    return {
-        "rmse_abs": np.sqrt(np.sum(np.where(valid, diff * diff, 0.0), axis=0) / count),
-        "rmse_rel": weighted_rms(np.where(positive, diff / np.where(positive, f_data, 1.0), 0.0),
-                                 positive.astype(float)),
-        "ngan": weighted_rms(diff * cos_i, w),
-        "low": weighted_rms(np.log1p(np.maximum(f_model * cos_i, -0.999)) - np.log1p(f_data * cos_i), w),
-    }
+    if pair is None:
+        pair = LocalPair.from_dirs(jnp.asarray(measurements.wi()), jnp.asarray(measurements.wo()))
+    weights = np.ones(measurements.n) if measurements.weights is None else measurements.weights
+    out = _metrics(model, pair, jnp.asarray(measurements.values, dtype=float),
+                   jnp.cos(jnp.asarray(measurements.theta_i, dtype=float)), jnp.asarray(weights, dtype=float))
+    return {k: np.asarray(v, dtype=float) for k, v in out.items()}

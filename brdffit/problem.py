@@ -17,11 +17,14 @@ import numpy as np
 import optimistix as optx
 
 from .losses import residuals, robust_residuals
-from .models.model import Model, evaluate_dirs, global_names
+from .geometry import LocalPair
+from .models.model import Model, evaluate_pair, global_names
 from .params import ParamTable
 
 __all__ = ["Problem", "FitData", "make_fit_data", "physical_params", "residual_fn", "compiled_solve",
-           "param_table", "stack_data"]
+           "param_table", "stack_data", "chunk_data", "flatten_free"]
+
+_PER_SAMPLE = ("pair", "values", "mask", "cos_i", "sqrt_weight", "sigma")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,7 +69,7 @@ class FitData(NamedTuple):
     """The arrays of a fit (a pytree; a leading batch axis is added by `stack_data` for `fit_many`).
 
     Fields:
-        wi, wo: ``(N, 3)`` unit directions.
+        pair: the `LocalPair` of the samples' directions (computed once: it does not depend on the parameters).
         values: ``(N, C)`` data with missing samples set to 0.
         mask: ``(N, C)`` True where the sample is valid.
         cos_i: ``(N,)``.
@@ -77,8 +80,7 @@ class FitData(NamedTuple):
         fixed: name -> value of every parameter that is not fitted.
     """
 
-    wi: Any
-    wo: Any
+    pair: LocalPair
     values: Any
     mask: Any
     cos_i: Any
@@ -110,9 +112,10 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, dty
     weights = np.ones(len(values)) if weights is None else np.asarray(weights, dtype=float)
     wi = np.asarray(measurements.wi(), dtype=float)
     as_array = lambda a: jnp.asarray(a, dtype=dtype)  # noqa: E731
+    pair = jax.tree_util.tree_map(lambda a: a.astype(dtype) if a.dtype != bool else a,
+                                  _local_pair(jnp.asarray(wi), jnp.asarray(measurements.wo(), dtype=float)))
     return FitData(
-        wi=as_array(wi),
-        wo=as_array(measurements.wo()),
+        pair=pair,
         values=as_array(np.where(mask, values, 0.0)),
         mask=jnp.asarray(mask),
         cos_i=as_array(np.maximum(wi[:, 2], 0.0)),
@@ -124,9 +127,51 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, dty
     )
 
 
+_local_pair = jax.jit(LocalPair.from_dirs)
+
+
 def stack_data(items: list[FitData]) -> FitData:
     """Stack equally shaped `FitData` along a new leading axis (for the vmapped `fit_many`)."""
     return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
+
+
+def chunk_data(data: FitData, size: int):
+    """Yield `FitData` pieces of ``size`` samples; the last is padded with masked samples so that every piece has
+    the same shape (one compilation serves all). Data of at most ``size`` samples is yielded whole."""
+    n = data.values.shape[0]
+    if n <= size:
+        yield data
+        return
+    for start in range(0, n, size):
+        stop = min(start + size, n)
+        pad = size - (stop - start)
+
+        def take(a, start=start, stop=stop, pad=pad):
+            piece = a[start:stop]
+            return jnp.concatenate([piece, jnp.zeros((pad,) + piece.shape[1:], piece.dtype)]) if pad else piece
+
+        yield data._replace(**{k: jax.tree_util.tree_map(take, getattr(data, k)) for k in _PER_SAMPLE})
+
+
+def flatten_free(problem: Problem, tree: dict):
+    """Flatten the free parameters of ``tree`` in model order (``ravel_pytree`` would sort the names).
+
+    Arguments:
+        problem: the `Problem` whose ``free`` names are flattened.
+        tree: name -> array for (at least) every free name.
+
+    Returns:
+        ``(flat, unravel)``: the 1-d array and the function that maps such an array back to a dict.
+    """
+    shapes = [jnp.shape(tree[name]) for name in problem.free]
+    sizes = [int(np.prod(shape)) for shape in shapes]
+    flat = jnp.concatenate([jnp.ravel(jnp.asarray(tree[name])) for name in problem.free])
+
+    def unravel(theta):
+        pieces = jnp.split(theta, np.cumsum(sizes)[:-1])
+        return {name: piece.reshape(shape) for name, piece, shape in zip(problem.free, pieces, shapes)}
+
+    return flat, unravel
 
 
 def physical_params(problem: Problem, y: dict, fixed: dict) -> dict:
@@ -149,7 +194,7 @@ def physical_params(problem: Problem, y: dict, fixed: dict) -> dict:
 
 def residual_fn(problem: Problem, params: dict, data: FitData):
     """Residuals ``(N, C)`` of the model with physical ``params`` against ``data``; missing samples give 0."""
-    f_model = evaluate_dirs(problem.model(params), data.wi, data.wo)
+    f_model = evaluate_pair(problem.model(params), data.pair)
     r = residuals(problem.loss, f_model, data.values, data.cos_i, data.sqrt_weight, data.sigma, data.eps)
     r = robust_residuals(problem.robust, r, data.robust_scale)
     return jnp.where(data.mask, r, 0.0)

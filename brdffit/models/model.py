@@ -15,7 +15,7 @@ from ..geometry import LocalPair, spherical_to_vector
 from ..params import ParamSpec, ParamTable
 from .lobe import Lobe
 
-__all__ = ["Model", "evaluate", "evaluate_dirs"]
+__all__ = ["Model", "evaluate", "evaluate_dirs", "evaluate_pair"]
 
 
 def global_names(lobes: tuple[Lobe, ...]) -> tuple[tuple[str, ...], ...]:
@@ -131,7 +131,19 @@ def evaluate_dirs(model: Model, wi, wo):
         f_r in 1/sr without the cosine factor, shape ``broadcast(...) + (channels,)``; zero unless both directions
         lie strictly above the horizon.
     """
-    pair = LocalPair.from_dirs(wi, wo)
+    return evaluate_pair(model, LocalPair.from_dirs(wi, wo))
+
+
+def evaluate_pair(model: Model, pair: LocalPair):
+    """Evaluate a model on precomputed direction quantities (fits compute the `LocalPair` of their data once).
+
+    Arguments:
+        model: the `Model`.
+        pair: the `brdffit.geometry.LocalPair` of the directions.
+
+    Returns:
+        f_r in 1/sr, shape ``pair.above.shape + (channels,)``, zero below the horizon.
+    """
     out_shape = pair.above.shape + (model.channels,)
     total = jnp.zeros(out_shape, dtype=pair.wi.dtype)
     for lobe, names in zip(model.lobes, model.names_by_lobe):
