@@ -1,0 +1,92 @@
+"""Property tests: on garbage input the readers succeed or raise FormatError / MeasurementError, nothing else."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import brdffit.io as bio
+from brdffit.io import FormatError
+from brdffit.measurements import MeasurementError, Measurements
+
+FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+EXPECTED = (FormatError, MeasurementError)
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    return tmp_path_factory.mktemp("fuzz")
+
+
+def load_or_fail_cleanly(path, **options):
+    try:
+        m = bio.load(path, **options)
+    except EXPECTED as err:
+        assert str(path) in str(err)  # every error names the file
+        return None
+    assert isinstance(m, Measurements)
+    return m
+
+
+@FUZZ
+@given(data=st.binary(max_size=400), ext=st.sampled_from([".csv", ".tsv", ".txt", ".binary", ".h5", ""]))
+def test_random_bytes(workdir, data, ext):
+    path = workdir / f"garbage{ext}"
+    path.write_bytes(data)
+    load_or_fail_cleanly(path)
+
+
+TABLE_ALPHABET = "0123456789.,;-+eE \t\n#naif_xsgmthop\"'"
+
+
+@FUZZ
+@given(text=st.text(alphabet=TABLE_ALPHABET, max_size=300))
+def test_random_table_text(workdir, text):
+    path = workdir / "table.csv"
+    path.write_text(text)
+    load_or_fail_cleanly(path)
+
+
+def _canonical_text(workdir) -> str:
+    m = Measurements(np.radians([0, 30, 60]), 0.0, np.radians([10, 40, 70]), np.pi, [[0.1, 0.2], [0.3, np.nan],
+                                                                                      [0.5, 0.6]],
+                     sigma=0.01, weights=[1.0, 2.0, 3.0], channels=("a", "b"), meta={"k": [1, 2]})
+    path = workdir / "canonical.csv"
+    bio.save(m, path)
+    return path.read_text()
+
+
+@FUZZ
+@given(cut=st.integers(0, 10_000), start=st.integers(0, 10_000), junk=st.text(alphabet=TABLE_ALPHABET, max_size=20))
+def test_damaged_canonical_tables(workdir, cut, start, junk):
+    text = _canonical_text(workdir)
+    start %= len(text) + 1
+    damaged = text[:start] + junk + text[start + cut % 30:]
+    path = workdir / "damaged.csv"
+    path.write_text(damaged)
+    load_or_fail_cleanly(path)
+    path.write_text(text[: cut % (len(text) + 1)])  # truncated anywhere
+    load_or_fail_cleanly(path)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cut=st.integers(0, 100_000), flip=st.integers(0, 100_000), byte=st.integers(0, 255))
+def test_damaged_hdf5(workdir, cut, flip, byte):
+    path = workdir / "m.h5"
+    m = Measurements(np.radians([0, 30, 60]), 0.0, np.radians([10, 40, 70]), np.pi, [0.1, 0.2, 0.3])
+    bio.save(m, path)
+    data = bytearray(path.read_bytes())
+    data[flip % len(data)] = byte
+    path.write_bytes(bytes(data))
+    load_or_fail_cleanly(path)
+    path.write_bytes(bytes(data[: cut % len(data)]))
+    load_or_fail_cleanly(path)
+
+
+@FUZZ
+@given(tail=st.binary(max_size=200))
+def test_merl_header_with_garbage(workdir, tail):
+    path = workdir / "m.binary"
+    path.write_bytes(np.asarray([90, 90, 180], "<i4").tobytes() + tail)
+    with pytest.raises(FormatError, match="truncated"):
+        bio.load(path)

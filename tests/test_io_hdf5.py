@@ -1,0 +1,173 @@
+"""brdffit's HDF5 schema: exact round trips, reproducible bytes, group updates that never damage a file."""
+
+import json
+import os
+
+import h5py
+import numpy as np
+import pytest
+
+import brdffit.io as bio
+from brdffit.io import FormatError, read_hdf5, update_hdf5, write_hdf5
+from brdffit.io.hdf5 import read_hdf5_group
+from brdffit.measurements import MeasurementError, Measurements
+
+
+def sample(n=50, sigma=True, weights=True):
+    rng = np.random.default_rng(11)
+    values = rng.uniform(0.0, 2.0, (n, 2))
+    values[3, 1] = np.nan
+    sig = np.where(np.isnan(values), np.nan, 0.05) if sigma else None
+    return Measurements(np.arccos(rng.random(n)), rng.random(n) * 7, np.arccos(rng.random(n)), rng.random(n) * 7,
+                        values, sigma=sig, weights=rng.random(n) if weights else None, channels=("450 nm", "λ=550"),
+                        meta={"source": "synthetic", "truth": {"spec": "lambert", "channels": 2,
+                                                              "params": {"rho_d": [0.1, 0.2]}}, "nan": float("nan")})
+
+
+def assert_same(a, b):
+    for name in ("theta_i", "phi_i", "theta_o", "phi_o", "values", "sigma", "weights"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert (x is None) == (y is None), name
+        if x is not None:
+            assert x.dtype == y.dtype == np.float64
+            np.testing.assert_array_equal(x, y, err_msg=name)  # NaN == NaN here; exact otherwise
+    assert a.channels == b.channels
+    assert json.dumps(a.meta, sort_keys=True) == json.dumps(b.meta, sort_keys=True)
+
+
+@pytest.mark.parametrize("sigma, weights", [(True, True), (False, False)])
+def test_exact_round_trip(tmp_path, sigma, weights):
+    m = sample(sigma=sigma, weights=weights)
+    path = tmp_path / "m.h5"
+    bio.save(m, path)
+    back = bio.load(path)
+    assert_same(m, back)
+    with h5py.File(path, "r") as f:
+        assert f.attrs["format_version"] == "1" and f.attrs["creator"].startswith("brdffit ")
+        g = f["measurements"]
+        expected = {"theta_i", "phi_i", "theta_o", "phi_o", "values"} | ({"sigma"} if sigma else set()) | (
+            {"weights"} if weights else set())
+        assert set(g) == expected
+        assert g["values"].shape == (50, 2) and g["theta_i"].dtype == np.float64
+        assert json.loads(g.attrs["channels"]) == ["450 nm", "λ=550"]
+
+
+def test_bytes_are_reproducible(tmp_path):
+    m = sample()
+    write_hdf5(m, tmp_path / "a.h5")
+    write_hdf5(m, tmp_path / "b.hdf5", compression="gzip")
+    write_hdf5(m, tmp_path / "c.hdf5", compression="gzip")
+    assert (tmp_path / "b.hdf5").read_bytes() == (tmp_path / "c.hdf5").read_bytes()
+    assert_same(read_hdf5(tmp_path / "a.h5"), read_hdf5(tmp_path / "b.hdf5"))
+
+
+def test_update_adds_and_replaces_groups(tmp_path):
+    path = tmp_path / "m.h5"
+    m = sample()
+    write_hdf5(m, path)
+
+    def fit_writer(value):
+        def write(group):
+            group.attrs["spec"] = "lambert"
+            group.create_dataset("params", data=np.array([value]))
+            return value
+        return write
+
+    assert update_hdf5(path, "fits/lambert", fit_writer(1.0)) == 1.0
+    update_hdf5(path, "/fits/ggx", fit_writer(2.0))
+    update_hdf5(path, "fits/lambert", fit_writer(3.0))  # replaced, not duplicated
+    update_hdf5(path, "posteriors/run1", lambda g: g.create_dataset("chain", data=np.zeros((4, 3))))
+    with h5py.File(path, "r") as f:
+        assert sorted(f) == ["fits", "measurements", "posteriors"]
+        assert sorted(f["fits"]) == ["ggx", "lambert"]
+        assert f["fits/lambert/params"][()].tolist() == [3.0]
+        assert f["fits/ggx/params"][()].tolist() == [2.0]
+        assert f["fits/lambert"].attrs["spec"] == "lambert"
+    assert_same(read_hdf5(path), m)
+    assert read_hdf5_group(path, "fits/ggx", lambda g: g["params"][0]) == 2.0
+    # replacing the measurements keeps the fits when asked to
+    write_hdf5(m.select_channels([1]), path, keep_other_groups=True)
+    with h5py.File(path, "r") as f:
+        assert sorted(f) == ["fits", "measurements", "posteriors"]
+    assert read_hdf5(path).channels == ("λ=550",)
+    write_hdf5(m, path)  # by default a fresh file
+    with h5py.File(path, "r") as f:
+        assert list(f) == ["measurements"]
+
+
+def test_update_creates_a_file_and_a_failure_leaves_it_untouched(tmp_path):
+    path = tmp_path / "new.h5"
+    update_hdf5(path, "fits/a", lambda g: g.create_dataset("x", data=[1.0]))
+    with h5py.File(path, "r") as f:
+        assert f.attrs["format_version"] == "1" and f["fits/a/x"][0] == 1.0
+    before = path.read_bytes()
+
+    def broken(group):
+        group.create_dataset("y", data=[2.0])
+        raise RuntimeError("solver exploded")
+
+    with pytest.raises(RuntimeError, match="solver exploded"):
+        update_hdf5(path, "fits/a", broken)
+    assert path.read_bytes() == before
+    assert os.listdir(tmp_path) == ["new.h5"]
+    with pytest.raises(ValueError):
+        update_hdf5(path, "/", broken)
+
+
+def test_a_failed_save_keeps_the_old_file(tmp_path):
+    path = tmp_path / "m.h5"
+    write_hdf5(sample(), path)
+    before = path.read_bytes()
+    with pytest.raises(TypeError):
+        write_hdf5("not measurements", path)
+    with pytest.raises(TypeError):
+        update_hdf5(path, "measurements", lambda g: g.create_dataset("x", data=object()))
+    assert path.read_bytes() == before and os.listdir(tmp_path) == ["m.h5"]
+
+
+def foreign(path, version=None, drop=None, values=None):
+    with h5py.File(path, "w") as f:
+        if version is not None:
+            f.attrs["format_version"] = version
+        g = f.create_group("measurements")
+        for name in ("theta_i", "phi_i", "theta_o", "phi_o"):
+            if name != drop:
+                g.create_dataset(name, data=np.zeros(3))
+        if drop != "values":
+            g.create_dataset("values", data=np.array([[0.1], [0.2], [0.3]]) if values is None else values)
+    return path
+
+
+def test_bad_files(tmp_path):
+    cases = [
+        (tmp_path / "empty.h5", b"", "empty"),
+        (tmp_path / "text.h5", b"theta_i,phi_i\n", "not an HDF5 file"),
+        (tmp_path / "lfs.h5", b"version https://git-lfs.github.com/spec/v1\noid sha256:1\n", "Git LFS pointer"),
+    ]
+    for path, content, pattern in cases:
+        path.write_bytes(content)
+        with pytest.raises(FormatError, match=pattern) as info:
+            read_hdf5(path)
+        assert str(info.value).startswith(str(path))
+    with pytest.raises(FormatError, match="no 'format_version' attribute"):
+        read_hdf5(foreign(tmp_path / "plain.h5"))
+    with pytest.raises(FormatError, match="format_version '2' is not one this brdffit reads"):
+        read_hdf5(foreign(tmp_path / "v2.h5", version="2"))
+    with pytest.raises(FormatError, match="dataset /measurements/phi_o is missing"):
+        read_hdf5(foreign(tmp_path / "nophi.h5", version="1", drop="phi_o"))
+    with pytest.raises(FormatError, match=r"no group /fits \(groups: /measurements\)"):
+        read_hdf5(foreign(tmp_path / "g.h5", version="1"), group="fits")
+    with pytest.raises(MeasurementError, match=r"neg.h5 \(/measurements\): row 1: values"):
+        read_hdf5(foreign(tmp_path / "neg.h5", version="1", values=np.array([[0.1], [-0.2], [0.3]])))
+    with pytest.raises(FormatError, match="not one brdffit wrote"):
+        update_hdf5(tmp_path / "plain.h5", "fits/x", lambda g: None)
+
+
+def test_truncated_file(tmp_path):
+    path = tmp_path / "m.h5"
+    write_hdf5(sample(n=2000), path)
+    data = path.read_bytes()
+    for cut in (len(data) // 2, 1024, 9):
+        path.write_bytes(data[:cut])
+        with pytest.raises(FormatError):
+            read_hdf5(path)
