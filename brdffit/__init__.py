@@ -2,16 +2,29 @@
 
 Importing brdffit enables JAX's 64-bit mode (``jax_enable_x64``): fitted parameters, covariances and the
 quadratures of `brdffit.properties` need double precision. Arrays passed in as float32 stay float32.
+
+Public API:
+
+- models: `models.names`, `models.get`, `Model`, `evaluate`, `evaluate_dirs`, `ParamSpec`;
+- data: `Measurements`, `MeasurementError`, `io.load`, `io.save`, `synth.generate`;
+- fitting: `fit`, `fit_many`, `FitResult`, `FitError`;
+- physical checks: `properties`.
 """
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from . import geometry, models, params  # noqa: E402
+from . import geometry, io, models, params, properties, synth  # noqa: E402
+from .fit import FitError, fit, fit_many  # noqa: E402
+from .fit_result import FitResult  # noqa: E402
+from .measurements import MeasurementError, Measurements  # noqa: E402
 from .models import Model, evaluate, evaluate_dirs  # noqa: E402
 from .params import ParamSpec  # noqa: E402
 
 __version__ = "0.1.0"
 
-__all__ = ["Model", "ParamSpec", "evaluate", "evaluate_dirs", "geometry", "models", "params", "__version__"]
+__all__ = [
+    "Model", "ParamSpec", "evaluate", "evaluate_dirs", "Measurements", "MeasurementError", "fit", "fit_many",
+    "FitResult", "FitError", "geometry", "io", "models", "params", "properties", "synth", "__version__",
+]

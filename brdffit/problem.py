@@ -27,7 +27,7 @@ __all__ = ["Problem", "FitData", "make_fit_data", "physical_params", "residual_f
 _PER_SAMPLE = ("pair", "values", "mask", "cos_i", "sqrt_weight", "sigma")
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class Problem:
     """Static description of a fit (hashable, so it can key the compile cache).
 
@@ -48,6 +48,20 @@ class Problem:
     robust: str | None
     solver: Any
     max_steps: int
+
+    def _key(self) -> tuple:
+        # Solver objects may hold JAX arrays (GaussNewton's learning rate), which are unhashable: key them by
+        # their tree structure and leaf values instead.
+        leaves, treedef = jax.tree_util.tree_flatten(self.solver)
+        solver_key = (treedef, tuple(np.asarray(leaf).tobytes() if hasattr(leaf, "shape") else leaf
+                                     for leaf in leaves))
+        return (self.lobes, self.channels, self.free, self.loss, self.robust, solver_key, self.max_steps)
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Problem) and self._key() == other._key()
 
     @property
     def specs(self) -> ParamTable:
