@@ -1,14 +1,68 @@
 """The ``brdffit`` command line: a thin layer that parses arguments, calls one API function and prints or writes
-its result. Exit codes: 0 success, 1 a fit did not converge, 2 bad input or usage."""
+its result. Exit codes: 0 success, 1 a fit did not converge, 2 bad input or usage (docs/cli.md)."""
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import sys
+from pathlib import Path
 
 from . import __version__, models
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
+DEFAULT_MODEL = "lambert+cook-torrance"
+
+
+class UsageError(Exception):
+    """A command-line value that cannot be used; reported with exit code 2."""
+
+
+def cache_dir() -> Path:
+    """Where the CLI keeps JAX's persistent compilation cache: $BRDFFIT_CACHE_DIR, else the user cache directory
+    ($XDG_CACHE_HOME or ~/.cache) under brdffit/jax."""
+    if os.environ.get("BRDFFIT_CACHE_DIR"):
+        return Path(os.environ["BRDFFIT_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "brdffit" / "jax"
+
+
+def enable_compilation_cache() -> None:
+    """Turn on JAX's persistent compilation cache so that a second process starts warm."""
+    import jax
+
+    try:
+        directory = cache_dir()
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return  # an unwritable cache only costs time
+    jax.config.update("jax_compilation_cache_dir", str(directory))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+
+
+def _parse_fixed(items) -> dict:
+    fixed = {}
+    for item in items or ():
+        if "=" not in item:
+            raise UsageError(f"--fixed {item!r}: write NAME=VALUE, e.g. --fixed f0=0.04")
+        name, value = item.split("=", 1)
+        try:
+            parts = [float(v) for v in value.split(",")]
+        except ValueError:
+            raise UsageError(f"--fixed {item!r}: {value!r} is not a number (or comma-separated numbers)") from None
+        fixed[name.strip()] = parts[0] if len(parts) == 1 else parts
+    return fixed
+
+
+def _load(path):
+    from . import io
+
+    return io.load(path)
+
+
+def _default_out(path: Path) -> Path:
+    return path.with_name(path.stem + ".brdffit")
 
 
 def _cmd_models(args) -> int:
@@ -23,25 +77,120 @@ def _cmd_models(args) -> int:
     return EXIT_OK
 
 
+def _cmd_info(args) -> int:
+    import numpy as np
+
+    m = _load(args.file)
+    valid = np.isfinite(m.values)
+    deg = np.degrees
+    info = {
+        "file": str(args.file),
+        "samples": m.n,
+        "channels": list(m.channels),
+        "theta_i_deg": [float(deg(m.theta_i.min())), float(deg(m.theta_i.max()))],
+        "theta_o_deg": [float(deg(m.theta_o.min())), float(deg(m.theta_o.max()))],
+        "phi_o_deg": [float(deg(m.phi_o.min())), float(deg(m.phi_o.max()))],
+        "missing_fraction": float(1.0 - valid.mean()),
+        "value_range": [float(np.nanmin(m.values)), float(np.nanmax(m.values))] if valid.any() else None,
+        "sigma": m.sigma is not None,
+        "weights": m.weights is not None,
+        "meta": m.meta,
+    }
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return EXIT_OK
+    print(f"{info['file']}: {m.n} samples x {m.n_channels} channels ({', '.join(m.channels)})")
+    print(f"  theta_i {info['theta_i_deg'][0]:.1f}..{info['theta_i_deg'][1]:.1f} deg, theta_o "
+          f"{info['theta_o_deg'][0]:.1f}..{info['theta_o_deg'][1]:.1f} deg, phi_o {info['phi_o_deg'][0]:.1f}.."
+          f"{info['phi_o_deg'][1]:.1f} deg")
+    if info["value_range"]:
+        print(f"  values {info['value_range'][0]:.4g}..{info['value_range'][1]:.4g} 1/sr, missing "
+              f"{100 * info['missing_fraction']:.2f}%")
+    print(f"  sigma: {'yes' if m.sigma is not None else 'no'}, weights: {'yes' if m.weights is not None else 'no'}")
+    if "truth" in m.meta:
+        print(f"  ground truth: {m.meta['truth']['spec']} {json.dumps(m.meta['truth']['params'])}")
+    return EXIT_OK
+
+
+def _cmd_fit(args) -> int:
+    from . import fit, io
+
+    enable_compilation_cache()
+    path = Path(args.file)
+    measurements = _load(path)
+    result = fit(measurements, args.model, loss=args.loss, solver=args.solver, fixed=_parse_fixed(args.fixed),
+                 multistart=args.multistart, seed=args.seed)
+    out = Path(args.out) if args.out else _default_out(path)
+    out.mkdir(parents=True, exist_ok=True)
+    h5 = out / "result.h5"
+    io.save(measurements, h5)
+    result.save(h5)
+    summary = result.to_dict()
+    (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "summary.txt").write_text(result.summary() + "\n")
+    files = [str(h5), str(out / "result.json"), str(out / "summary.txt")]
+    if args.json:
+        print(json.dumps({"model": summary["model"], "params": summary["params"], "stderr": summary["stderr"],
+                          "posterior": None, "metrics": summary["metrics"], "status": summary["status"],
+                          "files": files}))
+    elif not args.quiet:
+        print(result.summary())
+        print(f"wrote {', '.join(files)}")
+    return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+
+
+def _add(sub, name, help_text, examples, run):
+    p = sub.add_parser(name, help=help_text, description=help_text[0].upper() + help_text[1:] + ".",
+                       epilog="Examples:\n  " + "\n  ".join(examples),
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.set_defaults(run=run)
+    return p
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every ``brdffit`` command."""
+    from .losses import LOSSES
+    from .solvers import SOLVERS
+
     parser = argparse.ArgumentParser(
         prog="brdffit",
         description="Fit analytic BRDF models to measured reflectance.",
-        epilog="Examples:\n  brdffit models\n  brdffit --version",
+        epilog="Examples:\n  brdffit fit data/synthetic/plastic.h5\n  brdffit info data/synthetic/plastic.h5\n"
+               "  brdffit models",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"brdffit {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    p = sub.add_parser("models", help="list every lobe with its parameters, bounds and reference",
-                       description="List every lobe with its parameters, bounds and reference.",
-                       epilog="Example:\n  brdffit models", formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.set_defaults(run=_cmd_models)
+    _add(sub, "models", "list every lobe with its parameters, bounds and reference", ["brdffit models"],
+         _cmd_models)
+    p = _add(sub, "info", "describe the measurements in a file",
+             ["brdffit info data/synthetic/plastic.h5", "brdffit info table.csv --json"], _cmd_info)
+    p.add_argument("file", help="measurement file (.h5, .csv/.tsv, MERL .binary)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p = _add(sub, "fit", "fit a model to the measurements in a file and write the result",
+             ["brdffit fit data/synthetic/plastic.h5",
+              "brdffit fit data/synthetic/plastic.h5 --model lambert+ggx --fixed f0=0.04 --out out/",
+              "brdffit fit data/synthetic/clay.h5 --model oren-nayar --json"], _cmd_fit)
+    p.add_argument("file", help="measurement file (.h5, .csv/.tsv, MERL .binary)")
+    p.add_argument("--model", default=DEFAULT_MODEL,
+                   help=f"model spec, lobes joined with '+' (default {DEFAULT_MODEL}; see `brdffit models`)")
+    p.add_argument("--loss", default="cosine", choices=LOSSES, help="residual definition (default cosine)")
+    p.add_argument("--solver", default="lm", choices=list(SOLVERS), help="least-squares solver (default lm)")
+    p.add_argument("--fixed", action="append", metavar="NAME=VALUE",
+                   help="hold a parameter at a value (repeatable; a colour takes R,G,B)")
+    p.add_argument("--multistart", type=int, default=0, metavar="N", help="extra quasi-random starts")
+    p.add_argument("--seed", type=int, default=0, help="seed of subsamples and starts (default 0)")
+    p.add_argument("--out", help="output folder (default: next to the input, <name>.brdffit/)")
+    p.add_argument("--json", action="store_true", help="print one machine-readable JSON summary to stdout")
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
     return parser
 
 
 def main(argv=None) -> int:
     """Entry point of the ``brdffit`` console script; returns the exit code."""
+    from .io import FormatError
+    from .measurements import MeasurementError
+
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -50,7 +199,13 @@ def main(argv=None) -> int:
     if not getattr(args, "run", None):
         parser.print_help()
         return EXIT_BAD_INPUT
-    return args.run(args)
+    try:
+        return args.run(args)
+    except (UsageError, FormatError, MeasurementError, FileNotFoundError, IsADirectoryError, KeyError,
+            ValueError) as exc:
+        message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        print(f"brdffit {args.command}: error: {message}", file=sys.stderr)
+        return EXIT_BAD_INPUT
 
 
 if __name__ == "__main__":

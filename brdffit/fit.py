@@ -96,7 +96,7 @@ def _unconstrained(problem: Problem, starts: list[dict], dtype) -> dict:
 
 @functools.lru_cache(maxsize=32)
 def _jtj_fn(problem: Problem):
-    """Jitted (JᵀJ, Jᵀ diag(r²) J, Σr²) of one chunk of data, J the residual Jacobian w.r.t. the free physical
+    """Jitted (JᵀJ, Jᵀ diag(r²) J, None) of one chunk of data, J the residual Jacobian w.r.t. the free physical
     parameters."""
 
     def jtj(free_params: dict, data: FitData):
@@ -107,36 +107,47 @@ def _jtj_fn(problem: Problem):
             return residual_fn(problem, params, data).ravel()
 
         jac = jax.jacfwd(r)(flat)
-        res = r(flat)
-        scaled = jac * res[:, None]
-        return jac.T @ jac, scaled.T @ scaled, jnp.sum(res * res)
+        scaled = jac * r(flat)[:, None]
+        return jac.T @ jac, scaled.T @ scaled, None
 
     return jax.jit(jtj)
 
 
-def _laplace(problem: Problem, params: dict, data: FitData, n_valid: int):
+def _physical_normal_matrices(problem: Problem, params: dict, data: FitData):
+    """JᵀJ and Jᵀ diag(r²) J with J the residual Jacobian w.r.t. the free physical parameters (chunked)."""
+    free = {k: params[k] for k in problem.free}
+    p = sum(int(np.size(v)) for v in free.values())
+    chunk = int(max(1024, min(data.values.shape[0], _JACOBIAN_BYTES // (8 * problem.channels * max(p, 1)))))
+    data = data._replace(fixed={k: v for k, v in params.items() if k not in problem.free})
+    jtj, meat = np.zeros((p, p)), np.zeros((p, p))
+    fn = _jtj_fn(problem)
+    for piece in chunk_data(data, chunk):
+        a, b, _ = fn(free, piece)
+        jtj += np.asarray(a, dtype=float)
+        meat += np.asarray(b, dtype=float)
+    return jtj, meat
+
+
+def _to_physical(problem: Problem, y: dict, matrices):
+    """Map normal matrices in the unconstrained variables u to the physical ones p: J_p = J_u diag(du/dp)."""
+    specs = problem.specs
+    derivative = np.concatenate([np.ravel(np.asarray(jax.jvp(specs[name].from_unconstrained, (jnp.asarray(y[name]),),
+                                                             (jnp.ones_like(jnp.asarray(y[name])),))[1]))
+                                 for name in problem.free])
+    scale = 1.0 / np.outer(derivative, derivative)
+    return tuple(np.asarray(m, dtype=float) * scale for m in matrices)
+
+
+def _laplace(jtj, meat, rss: float, loss: str, n_valid: int):
     """Gauss-Newton covariance s² (JᵀJ)⁻¹ of the free parameters, with s² = Σr²/dof (1 for ``loss="sigma"``),
     and the sandwich covariance that stays valid when the residuals' variance differs between samples.
 
     Directions of JᵀJ with eigenvalues below 1e-12 of the largest are undetermined by the data: parameters with
     a component along them get infinite variance.
     """
-    free = {k: params[k] for k in problem.free}
-    p = sum(int(np.size(v)) for v in free.values())
-    channels = problem.channels
-    chunk = int(max(1024, min(data.values.shape[0], _JACOBIAN_BYTES // (8 * channels * max(p, 1)))))
-    data = data._replace(fixed={k: v for k, v in params.items() if k not in problem.free})
-    jtj = np.zeros((p, p))
-    meat = np.zeros((p, p))
-    rss = 0.0
-    fn = _jtj_fn(problem)
-    for piece in chunk_data(data, chunk):
-        a, b, c = fn(free, piece)
-        jtj += np.asarray(a, dtype=float)
-        meat += np.asarray(b, dtype=float)
-        rss += float(c)
+    p = jtj.shape[0]
     dof = max(n_valid - p, 1)
-    variance = 1.0 if problem.loss == "sigma" else rss / dof
+    variance = 1.0 if loss == "sigma" else rss / dof
     eigval, eigvec = np.linalg.eigh(jtj)
     good = eigval > 1e-12 * max(eigval.max(initial=0.0), 1e-300)
     inv = (eigvec[:, good] / eigval[good]) @ eigvec[:, good].T
@@ -218,8 +229,13 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
     fitted = model.replace(**params)
     n_valid = int(np.isfinite(measurements.values).sum())
     labels = param_labels(params, problem.free)
+    status, hit = _status(problem, outcome, params)
     if problem.free:
-        cov, sandwich, variance, undetermined = _laplace(problem, fitted.params, data, n_valid)
+        if "normal_matrices" in outcome and not hit:
+            matrices = _to_physical(problem, y, outcome["normal_matrices"])
+        else:  # near a bound du/dp is ill-conditioned: linearise in the physical parameters directly
+            matrices = _physical_normal_matrices(problem, fitted.params, data)
+        cov, sandwich, variance, undetermined = _laplace(*matrices, float(outcome["cost"]), problem.loss, n_valid)
     else:
         cov, sandwich = np.zeros((0, 0)), np.zeros((0, 0))
         variance, undetermined = float("nan"), np.zeros(0, bool)
@@ -243,7 +259,6 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
         if np.isfinite(rho) and abs(rho) > _CORRELATION_WARNING:
             warnings.append(f"{labels[a]} and {labels[b]} are correlated (ρ = {rho:+.4f}): not separately "
                             "identifiable from these data")
-    status, hit = _status(problem, outcome, params)
     if hit:
         warnings.append(f"parameters at a bound: {', '.join(hit)}")
     cost = float(outcome["cost"])

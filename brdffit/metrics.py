@@ -58,4 +58,4 @@ def fit_metrics(model: Model, measurements, pair: LocalPair | None = None) -> di
     weights = np.ones(measurements.n) if measurements.weights is None else measurements.weights
     out = _metrics(model, pair, jnp.asarray(measurements.values, dtype=float),
                    jnp.cos(jnp.asarray(measurements.theta_i, dtype=float)), jnp.asarray(weights, dtype=float))
-    return {k: np.asarray(v, dtype=float) for k, v in out.items()}
+    return {k: np.asarray(out[k], dtype=float) for k in METRICS}

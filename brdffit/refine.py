@@ -26,7 +26,7 @@ CHUNK_SAMPLES = 262_144
 
 @functools.lru_cache(maxsize=32)
 def _normal_equations(problem: Problem):
-    """Jitted (JᵀJ, Jᵀr, rᵀr) of one chunk, J the Jacobian w.r.t. the unconstrained variables."""
+    """Jitted (JᵀJ, Jᵀr, rᵀr, Jᵀ diag(r²) J) of one chunk, J the Jacobian w.r.t. the unconstrained variables."""
 
     def fn(y: dict, data: FitData):
         flat, unravel = flatten_free(problem, y)
@@ -36,7 +36,8 @@ def _normal_equations(problem: Problem):
 
         jac = jax.jacfwd(r)(flat)
         res = r(flat)
-        return jac.T @ jac, jac.T @ res, jnp.sum(res * res)
+        scaled = jac * res[:, None]
+        return jac.T @ jac, jac.T @ res, jnp.sum(res * res), scaled.T @ scaled
 
     return jax.jit(fn)
 
@@ -62,7 +63,8 @@ def refine(problem: Problem, y: dict, data: FitData, *, rtol: float, atol: float
 
     Returns:
         ``(y, outcome)`` with outcome keys ``cost``, ``steps``, ``successful``, ``max_steps``, ``nonfinite``
-        (the same as the optimistix solve's).
+        (the same as the optimistix solve's) and ``normal_matrices`` (JᵀJ, Jᵀ diag(r²) J) in the unconstrained
+        variables.
     """
     chunk = CHUNK_SAMPLES
     pieces = list(chunk_data(data, chunk))
@@ -70,18 +72,18 @@ def refine(problem: Problem, y: dict, data: FitData, *, rtol: float, atol: float
     cost_fn = _cost(problem)
 
     def system(y):
-        h, g, c = 0.0, 0.0, 0.0
+        h, g, c, meat = 0.0, 0.0, 0.0, 0.0
         for piece in pieces:
-            a, b, s = normal(y, piece)
-            h, g, c = h + np.asarray(a), g + np.asarray(b), c + float(s)
-        return h, g, c
+            a, b, s, t = normal(y, piece)
+            h, g, c, meat = h + np.asarray(a), g + np.asarray(b), c + float(s), meat + np.asarray(t)
+        return h, g, c, meat
 
     def cost(y):
         return sum(float(cost_fn(y, piece)) for piece in pieces)
 
     flat, unravel = flatten_free(problem, y)
     flat = np.asarray(flat, dtype=float)
-    h, g, c = system(unravel(jnp.asarray(flat)))
+    h, g, c, meat = system(unravel(jnp.asarray(flat)))
     damping = 1e-6
     steps, converged = 0, False
     while steps < max_steps and np.isfinite(c):
@@ -102,12 +104,15 @@ def refine(problem: Problem, y: dict, data: FitData, *, rtol: float, atol: float
                 c = trial_cost
                 converged = True
                 break
-            h, g, c = system(unravel(jnp.asarray(flat)))
+            h, g, c, meat = system(unravel(jnp.asarray(flat)))
         else:
             if small:
                 converged = True
                 break
             damping *= 10.0
     outcome = {"cost": np.asarray(c), "steps": np.asarray(steps), "successful": np.asarray(converged),
-               "max_steps": np.asarray(not converged and np.isfinite(c)), "nonfinite": np.asarray(not np.isfinite(c))}
+               "max_steps": np.asarray(not converged and np.isfinite(c)), "nonfinite": np.asarray(not np.isfinite(c)),
+               # JᵀJ and Jᵀ diag(r²) J at the last linearisation point (within rtol of the answer when converged),
+               # in the unconstrained variables: `fit` turns them into the covariance without another pass.
+               "normal_matrices": (h, meat)}
     return unravel(jnp.asarray(flat)), outcome

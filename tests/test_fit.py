@@ -244,3 +244,19 @@ def test_measurements_without_sigma_fit_with_cosine_loss():
     data = Measurements(clean.theta_i, clean.phi_i, clean.theta_o, clean.phi_o, clean.values)
     result = fit(data, "lambert")
     np.testing.assert_allclose(result.params["rho_d"], [0.2, 0.4, 0.6], rtol=1e-6)
+
+
+def test_coarse_to_fine_gives_the_full_data_answer():
+    # Above COARSE_SAMPLES samples a fit may solve on a subsample and refine on all data (brdffit.refine); the
+    # optimum, its cost and its covariance must be those of the plain full-data solve.
+    truth = models.get("lambert+ward", rho_d=[0.4, 0.3, 0.2], ks=[0.5, 0.4, 0.3], alpha=0.2)
+    data = synth.generate(truth, pattern="half-diff", n=120_000, noise="relative:0.01", seed=9)
+    full = fit(data, "lambert+ward", coarse=False)
+    staged = fit(data, "lambert+ward", coarse=True)
+    assert full.strategy == "full" and staged.strategy.startswith("coarse")
+    assert staged.converged
+    assert staged.cost == pytest.approx(full.cost, rel=1e-9)
+    for name in full.params:
+        np.testing.assert_allclose(staged.params[name], full.params[name], rtol=1e-6)
+        np.testing.assert_allclose(staged.stderr[name], full.stderr[name], rtol=1e-3)
+        np.testing.assert_allclose(staged.stderr_robust[name], full.stderr_robust[name], rtol=1e-3)
