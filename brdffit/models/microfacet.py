@@ -13,7 +13,7 @@ import dataclasses
 import jax.numpy as jnp
 from jax.scipy.special import erfc
 
-from ..geometry import LocalPair, safe_div, safe_sqrt
+from ..geometry import TINY, LocalPair, safe_div, safe_sqrt
 
 __all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "DISTRIBUTIONS", "v_cavity", "smith", "SHADOWING"]
 
@@ -23,7 +23,8 @@ _BECKMANN_A_MAX = 27.0
 
 def _tan2(cos_theta):
     c2 = cos_theta * cos_theta
-    return safe_div(1.0 - c2, c2, fallback=jnp.inf)
+    # Finite where cosθ -> 0, so exp(−tan²θ/m²) has the finite derivative 0 there rather than 0·inf = NaN.
+    return safe_div(1.0 - c2, c2, fallback=1.0 / TINY)
 
 
 def _beckmann_lambda(cos_v, m):

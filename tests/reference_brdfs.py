@@ -1,0 +1,466 @@
+"""Independent NumPy re-derivations of every brdffit lobe, written from the papers' formulas.
+
+Nothing here imports brdffit: the formulas are written again from the papers (and from the specification in
+issue 2), in the plain spherical-angle form the papers use wherever they use one, so that a slip in the library
+(a wrong sign, a swapped angle, a missing factor) shows up as a disagreement with these functions.
+
+Convention (docs/conventions.md): θ is the polar angle from the normal z, φ the azimuth from the tangent x,
+ωi points to the light and ωo to the detector; the BRDF is f_r in 1/sr without the cosine factor and is zero
+unless cosθi > 0 and cosθo > 0.
+
+Every lobe function takes ``(theta_i, phi_i, theta_o, phi_o)`` in radians (broadcastable arrays, flattened to
+shape ``(N,)``) followed by the lobe's parameters (colour parameters as ``(C,)`` arrays, shape parameters as
+floats), and returns ``(N, C)`` in 1/sr.
+"""
+
+from __future__ import annotations
+
+import cmath
+import functools
+import math
+
+import numpy as np
+from scipy import integrate, special
+
+__all__ = [
+    "Pair",
+    "lambert",
+    "oren_nayar",
+    "phong",
+    "blinn_phong",
+    "ward",
+    "ward_duer",
+    "cook_torrance",
+    "ashikhmin_shirley",
+    "lafortune",
+    "toon_diffuse",
+    "toon_specular",
+    "fresnel_schlick",
+    "fresnel_dielectric",
+    "fresnel_conductor",
+    "fresnel_conductor_scalar",
+    "microfacet_D",
+    "smith_lambda",
+    "smith_G1",
+    "smith_lambda_numeric",
+    "slope_marginal",
+    "REFERENCES",
+]
+
+
+class Pair:
+    """Angles of a direction pair in the forms the papers use.
+
+    Attributes:
+        ti, pi_, to, po: the spherical angles, shape ``(N,)``.
+        ci, co, si, so: cosines and sines of θi and θo.
+        dphi: φi − φo.
+        cos_io: ωi·ωo = cosθi cosθo + sinθi sinθo cos(φi − φo) (spherical law of cosines).
+        cos_d: cosθd = ωi·h = √((1 + ωi·ωo)/2): h bisects ωi and ωo, so θd is half the angle between them.
+        hx, hy, hz: the half vector (ωi + ωo)/(2 cosθd).
+        th, ph: θh (from atan2, accurate near 0) and φh of the half vector.
+        above: cosθi > 0 and cosθo > 0.
+    """
+
+    def __init__(self, theta_i, phi_i, theta_o, phi_o):
+        ti, pi_, to, po = (np.ravel(a).astype(float) for a in np.broadcast_arrays(theta_i, phi_i, theta_o, phi_o))
+        self.ti, self.pi_, self.to, self.po = ti, pi_, to, po
+        self.ci, self.co, self.si, self.so = np.cos(ti), np.cos(to), np.sin(ti), np.sin(to)
+        self.dphi = pi_ - po
+        self.cos_io = self.ci * self.co + self.si * self.so * np.cos(self.dphi)
+        self.cos_d = np.sqrt(np.clip(0.5 * (1.0 + self.cos_io), 0.0, 1.0))
+        two_cd = 2.0 * self.cos_d
+        with np.errstate(all="ignore"):  # ωi = −ωo only happens below the horizon
+            self.hx = (self.si * np.cos(pi_) + self.so * np.cos(po)) / two_cd
+            self.hy = (self.si * np.sin(pi_) + self.so * np.sin(po)) / two_cd
+            self.hz = (self.ci + self.co) / two_cd
+        self.th = np.arctan2(np.hypot(self.hx, self.hy), self.hz)
+        self.ph = np.arctan2(self.hy, self.hx)
+        self.above = (self.ci > 0) & (self.co > 0)
+
+
+def _quiet(func):
+    """Run ``func`` with NumPy's floating-point warnings off: below the horizon the formulas may produce NaN or
+    inf, which `_masked` discards."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        with np.errstate(all="ignore"):
+            return func(*args, **kwargs)
+
+    return wrapper
+
+
+def _channels(*params):
+    return max([np.size(p) for p in params] + [1])
+
+
+def _col(p):
+    """A colour parameter as a ``(1, C)`` row (scalars broadcast)."""
+    return np.atleast_1d(np.asarray(p, dtype=float))[None, :]
+
+
+def _masked(pair: Pair, value):
+    """Zero below the horizon; ``value`` is ``(N, C)`` (NaN or inf there are discarded, never above it)."""
+    return np.where(pair.above[:, None], np.asarray(value, dtype=float), 0.0)
+
+
+def _pow_pos(x, n):
+    """max(0, x)^n (x = 0 gives 0 for n > 0)."""
+    return np.where(x > 0, np.abs(x) ** n, 0.0)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Diffuse lobes
+
+
+@_quiet
+def lambert(theta_i, phi_i, theta_o, phi_o, rho_d):
+    """Lambert (Photometria, 1760): f = ρd/π."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    return _masked(g, np.ones_like(g.ti)[:, None] * _col(rho_d) / math.pi)
+
+
+@_quiet
+def oren_nayar(theta_i, phi_i, theta_o, phi_o, rho_d, sigma):
+    """Oren & Nayar, Generalization of Lambert's reflectance model, SIGGRAPH 1994, Eq. 30 (qualitative model):
+    f = ρ/π (A + B max(0, cos(φi − φo)) sinα tanβ), A = 1 − 0.5σ²/(σ² + 0.33), B = 0.45σ²/(σ² + 0.09),
+    α = max(θi, θo), β = min(θi, θo). Written with the explicit angles, as in the paper."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    s2 = sigma * sigma
+    a = 1.0 - 0.5 * s2 / (s2 + 0.33)
+    b = 0.45 * s2 / (s2 + 0.09)
+    alpha = np.maximum(g.ti, g.to)
+    beta = np.minimum(g.ti, g.to)
+    with np.errstate(all="ignore"):
+        shape = a + b * np.maximum(0.0, np.cos(g.dphi)) * np.sin(alpha) * np.tan(beta)
+    return _masked(g, _col(rho_d) / math.pi * shape[:, None])
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Cosine-power lobes
+
+
+@_quiet
+def phong(theta_i, phi_i, theta_o, phi_o, ks, n):
+    """Modified Phong, Lafortune & Willems 1994 (Report CW197), Eq. 6: f = ks (n + 2)/(2π) cos^n ψ, ψ the angle
+    between ωo and the mirror direction of ωi; cosψ = cosθi cosθo − sinθi sinθo cos(φi − φo) since the mirror
+    direction has polar angle θi and azimuth φi + π."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    cos_psi = g.ci * g.co - g.si * g.so * np.cos(g.dphi)
+    return _masked(g, _col(ks) * ((n + 2.0) / (2.0 * math.pi) * _pow_pos(cos_psi, n))[:, None])
+
+
+@_quiet
+def blinn_phong(theta_i, phi_i, theta_o, phi_o, ks, n):
+    """Normalised Blinn-Phong (Blinn 1977; normalisation (n + 8)/(8π), Akenine-Möller et al., Real-Time Rendering
+    3rd ed., Eq. 7.48): f = ks (n + 8)/(8π) cos^n θh."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    return _masked(g, _col(ks) * ((n + 8.0) / (8.0 * math.pi) * np.cos(g.th) ** n)[:, None])
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Ward
+
+
+@_quiet
+def ward(theta_i, phi_i, theta_o, phi_o, ks, alpha_x, alpha_y=None):
+    """Ward, Measuring and modeling anisotropic reflection, SIGGRAPH 1992, Eq. 5a (elliptical Gaussian):
+    f = ks exp(−tan²θh (cos²φh/αx² + sin²φh/αy²)) / (4π αx αy √(cosθi cosθo)); the isotropic lobe (Eq. 4a)
+    has αx = αy = α and the exponent −tan²θh/α²."""
+    alpha_y = alpha_x if alpha_y is None else alpha_y
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    with np.errstate(all="ignore"):
+        expo = -np.tan(g.th) ** 2 * (np.cos(g.ph) ** 2 / alpha_x**2 + np.sin(g.ph) ** 2 / alpha_y**2)
+        shape = np.exp(expo) / (4.0 * math.pi * alpha_x * alpha_y * np.sqrt(g.ci * g.co))
+    return _masked(g, _col(ks) * shape[:, None])
+
+
+@_quiet
+def ward_duer(theta_i, phi_i, theta_o, phi_o, ks, alpha):
+    """Dür, An improved normalization for the Ward reflectance model, JGT 11(1), 2006: Ward's isotropic lobe with
+    cosθi cosθo in place of √(cosθi cosθo): f = ks exp(−tan²θh/α²)/(4π α² cosθi cosθo)."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    with np.errstate(all="ignore"):
+        shape = np.exp(-np.tan(g.th) ** 2 / alpha**2) / (4.0 * math.pi * alpha**2 * g.ci * g.co)
+    return _masked(g, _col(ks) * shape[:, None])
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Fresnel
+
+
+def fresnel_schlick(cos_theta, f0):
+    """Schlick, An inexpensive BRDF model for physically-based rendering, CGF 13(3), 1994, Eq. 24:
+    F = f0 + (1 − f0)(1 − cosθ)⁵."""
+    return f0 + (1.0 - f0) * (1.0 - cos_theta) ** 5
+
+
+def fresnel_dielectric(theta_i, eta_i, eta_t):
+    """Unpolarised Fresnel reflectance of a dielectric interface from Fresnel's sine and tangent laws
+    (Born & Wolf, Principles of Optics, Sec. 1.5.2, Eq. 21a): with Snell's ηi sinθi = ηt sinθt,
+    r_s = −sin(θi − θt)/sin(θi + θt), r_p = tan(θi − θt)/tan(θi + θt), F = (r_s² + r_p²)/2.
+    At normal incidence (0/0) the limit ((ηi − ηt)/(ηi + ηt))²; beyond the critical angle F = 1."""
+    theta_i = np.asarray(theta_i, dtype=float)
+    sin_t = eta_i * np.sin(theta_i) / eta_t
+    total = sin_t >= 1.0
+    with np.errstate(all="ignore"):
+        theta_t = np.arcsin(np.where(total, 0.0, sin_t))
+        rs = -np.sin(theta_i - theta_t) / np.sin(theta_i + theta_t)
+        rp = np.tan(theta_i - theta_t) / np.tan(theta_i + theta_t)
+        f = 0.5 * (rs * rs + rp * rp)
+    normal = ((eta_i - eta_t) / (eta_i + eta_t)) ** 2
+    return np.where(total, 1.0, np.where(theta_i == 0.0, normal, f))
+
+
+def fresnel_conductor_scalar(theta_i: float, eta: float, k: float) -> float:
+    """Unpolarised Fresnel reflectance of a conductor of complex index N = η + iκ seen from vacuum, with Python
+    complex numbers (Born & Wolf, Sec. 14.2, Eq. 14.2(1)-(3)): N cosθt = √(N² − sin²θi) (principal root, so
+    the transmitted wave decays), r_s = (cosθi − N cosθt)/(cosθi + N cosθt),
+    r_p = (N cosθi − cosθt)/(N cosθi + cosθt) = (N² cosθi − N cosθt)/(N² cosθi + N cosθt),
+    F = (|r_s|² + |r_p|²)/2."""
+    n = complex(eta, k)
+    ci = math.cos(theta_i)
+    n_ct = cmath.sqrt(n * n - math.sin(theta_i) ** 2)
+    rs = (ci - n_ct) / (ci + n_ct)
+    rp = (n * n * ci - n_ct) / (n * n * ci + n_ct)
+    return 0.5 * (abs(rs) ** 2 + abs(rp) ** 2)
+
+
+def fresnel_conductor(theta_i, eta, k):
+    """`fresnel_conductor_scalar` over broadcast arrays, with NumPy complex arithmetic (same equations)."""
+    theta_i, eta, k = np.broadcast_arrays(np.asarray(theta_i, float), np.asarray(eta, float), np.asarray(k, float))
+    n = eta + 1j * k
+    ci = np.cos(theta_i).astype(complex)
+    n_ct = np.sqrt(n * n - np.sin(theta_i) ** 2)
+    rs = (ci - n_ct) / (ci + n_ct)
+    rp = (n * n * ci - n_ct) / (n * n * ci + n_ct)
+    return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Microfacet distributions and Smith shadowing (Walter, Marschner, Li & Torrance, Microfacet models for
+# refraction through rough surfaces, EGSR 2007)
+
+
+def blinn_exponent(m):
+    """Walter et al. 2007, Sec. 5.2: the Phong exponent equivalent to Beckmann width m, αp = 2/m² − 2."""
+    return 2.0 / (m * m) - 2.0
+
+
+def microfacet_D(distribution: str, theta_h, m):
+    """Normal distribution functions of Walter et al. 2007 as functions of θh:
+
+    - beckmann, Eq. 25: D = exp(−tan²θh/m²)/(π m² cos⁴θh)
+    - ggx, Eq. 33: D = α²/(π cos⁴θh (α² + tan²θh)²)  (the tan form of the paper; equal to α²/(π (cos²θh (α² − 1) + 1)²))
+    - blinn (power-cosine), Eq. 30: D = (αp + 2)/(2π) cos^αp θh with αp = 2/m² − 2
+    """
+    theta_h = np.asarray(theta_h, dtype=float)
+    c = np.cos(theta_h)
+    t2 = np.tan(theta_h) ** 2
+    if distribution == "beckmann":
+        return np.exp(-t2 / m**2) / (math.pi * m**2 * c**4)
+    if distribution == "ggx":
+        return m**2 / (math.pi * c**4 * (m**2 + t2) ** 2)
+    if distribution == "blinn":
+        ap = blinn_exponent(m)
+        return (ap + 2.0) / (2.0 * math.pi) * c**ap
+    raise ValueError(distribution)
+
+
+def _beckmann_lambda_a(a):
+    """Walter et al. 2007, Eq. 27 (Smith for Beckmann, integrated): Λ(a) = (erf(a) − 1)/2 + exp(−a²)/(2a√π)."""
+    a = np.asarray(a, dtype=float)
+    with np.errstate(all="ignore"):
+        lam = 0.5 * (special.erf(a) - 1.0) + np.exp(-a * a) / (2.0 * a * math.sqrt(math.pi))
+    return np.where(np.isinf(a), 0.0, lam)
+
+
+def smith_lambda(distribution: str, theta_v, m):
+    """Smith's Λ of a direction with polar angle θv (Walter et al. 2007, Sec. 5):
+
+    - beckmann: a = 1/(m tanθv), Λ = (erf(a) − 1)/2 + exp(−a²)/(2a√π)
+    - ggx (Eq. 34): Λ = (√(1 + α² tan²θv) − 1)/2, i.e. G1 = 2/(1 + √(1 + α² tan²θv))
+    - blinn: no closed form; Walter et al. use the Beckmann function with a = √(αp/2 + 1)/tanθv (Sec. 5.2)
+    """
+    theta_v = np.asarray(theta_v, dtype=float)
+    t = np.tan(theta_v)
+    with np.errstate(divide="ignore"):
+        if distribution == "beckmann":
+            return _beckmann_lambda_a(1.0 / (m * t))
+        if distribution == "ggx":
+            return 0.5 * (np.sqrt(1.0 + m * m * t * t) - 1.0)
+        if distribution == "blinn":
+            return _beckmann_lambda_a(np.sqrt(0.5 * blinn_exponent(m) + 1.0) / t)
+    raise ValueError(distribution)
+
+
+def smith_G1(distribution: str, theta_v, m):
+    """Smith masking G1 = 1/(1 + Λ) (Walter et al. 2007, Eq. 23 with Λ of `smith_lambda`)."""
+    return 1.0 / (1.0 + smith_lambda(distribution, theta_v, m))
+
+
+def slope_marginal(distribution: str, q, m):
+    """Marginal density P2(q) of one slope component (x-slope q) of the isotropic microfacet slope distribution
+    P22(x, y) = D(h) cos⁴θh (tan²θh = x² + y²), integrated over the other slope by hand:
+
+    - beckmann: P22 = exp(−r²/m²)/(π m²)  ->  P2 = exp(−q²/m²)/(m√π)
+    - ggx: P22 = 1/(π α² (1 + r²/α²)²)  ->  P2 = 1/(2α (1 + q²/α²)^{3/2})
+    - blinn: P22 = (αp + 2)/(2π) (1 + r²)^{−s}, s = αp/2 + 2  ->  P2 = (αp + 2)/(2√π) Γ(s − ½)/Γ(s) (1 + q²)^{½−s}
+    """
+    if distribution == "beckmann":
+        return math.exp(-q * q / (m * m)) / (m * math.sqrt(math.pi))
+    if distribution == "ggx":
+        return 1.0 / (2.0 * m * (1.0 + q * q / (m * m)) ** 1.5)
+    if distribution == "blinn":
+        ap = blinn_exponent(m)
+        s = 0.5 * ap + 2.0
+        log_c = math.log(ap + 2.0) - math.log(2.0 * math.sqrt(math.pi)) + math.lgamma(s - 0.5) - math.lgamma(s)
+        return math.exp(log_c + (0.5 - s) * math.log1p(q * q))
+    raise ValueError(distribution)
+
+
+def smith_lambda_numeric(distribution: str, theta_v: float, m: float) -> float:
+    """Smith's Λ from its definition (Smith 1967; Walter et al. 2007, Eq. 18 written over slopes):
+    Λ(μ) = (1/μ) ∫_μ^∞ (q − μ) P2(q) dq with μ = cotθv, by adaptive quadrature."""
+    mu = 1.0 / math.tan(theta_v)
+    value, _ = integrate.quad(lambda q: (q - mu) * slope_marginal(distribution, q, m), mu, math.inf,
+                              epsabs=0.0, epsrel=1e-12, limit=200)
+    return value / mu
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Microfacet lobes
+
+
+@_quiet
+def cook_torrance(theta_i, phi_i, theta_o, phi_o, ks, m, *, distribution="beckmann", shadowing="v-cavity",
+                  fresnel="schlick", f0=None, eta=None, k=None):
+    """Cook & Torrance, A reflectance model for computer graphics, ACM TOG 1(1), 1982, with Walter et al. 2007's
+    normalisation (Eq. 20): f = ks F(θd) D(θh) G / (4 cosθi cosθo).
+
+    G: ``v-cavity`` Cook & Torrance 1982, p. 10: G = min(1, 2 cosθh cosθo/cosθd, 2 cosθh cosθi/cosθd);
+    ``smith`` Walter et al. 2007, Eq. 23: G1(θi) G1(θo); ``none``: 1.
+    F at cosθd = ωo·h: Schlick (f0), exact dielectric from vacuum into η (`fresnel_dielectric`) or exact
+    conductor η + iκ (`fresnel_conductor`, complex arithmetic).
+    """
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    with np.errstate(all="ignore"):
+        d = microfacet_D(distribution, g.th, m)
+        if shadowing == "v-cavity":
+            ch = np.cos(g.th)
+            gg = np.minimum(1.0, np.minimum(2 * ch * g.co / g.cos_d, 2 * ch * g.ci / g.cos_d))
+        elif shadowing == "smith":
+            gg = smith_G1(distribution, g.ti, m) * smith_G1(distribution, g.to, m)
+        elif shadowing == "none":
+            gg = np.ones_like(g.th)
+        else:
+            raise ValueError(shadowing)
+        theta_d = np.arccos(g.cos_d)
+        if fresnel == "schlick":
+            f = fresnel_schlick(g.cos_d, f0)[:, None] * np.ones((1, _channels(ks)))
+        elif fresnel == "dielectric":
+            f = fresnel_dielectric(theta_d, 1.0, eta)[:, None] * np.ones((1, _channels(ks)))
+        elif fresnel == "conductor":
+            f = fresnel_conductor(theta_d[:, None], _col(eta), _col(k))
+        else:
+            raise ValueError(fresnel)
+        value = _col(ks) * f * (d * gg / (4.0 * g.ci * g.co))[:, None]
+    return _masked(g, value)
+
+
+@_quiet
+def ashikhmin_shirley(theta_i, phi_i, theta_o, phi_o, rs, nu, nv=None):
+    """Ashikhmin & Shirley, An anisotropic Phong BRDF model, JGT 5(2), 2000, Eq. 4 (specular term):
+    f = √((nu + 1)(nv + 1))/(8π) cosθh^(nu cos²φh + nv sin²φh) / (cosθd max(cosθi, cosθo)) F(cosθd),
+    F Schlick's with normal reflectance rs (their Eq. 5). nv = nu for the isotropic lobe."""
+    nv = nu if nv is None else nv
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    e = nu * np.cos(g.ph) ** 2 + nv * np.sin(g.ph) ** 2
+    with np.errstate(all="ignore"):
+        shape = (math.sqrt((nu + 1.0) * (nv + 1.0)) / (8.0 * math.pi) * np.cos(g.th) ** e
+                 / (g.cos_d * np.maximum(g.ci, g.co)))
+    f = fresnel_schlick(g.cos_d[:, None], _col(rs))
+    return _masked(g, shape[:, None] * f)
+
+
+@_quiet
+def lafortune(theta_i, phi_i, theta_o, phi_o, lobes):
+    """Lafortune, Foo, Torrance & Greenberg, Non-linear approximation of reflectance functions, SIGGRAPH 1997,
+    Eq. 3 (generalized cosine lobe ρ [Cx ui,x uo,x + Cy ui,y uo,y + Cz ui,z uo,z]^n), normalised as in Ngan,
+    Durand & Matusik, Experimental analysis of BRDF models, EGSR 2005: each lobe is multiplied by
+    (n + 2)/(2π) / max(|Cx|, |Cy|, |Cz|)^n.
+
+    Arguments:
+        lobes: list of dicts with ``ks`` (colour), ``cx``, ``cy``, ``cz``, ``n``.
+    """
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    total = 0.0
+    for lobe in lobes:
+        cx, cy, cz, n = lobe["cx"], lobe["cy"], lobe["cz"], lobe["n"]
+        dot = (cx * g.si * g.so * np.cos(g.pi_) * np.cos(g.po) + cy * g.si * g.so * np.sin(g.pi_) * np.sin(g.po)
+               + cz * g.ci * g.co)
+        norm = max(abs(cx), abs(cy), abs(cz)) ** n
+        total = total + _col(lobe["ks"]) * ((n + 2.0) / (2.0 * math.pi) * _pow_pos(dot, n) / norm)[:, None]
+    return _masked(g, total)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Two-tone (toon) lobes, issue 2's definition (after Lake et al., NPAR 2000, with a logistic step)
+
+
+@_quiet
+def toon_diffuse(theta_i, phi_i, theta_o, phi_o, rho_d, rho_shade, threshold, width):
+    """f = (ρshade + (ρd − ρshade) S((cosθi − threshold)/width))/π, S(u) = 1/(1 + e^(−u))."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    step = special.expit((g.ci - threshold) / width)[:, None]
+    return _masked(g, (_col(rho_shade) + (_col(rho_d) - _col(rho_shade)) * step) / math.pi)
+
+
+@_quiet
+def toon_specular(theta_i, phi_i, theta_o, phi_o, ks, threshold, width):
+    """f = ks S((cosψ − threshold)/width)/π, ψ the angle between ωo and the mirror direction of ωi."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    cos_psi = g.ci * g.co - g.si * g.so * np.cos(g.dphi)
+    return _masked(g, _col(ks) * special.expit((cos_psi - threshold) / width)[:, None] / math.pi)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Reference of a single registered lobe, from its brdffit name, options and (model-level) parameter dict
+
+
+def _lafortune_ref(ti, pi_, to, po, p, lobes=1, anisotropic=False):
+    spec = []
+    for j in range(1, lobes + 1):
+        cx = p[f"cx_{j}"] if anisotropic else p[f"cxy_{j}"]
+        cy = p[f"cy_{j}"] if anisotropic else p[f"cxy_{j}"]
+        spec.append({"ks": p[f"ks_{j}"], "cx": cx, "cy": cy, "cz": p[f"cz_{j}"], "n": p[f"n_{j}"]})
+    return lafortune(ti, pi_, to, po, spec)
+
+
+def _ct_ref(ti, pi_, to, po, p, roughness="m", distribution="beckmann", shadowing="v-cavity", fresnel="schlick"):
+    return cook_torrance(ti, pi_, to, po, p["ks"], p[roughness], distribution=distribution, shadowing=shadowing,
+                         fresnel=fresnel, f0=p.get("f0"), eta=p.get("eta"), k=p.get("k"))
+
+
+REFERENCES = {
+    "lambert": lambda ti, pi_, to, po, p: lambert(ti, pi_, to, po, p["rho_d"]),
+    "oren-nayar": lambda ti, pi_, to, po, p: oren_nayar(ti, pi_, to, po, p["rho_d"], p["sigma"]),
+    "phong": lambda ti, pi_, to, po, p: phong(ti, pi_, to, po, p["ks"], p["n"]),
+    "blinn-phong": lambda ti, pi_, to, po, p: blinn_phong(ti, pi_, to, po, p["ks"], p["n"]),
+    "ward": lambda ti, pi_, to, po, p: ward(ti, pi_, to, po, p["ks"], p["alpha"]),
+    "ward-aniso": lambda ti, pi_, to, po, p: ward(ti, pi_, to, po, p["ks"], p["alpha_x"], p["alpha_y"]),
+    "ward-duer": lambda ti, pi_, to, po, p: ward_duer(ti, pi_, to, po, p["ks"], p["alpha"]),
+    "cook-torrance": _ct_ref,
+    "ggx": lambda ti, pi_, to, po, p, **o: _ct_ref(ti, pi_, to, po, p, roughness="alpha",
+                                                   **{"distribution": "ggx", "shadowing": "smith", **o}),
+    "ashikhmin-shirley": lambda ti, pi_, to, po, p: ashikhmin_shirley(ti, pi_, to, po, p["rs"], p["n"]),
+    "ashikhmin-shirley-aniso": lambda ti, pi_, to, po, p: ashikhmin_shirley(ti, pi_, to, po, p["rs"], p["nu"],
+                                                                            p["nv"]),
+    "lafortune": _lafortune_ref,
+    "toon-diffuse": lambda ti, pi_, to, po, p: toon_diffuse(ti, pi_, to, po, p["rho_d"], p["rho_shade"],
+                                                            p["threshold"], p["width"]),
+    "toon-specular": lambda ti, pi_, to, po, p: toon_specular(ti, pi_, to, po, p["ks"], p["threshold"],
+                                                              p["width"]),
+}
+"""Lobe name -> ``f(theta_i, phi_i, theta_o, phi_o, params, **options)`` returning ``(N, C)``."""

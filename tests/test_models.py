@@ -1,0 +1,470 @@
+"""Every lobe against an independent NumPy re-derivation of its paper's formula, and the model API.
+
+The references live in tests/reference_brdfs.py and do not import brdffit. Values are compared in float64 with
+rtol = 1e-10 (the two sides evaluate the same formula along different algebraic routes: vectors versus spherical
+angles, so only rounding may differ) and atol = 1e-15 1/sr, far below any value a lobe takes where it is not zero
+(it only matters where a lobe is switched off, e.g. a cosine power of a negative cosine).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import itertools
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit import cli, models
+
+import reference_brdfs as ref
+
+RTOL, ATOL = 1e-10, 1e-15
+CHANNELS = 3
+
+# Per-channel colour values, all different from each other and from the declared defaults.
+RHO = [0.15, 0.45, 0.85]
+KS = [0.3, 0.6, 0.9]
+RS = [0.04, 0.3, 0.9]
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    """One lobe configuration: spec, lobe options, (non-default) parameter values."""
+
+    spec: str
+    options: dict
+    params: dict
+
+    @property
+    def id(self) -> str:
+        opts = ",".join(f"{k}={v}" for k, v in self.options.items())
+        return self.spec + (f"({opts})" if opts else "")
+
+    def model(self):
+        return models.get(self.spec, channels=CHANNELS, **self.options, **self.params)
+
+    def reference(self, ti, pi_, to, po):
+        options = {k: v for k, v in self.options.items() if k != "material"}
+        params = {k: np.asarray(v, dtype=float) if np.ndim(v) else float(v) for k, v in self.params.items()}
+        return ref.REFERENCES[self.spec](ti, pi_, to, po, params, **options)
+
+
+def _fresnel_params(fresnel):
+    if fresnel == "schlick":
+        return {"f0": 0.08}
+    if fresnel == "dielectric":
+        return {"eta": 1.6}
+    return {"eta": [0.2, 0.6, 1.1], "k": [3.0, 2.4, 1.8]}
+
+
+CT_CASES = [
+    Case("cook-torrance", {"distribution": d, "shadowing": s, "fresnel": f},
+         {"ks": KS, "m": 0.35, **_fresnel_params(f)})
+    for d, s, f in itertools.product(("beckmann", "ggx", "blinn"), ("v-cavity", "smith", "none"),
+                                     ("schlick", "dielectric", "conductor"))
+]
+
+OTHER_CASES = [
+    Case("lambert", {}, {"rho_d": RHO}),
+    Case("oren-nayar", {}, {"rho_d": RHO, "sigma": 0.45}),
+    Case("phong", {}, {"ks": KS, "n": 7.5}),
+    Case("blinn-phong", {}, {"ks": KS, "n": 12.0}),
+    Case("ward", {}, {"ks": KS, "alpha": 0.27}),
+    Case("ward-aniso", {}, {"ks": KS, "alpha_x": 0.12, "alpha_y": 0.4}),
+    Case("ward-duer", {}, {"ks": KS, "alpha": 0.33}),
+    Case("ggx", {}, {"ks": KS, "alpha": 0.3, "f0": 0.07}),
+    Case("ggx", {"fresnel": "conductor", "material": "copper"},
+         {"ks": KS, "alpha": 0.22, **_fresnel_params("conductor")}),
+    Case("ashikhmin-shirley", {}, {"rs": RS, "n": 35.0}),
+    Case("ashikhmin-shirley-aniso", {}, {"rs": RS, "nu": 12.0, "nv": 150.0}),
+    Case("lafortune", {}, {"ks_1": KS, "cxy_1": -0.8, "cz_1": 0.6, "n_1": 6.5}),
+    Case("lafortune", {"lobes": 2}, {"ks_1": KS, "cxy_1": -0.8, "cz_1": 0.6, "n_1": 6.5,
+                                     "ks_2": [0.5, 0.25, 0.1], "cxy_2": 0.3, "cz_2": 0.9, "n_2": 3.0}),
+    Case("lafortune", {"anisotropic": True}, {"ks_1": KS, "cx_1": -0.9, "cy_1": -0.5, "cz_1": 0.7, "n_1": 8.0}),
+    Case("toon-diffuse", {}, {"rho_d": RHO, "rho_shade": [0.05, 0.12, 0.2], "threshold": 0.45, "width": 0.07}),
+    Case("toon-specular", {}, {"ks": KS, "threshold": 0.9, "width": 0.03}),
+]
+
+CASES = OTHER_CASES + CT_CASES
+CASES_BY_ID = {case.id: case for case in CASES}
+
+# One model with every registered lobe (parameters numbered _2, _3, ... where names repeat): jit and vmap are
+# checked on it once instead of once per lobe.
+ALL_LOBES = models.get("+".join(models.names()), channels=CHANNELS)
+
+# Direction pairs (θi, φi, θo, φo) in degrees.
+CONFIGS = {
+    "normal-incidence": [(0, 0, 0, 0), (0, 0, 25, 40), (0, 115, 60, 200)],
+    "off-specular": [(30, 10, 50, 120), (20, 200, 65, 300), (45, 0, 10, 90), (60, 30, 40, 250), (15, 80, 75, 100)],
+    "in-plane-specular": [(35, 40, 35, 220), (60, 0, 60, 180), (10, 300, 10, 120)],
+    "near-grazing": [(89, 20, 89, 200), (89, 20, 30, 250), (15, 100, 89, 300), (89, 0, 89, 0)],
+}
+BELOW = [(100, 0, 30, 180), (30, 0, 95, 180), (120, 10, 120, 190), (91, 45, 40, 225), (70, 0, 179, 0)]
+
+
+def _radians(points):
+    return tuple(np.radians(np.array(points, dtype=float)).T)
+
+
+def _evaluate(model, points):
+    return np.asarray(brdffit.evaluate(model, *_radians(points)))
+
+
+# Every case is evaluated once on all points (one array shape for every lobe, so JAX's per-primitive compilation
+# cache is shared across cases and the suite stays fast); the tests then look at the rows of one configuration.
+ALL_POINTS = [p for points in CONFIGS.values() for p in points] + BELOW
+_ROWS = {}
+for _name, _points in [*CONFIGS.items(), ("below-horizon", BELOW)]:
+    _start = sum(len(v) for v in _ROWS.values())
+    _ROWS[_name] = list(range(_start, _start + len(_points)))
+
+
+@functools.lru_cache(maxsize=None)
+def _values(case_id):
+    case = CASES_BY_ID[case_id]
+    return _evaluate(case.model(), ALL_POINTS), case.reference(*_radians(ALL_POINTS))
+
+
+def test_every_registered_lobe_has_a_case_and_a_reference():
+    assert set(models.names()) == {case.spec for case in CASES} == set(ref.REFERENCES)
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
+def test_case_sets_every_parameter_to_a_non_default_value(case):
+    model = case.model()
+    assert set(model.params) == set(case.params)
+    for spec in model.param_specs:
+        assert not np.any(np.asarray(model.params[spec.name]) == spec.default), spec.name
+
+
+@pytest.mark.parametrize("config", list(CONFIGS))
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
+def test_lobe_matches_reference(case, config):
+    got, want = (v[_ROWS[config]] for v in _values(case.id))
+    assert got.shape == want.shape == (len(CONFIGS[config]), CHANNELS)
+    assert np.all(np.isfinite(want)) and np.any(want > 0)
+    np.testing.assert_allclose(got, want, rtol=RTOL, atol=ATOL)
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
+def test_lobe_is_exactly_zero_below_the_horizon(case):
+    got, want = (v[_ROWS["below-horizon"]] for v in _values(case.id))
+    assert got.shape == (len(BELOW), CHANNELS)
+    assert np.all(got == 0.0) and np.all(want == 0.0)
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
+def test_channels_differ_as_their_colour_values(case):
+    """The per-channel colour values reach the right channel (no channel mix-up)."""
+    got = _values(case.id)[0][_ROWS["off-specular"]]
+    assert not np.allclose(got[:, 0], got[:, 1])
+
+
+# Gradient configurations: exactly normal incidence (h = n, every azimuth undefined), 89.9° (cosines ~ 1.7e-3),
+# below the horizon (masked points must not poison a fit's Jacobian with NaN), and retro-reflection within 1e-5° of
+# the horizon (h within ~2e-7 rad of horizontal).
+GRAD_CONFIGS = {
+    "theta=0": [(0, 0, 0, 0)],
+    "theta=0/view-off-normal": [(0, 0, 40, 30)],
+    "theta=89.9-specular": [(89.9, 10, 89.9, 190)],
+    "theta=89.9-mixed": [(89.9, 10, 0, 0), (0, 0, 89.9, 100), (89.9, 10, 45, 100), (89.9, 0, 89.9, 0)],
+    "below-horizon": [(100, 0, 30, 180), (30, 0, 95, 180)],
+}
+GRAD_POINTS = [p for points in GRAD_CONFIGS.values() for p in points]
+# The near-horizon retro point, repeated so that its batch has the same shape as GRAD_POINTS (JAX then reuses the
+# compiled primitives) but stays separate: a NaN derivative at one point poisons the gradient of the whole batch.
+RETRO_POINTS = [(89.99999, 0, 89.99999, 0)] * len(GRAD_POINTS)
+BELOW_POINTS = [GRAD_CONFIGS["below-horizon"][i % 2] for i in range(len(GRAD_POINTS))]
+
+
+def _grad(model, points):
+    """The issue's call: jax.grad of evaluate(...).sum() w.r.t. the model, a model of gradients."""
+    angles = _radians(points)
+    return jax.grad(lambda m: brdffit.evaluate(m, *angles).sum())(model)
+
+
+def _non_finite(grads):
+    return [name for name, value in grads.params.items() if not np.all(np.isfinite(np.asarray(value)))]
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
+def test_gradient_wrt_model_is_finite(case):
+    """At θ = 0 and θ = 89.9° (GRAD_CONFIGS) the gradient is a model of finite, not all zero, arrays."""
+    model = case.model()
+    grads = _grad(model, GRAD_POINTS)
+    assert isinstance(grads, brdffit.Model) and set(grads.params) == set(model.params)
+    if _non_finite(grads):  # name the configuration(s) in the failure message
+        bad = {config: _non_finite(_grad(model, points)) for config, points in GRAD_CONFIGS.items()}
+        pytest.fail(f"non-finite gradients: { {k: v for k, v in bad.items() if v} }")
+    assert any(np.any(np.asarray(v) != 0) for v in grads.params.values())
+    below = _grad(model, BELOW_POINTS)
+    assert all(np.all(np.asarray(v) == 0) for v in below.params.values())
+
+
+@pytest.mark.parametrize("case", CASES, ids=[case.id for case in CASES])
+def test_gradient_wrt_model_is_finite_at_the_horizon(case):
+    grads = _grad(case.model(), RETRO_POINTS)
+    assert not _non_finite(grads), _non_finite(grads)
+
+
+def test_gradient_matches_finite_differences():
+    """The gradient is not only finite but right: central differences on a sum of lobes."""
+    model = models.get("lambert+cook-torrance+ward-aniso", channels=CHANNELS, rho_d=RHO, ks=KS, m=0.3,
+                       ks_2=[0.2, 0.1, 0.4], alpha_x=0.2, alpha_y=0.35)
+    angles = _radians(CONFIGS["off-specular"])
+    loss = jax.jit(lambda m: brdffit.evaluate(m, *angles).sum())
+    grads = jax.grad(loss)(model)
+    for name in ("m", "alpha_x", "alpha_y", "f0"):
+        h = 1e-6
+        up = loss(model.replace(**{name: model.params[name] + h}))
+        down = loss(model.replace(**{name: model.params[name] - h}))
+        np.testing.assert_allclose(grads.params[name], (up - down) / (2 * h), rtol=1e-6)
+
+
+def test_jit_matches_eager_for_every_lobe():
+    angles = _radians(ALL_POINTS)
+    eager = brdffit.evaluate(ALL_LOBES, *angles)
+    jitted = jax.jit(brdffit.evaluate)(ALL_LOBES, *angles)
+    np.testing.assert_allclose(jitted, eager, rtol=1e-13, atol=1e-300)
+    assert np.all(np.asarray(jitted)[_ROWS["below-horizon"]] == 0.0)
+
+
+def test_vmap_over_directions_matches_broadcasting_for_every_lobe():
+    angles = _radians(ALL_POINTS)
+    batched = brdffit.evaluate(ALL_LOBES, *angles)
+    mapped = jax.jit(jax.vmap(lambda ti, pi_, to, po: brdffit.evaluate(ALL_LOBES, ti, pi_, to, po)))(*angles)
+    assert mapped.shape == batched.shape
+    np.testing.assert_allclose(mapped, batched, rtol=1e-13, atol=1e-300)
+
+
+def test_vmap_and_jit_over_a_stack_of_models():
+    """A batch of parameter sets is a model whose leaves have a leading axis; vmap maps over it."""
+    stack = [models.get("lambert+ggx", channels=CHANNELS, rho_d=r, alpha=a) for r, a in ((0.2, 0.1), (0.5, 0.3))]
+    stacked = jax.tree.map(lambda *leaves: jnp.stack(leaves), *stack)
+    angles = _radians(CONFIGS["off-specular"])
+    out = jax.jit(jax.vmap(lambda m: brdffit.evaluate(m, *angles)))(stacked)
+    assert out.shape == (2, len(CONFIGS["off-specular"]), CHANNELS)
+    for i, model in enumerate(stack):
+        np.testing.assert_allclose(out[i], brdffit.evaluate(model, *angles), rtol=1e-13)
+
+
+def test_evaluate_dirs_matches_evaluate():
+    model = CASES[4].model()
+    angles = _radians(CONFIGS["off-specular"])
+    wi = brdffit.geometry.spherical_to_vector(angles[0], angles[1])
+    wo = brdffit.geometry.spherical_to_vector(angles[2], angles[3])
+    np.testing.assert_array_equal(brdffit.evaluate_dirs(model, wi, wo), brdffit.evaluate(model, *angles))
+    np.testing.assert_array_equal(model(wi, wo), brdffit.evaluate(model, *angles))
+
+
+def test_evaluate_broadcasts_its_inputs():
+    model = CASES_BY_ID["phong"].model()
+    theta_o = np.linspace(0.1, 1.4, len(ALL_POINTS))
+    scalar = brdffit.evaluate(model, 0.3, 0.0, theta_o, np.pi)
+    full = brdffit.evaluate(model, np.full_like(theta_o, 0.3), np.zeros_like(theta_o), theta_o,
+                            np.full_like(theta_o, np.pi))
+    assert scalar.shape == (len(ALL_POINTS), CHANNELS)
+    np.testing.assert_array_equal(scalar, full)
+    grid = jax.eval_shape(brdffit.evaluate, model, np.zeros((2, 1)), 0.0, np.zeros((1, 4)), np.pi)
+    assert grid.shape == (2, 4, CHANNELS)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Sums of lobes and the naming rule
+
+
+def test_sum_of_lobes_is_the_sum_of_its_parts():
+    angles = _radians(ALL_POINTS)
+    total = models.get("lambert+ward", channels=CHANNELS, rho_d=RHO, ks=KS, alpha=0.2)
+    parts = (models.get("lambert", channels=CHANNELS, rho_d=RHO),
+             models.get("ward", channels=CHANNELS, ks=KS, alpha=0.2))
+    np.testing.assert_allclose(brdffit.evaluate(total, *angles),
+                               sum(brdffit.evaluate(p, *angles) for p in parts), rtol=1e-14, atol=0)
+
+
+def test_sum_of_three_lobes_with_options_matches_references():
+    points = CONFIGS["off-specular"] + CONFIGS["near-grazing"]
+    angles = _radians(points)
+    model = models.get("oren-nayar+cook-torrance(distribution=ggx, shadowing=smith)+lafortune(lobes=2)",
+                       channels=CHANNELS, rho_d=RHO, sigma=0.3, ks=KS, m=0.25, f0=0.1,
+                       ks_1=[0.1, 0.2, 0.3], cxy_1=-0.7, cz_1=0.7, n_1=9.0,
+                       ks_2=[0.3, 0.2, 0.1], cxy_2=0.5, cz_2=0.5, n_2=2.0)
+    want = (ref.oren_nayar(*angles, np.array(RHO), 0.3)
+            + ref.cook_torrance(*angles, np.array(KS), 0.25, distribution="ggx", shadowing="smith", f0=0.1)
+            + ref.lafortune(*angles, [{"ks": np.array([0.1, 0.2, 0.3]), "cx": -0.7, "cy": -0.7, "cz": 0.7, "n": 9.0},
+                                      {"ks": np.array([0.3, 0.2, 0.1]), "cx": 0.5, "cy": 0.5, "cz": 0.5, "n": 2.0}]))
+    np.testing.assert_allclose(brdffit.evaluate(model, *angles), want, rtol=RTOL, atol=ATOL)
+
+
+def test_repeated_lobes_get_numbered_parameter_names():
+    model = models.get("lambert+ward+ward", channels=CHANNELS)
+    assert list(model.params) == ["rho_d", "ks", "alpha", "ks_2", "alpha_2"]
+    assert model.param_specs.names == ("rho_d", "ks", "alpha", "ks_2", "alpha_2")
+    assert models.get("ward+ward+ward").param_specs.names == ("ks", "alpha", "ks_2", "alpha_2", "ks_3", "alpha_3")
+    # The renamed declarations keep everything but the name.
+    assert model.param_specs["alpha_2"].lower == model.param_specs["alpha"].lower
+    assert model.param_specs["ks_2"].colour and not model.param_specs["alpha_2"].colour
+
+
+def test_each_numbered_lobe_reads_its_own_parameters():
+    angles = _radians(CONFIGS["off-specular"])
+    model = models.get("lambert+ward+ward", channels=CHANNELS, rho_d=RHO, ks=KS, alpha=0.1,
+                       ks_2=[0.05, 0.1, 0.2], alpha_2=0.5)
+    want = (ref.lambert(*angles, np.array(RHO)) + ref.ward(*angles, np.array(KS), 0.1)
+            + ref.ward(*angles, np.array([0.05, 0.1, 0.2]), 0.5))
+    np.testing.assert_allclose(brdffit.evaluate(model, *angles), want, rtol=RTOL, atol=ATOL)
+
+
+def test_shared_options_apply_to_every_lobe_that_accepts_them():
+    model = models.get("lambert+cook-torrance+cook-torrance", distribution="ggx")
+    assert [lobe.options().get("distribution") for lobe in model.lobes] == [None, "ggx", "ggx"]
+    own = models.get("cook-torrance(distribution=blinn)+cook-torrance", distribution="ggx")
+    assert [lobe.distribution for lobe in own.lobes] == ["blinn", "ggx"]
+
+
+def test_params_and_param_specs_have_the_declared_shapes():
+    model = models.get("lambert+cook-torrance(fresnel=conductor)", channels=5)
+    for spec in model.param_specs:
+        value = model.params[spec.name]
+        assert value.shape == ((5,) if spec.colour else ())
+        np.testing.assert_array_equal(value, spec.default)
+    assert [s.kind for s in model.param_specs] == ["colour", "colour", "shape", "colour", "colour"]
+    gold_eta, gold_k = models.fresnel.CONDUCTORS["gold"]
+    assert model.param_specs["eta"].default == gold_eta and model.param_specs["k"].default == gold_k
+
+
+def test_material_preset_sets_defaults():
+    copper = models.get("cook-torrance", fresnel="conductor", material="copper", channels=2)
+    np.testing.assert_array_equal(copper.params["eta"], [0.617, 0.617])
+    np.testing.assert_array_equal(copper.params["k"], [2.63, 2.63])
+    water = models.get("cook-torrance(fresnel=dielectric, material=water)")
+    assert float(water.params["eta"]) == 1.333
+
+
+# --------------------------------------------------------------------------------------------------------------
+# replace, errors, serialisation, CLI
+
+
+def test_replace_returns_a_new_model_and_keeps_the_old():
+    model = models.get("lambert+ward", channels=CHANNELS)
+    new = model.replace(rho_d=RHO, alpha=0.4)
+    np.testing.assert_array_equal(new.params["rho_d"], RHO)
+    assert float(new.params["alpha"]) == 0.4
+    np.testing.assert_array_equal(model.params["rho_d"], [0.5, 0.5, 0.5])
+    assert float(model.params["alpha"]) == 0.2
+    np.testing.assert_array_equal(model.replace(ks=0.7).params["ks"], [0.7, 0.7, 0.7])
+    assert new.lobes == model.lobes and new.channels == model.channels
+    assert models.get(model, ks=0.3).params["ks"].shape == (CHANNELS,)
+
+
+def test_replace_rejects_unknown_names_and_wrong_shapes():
+    model = models.get("lambert+ward", channels=CHANNELS)
+    with pytest.raises(KeyError, match="alpha_2"):
+        model.replace(alpha_2=0.1)
+    with pytest.raises(ValueError, match="rho_d"):
+        model.replace(rho_d=[0.1, 0.2])
+    with pytest.raises(ValueError, match="alpha"):
+        model.replace(alpha=[0.1, 0.2, 0.3])
+
+
+@pytest.mark.parametrize(
+    "call, exc, words",
+    [
+        (lambda: models.get("lambrt"), KeyError, ["lambrt", "lambert", "oren-nayar"]),
+        (lambda: models.get("lambert+wrd"), KeyError, ["wrd", "ward"]),
+        (lambda: models.get(""), ValueError, ["non-empty"]),
+        (lambda: models.get("lambert+"), ValueError, ["lambert+"]),
+        (lambda: models.get("cook-torrance", distribution="phong"), ValueError, ["distribution", "beckmann", "ggx"]),
+        (lambda: models.get("cook-torrance", shadowing="smit"), ValueError, ["shadowing", "v-cavity", "smith"]),
+        (lambda: models.get("cook-torrance", fresnel="metal"), ValueError, ["fresnel", "schlick", "conductor"]),
+        (lambda: models.get("cook-torrance", fresnel="conductor", material="glass"), ValueError, ["glass", "gold"]),
+        (lambda: models.get("cook-torrance(distribution=foo)"), ValueError, ["foo", "beckmann"]),
+        (lambda: models.get("ward(lobes=2)"), ValueError, ["lobes", "ward"]),
+        (lambda: models.get("cook-torrance(ggx)"), ValueError, ["key=value"]),
+        (lambda: models.get("ward", sigma=0.2), ValueError, ["sigma", "ks", "alpha"]),
+        (lambda: models.get("lafortune", lobes=0), ValueError, ["lobes"]),
+        (lambda: models.get("lambert", channels=0), ValueError, ["channels"]),
+        (lambda: models.get("lambert", rho_d=[0.1, 0.2]), ValueError, ["rho_d"]),
+    ],
+    ids=lambda v: None,
+)
+def test_unknown_names_and_options_raise_clear_errors(call, exc, words):
+    with pytest.raises(exc) as info:
+        call()
+    message = str(info.value)
+    for word in words:
+        assert word in message, (word, message)
+
+
+SERIALISED_SPECS = [
+    "lambert",
+    "lambert+ward+ward",
+    "cook-torrance(distribution=ggx, fresnel=conductor, material=gold)",
+    "oren-nayar+cook-torrance(shadowing=smith, fresnel=dielectric)",
+    "lafortune(lobes=2, anisotropic=true)",
+    "ggx(fresnel=conductor)+toon-specular",
+]
+
+
+@pytest.mark.parametrize("spec", SERIALISED_SPECS)
+def test_model_dict_round_trip(spec):
+    model = models.get(spec, channels=CHANNELS)
+    model = model.replace(**{s.name: np.linspace(0.3, 0.4, CHANNELS) if s.colour else
+                             min(s.upper, s.default * 0.9 + 0.01) for s in model.param_specs})
+    description = json.loads(json.dumps(models.model_to_dict(model)))
+    back = models.model_from_dict(description)
+    assert back.lobes == model.lobes and back.channels == model.channels
+    assert list(back.params) == list(model.params)
+    for name in model.params:
+        np.testing.assert_array_equal(back.params[name], model.params[name])
+    angles = _radians(CONFIGS["off-specular"])
+    np.testing.assert_array_equal(brdffit.evaluate(back, *angles), brdffit.evaluate(model, *angles))
+
+
+def test_cli_models_lists_every_lobe_with_its_parameters(capsys):
+    assert cli.main(["models"]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    for name in models.names():
+        assert any(line.startswith(name + ":") for line in lines), name
+        for spec in models.get(name, channels=1).param_specs:
+            assert any(line.split()[:1] == [spec.name] for line in lines), (name, spec.name)
+
+
+def test_reciprocal_flags():
+    """Every lobe but toon-diffuse is reciprocal by construction, and the flag says so."""
+    flags = {name: models.lobe_class(name).reciprocal for name in models.names()}
+    assert flags.pop("toon-diffuse") is False
+    assert all(flags.values())
+    assert not models.get("lambert+toon-diffuse").reciprocal
+    assert models.get("lambert+toon-specular").reciprocal
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
+def test_reciprocal_lobes_are_symmetric_and_toon_diffuse_is_not(case):
+    points = np.array(ALL_POINTS, dtype=float)
+    model = case.model()
+    forward = _values(case.id)[0]
+    backward = _evaluate(model, points[:, [2, 3, 0, 1]])
+    if model.reciprocal:
+        np.testing.assert_allclose(forward, backward, rtol=1e-11, atol=ATOL)
+    else:
+        assert not np.allclose(forward, backward)
+
+
+def test_models_doc_is_up_to_date():
+    """docs/models.md is generated by scripts/make_models_doc.py from the declarations; rerun it when they change."""
+    import importlib.util
+    import pathlib
+
+    root = pathlib.Path(__file__).resolve().parent.parent
+    spec = importlib.util.spec_from_file_location("make_models_doc", root / "scripts" / "make_models_doc.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert (root / "docs" / "models.md").read_text(encoding="utf-8") == module.render(), \
+        "docs/models.md is stale: run python scripts/make_models_doc.py"
