@@ -119,7 +119,7 @@ def _cmd_fit(args) -> int:
     path = Path(args.file)
     measurements = _load(path)
     result = fit(measurements, args.model, loss=args.loss, solver=args.solver, fixed=_parse_fixed(args.fixed),
-                 multistart=args.multistart, seed=args.seed)
+                 multistart=args.multistart, seed=args.seed, max_steps=args.max_steps)
     out = Path(args.out) if args.out else _default_out(path)
     out.mkdir(parents=True, exist_ok=True)
     h5 = out / "result.h5"
@@ -180,6 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="hold a parameter at a value (repeatable; a colour takes R,G,B)")
     p.add_argument("--multistart", type=int, default=0, metavar="N", help="extra quasi-random starts")
     p.add_argument("--seed", type=int, default=0, help="seed of subsamples and starts (default 0)")
+    p.add_argument("--max-steps", type=int, default=256, metavar="N", help="solver step limit (default 256)")
     p.add_argument("--out", help="output folder (default: next to the input, <name>.brdffit/)")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON summary to stdout")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")

@@ -1,0 +1,101 @@
+"""The command line: the Quick start job end to end, info, models, and exit codes on bad input."""
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from brdffit import FitResult, io, synth
+from brdffit.cli import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_OK, main
+
+ROOT = Path(__file__).resolve().parents[1]
+PLASTIC = ROOT / "data" / "synthetic" / "plastic.h5"
+
+
+@pytest.fixture(autouse=True)
+def private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path / "jax-cache"))
+
+
+def test_quick_start_fit_recovers_the_shipped_plastic(tmp_path, capsys):
+    out = tmp_path / "plastic"
+    assert main(["fit", str(PLASTIC), "--out", str(out), "--json"]) == EXIT_OK
+    printed = json.loads(capsys.readouterr().out)
+    assert set(printed) == {"model", "params", "stderr", "posterior", "metrics", "status", "files"}
+    assert printed["status"] == "converged"
+    truth = synth.truth_model(io.load(PLASTIC)).params
+    assert printed["params"]["m"] == pytest.approx(float(truth["m"]), rel=0.01)
+    np.testing.assert_allclose(printed["params"]["rho_d"], truth["rho_d"], rtol=0.01)
+    # Everything it wrote reads back: the measurements and the fit in one HDF5 file, JSON and text summaries.
+    result = FitResult.load(out / "result.h5")
+    assert float(result.params["m"]) == pytest.approx(printed["params"]["m"], rel=1e-12)
+    assert io.load(out / "result.h5").n == io.load(PLASTIC).n
+    assert json.loads((out / "result.json").read_text())["status"] == "converged"
+    assert "lambert+cook-torrance" in (out / "summary.txt").read_text()
+
+
+def test_fit_default_output_goes_next_to_the_input(tmp_path, capsys):
+    copy = tmp_path / "clay.h5"
+    copy.write_bytes((ROOT / "data" / "synthetic" / "clay.h5").read_bytes())
+    assert main(["fit", str(copy), "--model", "oren-nayar", "--quiet"]) == EXIT_OK
+    assert capsys.readouterr().out == ""
+    with h5py.File(tmp_path / "clay.brdffit" / "result.h5", "r") as f:
+        assert "fits/oren-nayar" in f and "measurements" in f
+
+
+def test_fit_with_fixed_parameter_and_solver(tmp_path, capsys):
+    code = main(["fit", str(PLASTIC), "--model", "lambert+ggx", "--fixed", "f0=0.04", "--solver", "dogleg",
+                 "--out", str(tmp_path / "o"), "--json"])
+    printed = json.loads(capsys.readouterr().out)
+    assert code == EXIT_OK and printed["params"]["f0"] == 0.04 and printed["stderr"]["f0"] == 0.0
+
+
+def test_not_converged_fit_exits_1(tmp_path, capsys):
+    code = main(["fit", str(PLASTIC), "--max-steps", "1", "--out", str(tmp_path / "o"), "--json"])
+    assert code == EXIT_NOT_CONVERGED
+    assert json.loads(capsys.readouterr().out)["status"] == "max-steps"
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["fit", "does-not-exist.h5"], "does-not-exist.h5"),
+    (["fit", str(PLASTIC), "--model", "lambert+nonsense"], "unknown lobe 'nonsense'"),
+    (["fit", str(PLASTIC), "--fixed", "f0"], "NAME=VALUE"),
+    (["fit", str(PLASTIC), "--fixed", "f0=abc"], "not a number"),
+    (["fit", str(PLASTIC), "--model", "lambert", "--fixed", "alpha=0.1"], "no parameter 'alpha'"),
+    (["fit", str(PLASTIC), "--loss", "l1"], "invalid choice"),
+    (["frobnicate"], "invalid choice"),
+])
+def test_bad_input_exits_2_with_a_clear_message(argv, message, capsys, tmp_path):
+    argv = argv + (["--out", str(tmp_path / "o")] if argv[0] == "fit" and len(argv) > 2 else [])
+    assert main(argv) == EXIT_BAD_INPUT
+    assert message in capsys.readouterr().err
+
+
+def test_bad_file_content_exits_2_and_names_the_file(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("theta_i,phi_i,theta_o,phi_o,R\n10,0,20,180,0.3\n10,0,x,180,0.3\n")
+    assert main(["fit", str(bad), "--model", "lambert", "--out", str(tmp_path / "o")]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err
+    assert "bad.csv" in err and "'x'" in err
+
+
+def test_info_reports_coverage_and_truth(capsys):
+    assert main(["info", str(PLASTIC), "--json"]) == EXIT_OK
+    info = json.loads(capsys.readouterr().out)
+    m = io.load(PLASTIC)
+    assert info["samples"] == m.n and info["channels"] == ["R", "G", "B"]
+    assert info["theta_i_deg"] == pytest.approx([0.0, 70.0])
+    assert info["missing_fraction"] == 0.0
+    assert info["meta"]["truth"]["spec"] == "lambert+cook-torrance"
+    assert main(["info", str(PLASTIC)]) == EXIT_OK
+    assert "3072 samples x 3 channels" in capsys.readouterr().out
+
+
+def test_models_and_version(capsys):
+    assert main(["models"]) == EXIT_OK
+    out = capsys.readouterr().out
+    assert "cook-torrance" in out and "alpha_x" in out
+    assert main(["--version"]) == EXIT_OK
+    assert "brdffit 0.1.0" in capsys.readouterr().out
