@@ -25,6 +25,7 @@ from scipy.optimize import lsq_linear
 from scipy.stats import qmc
 
 from .models.model import evaluate_pair
+from .losses import residual_scale
 from .params import bound_margin
 from .problem import FitData, Problem, residual_fn
 
@@ -97,24 +98,6 @@ def _is_affine(problem: Problem, base: dict, name: str, data: FitData) -> bool:
     f0, f1, f2 = _batched(_eval_fn, problem, trials, data)
     scale = np.max(np.abs(f2)) + 1e-300
     return bool(np.all(np.isfinite(f2)) and np.max(np.abs(f2 - 2 * f1 + f0)) <= 1e-9 * scale)
-
-
-def _loss_weights(loss: str, data: FitData) -> np.ndarray:
-    """|∂r/∂f_model| at f_model = f_data: the weights that linearise each loss for the amplitude solve."""
-    values = np.asarray(data.values)
-    cos_i = np.asarray(data.cos_i)[:, None]
-    sqrt_w = np.asarray(data.sqrt_weight)[:, None]
-    if loss == "cosine":
-        w = np.broadcast_to(cos_i * sqrt_w, values.shape)
-    elif loss == "log":
-        w = cos_i * sqrt_w / (1.0 + values * cos_i)
-    elif loss == "relative":
-        w = 1.0 / (values + np.asarray(data.eps))
-    elif loss == "sigma":
-        w = 1.0 / np.asarray(data.sigma)
-    else:
-        w = np.ones_like(values)
-    return np.where(np.asarray(data.mask), w, 0.0)
 
 
 @functools.lru_cache(maxsize=64)
@@ -195,7 +178,7 @@ def initial_guesses(problem: Problem, base: dict, data: FitData, n_extra: int, s
     colour_free = [s.name for s in specs if s.name in free and s.colour]
     affine = [a for a in colour_free if _is_affine(problem, base, a, data)]
     grid, extra = _shape_candidates(shape_specs, base, n_extra, seed)
-    weights = _loss_weights(problem.loss, data)
+    weights = residual_scale(problem.loss, data)
     candidates = _fill_amplitudes(problem, grid, base, affine, data, weights)
     costs = _batched(_cost_fn, problem, candidates, data)
     costs = np.where(np.isfinite(costs), costs, np.inf)

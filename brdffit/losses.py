@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-__all__ = ["LOSSES", "ROBUST", "residuals", "robust_residuals", "relative_epsilon"]
+__all__ = ["LOSSES", "ROBUST", "residuals", "robust_residuals", "relative_epsilon", "residual_scale"]
 
 LOSSES = ("cosine", "log", "relative", "absolute", "sigma")
 ROBUST = (None, "huber", "cauchy")
@@ -93,3 +93,35 @@ def robust_residuals(kind: str | None, r, scale: float):
         factor = jnp.sqrt(jnp.log1p(jnp.where(small, 1.0, z2)) / jnp.where(small, 1.0, z2))
         return r * jnp.where(small, 1.0 - 0.25 * z2, factor)
     raise ValueError(f"unknown robust loss {kind!r}; choose None, 'huber' or 'cauchy'")
+
+
+def residual_scale(loss: str, data) -> "np.ndarray":
+    """|∂r/∂f_model| at f_model = f_data for each (sample, channel), 0 for missing samples.
+
+    It linearises a loss at the data: an error δ in f becomes a residual of about ``residual_scale · δ``. The
+    initial guess uses it to weight its linear amplitude solve, and the posterior to carry a σ given in 1/sr
+    into the loss's residual units.
+
+    Arguments:
+        loss: one of `LOSSES`.
+        data: `brdffit.problem.FitData`.
+
+    Returns:
+        NumPy array ``(N, C)``.
+    """
+    import numpy as np
+
+    values = np.asarray(data.values)
+    cos_i = np.asarray(data.cos_i)[:, None]
+    sqrt_w = np.asarray(data.sqrt_weight)[:, None]
+    if loss == "cosine":
+        w = np.broadcast_to(cos_i * sqrt_w, values.shape)
+    elif loss == "log":
+        w = cos_i * sqrt_w / (1.0 + values * cos_i)
+    elif loss == "relative":
+        w = 1.0 / (values + np.asarray(data.eps))
+    elif loss == "sigma":
+        w = 1.0 / np.asarray(data.sigma)
+    else:
+        w = np.ones_like(values)
+    return np.where(np.asarray(data.mask), w, 0.0)

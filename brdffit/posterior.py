@@ -1,0 +1,522 @@
+"""Parameter posteriors by MCMC with emcee (docs/posterior.md).
+
+`posterior(fit_result, measurements)` samples the free parameters of a least-squares fit, and optionally one
+noise scale per channel, with emcee's affine-invariant ensemble sampler (Goodman & Weare 2010; Foreman-Mackey
+et al. 2013). The log-probability is one jitted JAX function, vmapped over walkers (emcee ``vectorize=True``).
+The likelihood uses the same residuals as the fit's loss.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import logging
+import math
+import sys
+import time
+
+import emcee
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.scipy.special import gammaln
+
+from .fit_result import FitResult, param_labels
+from .losses import relative_epsilon, residual_scale
+from .models.model import evaluate
+from .params import ParamSpec
+from .problem import Problem, flatten_free, make_fit_data, physical_params, residual_fn
+
+__all__ = ["posterior", "Posterior", "LIKELIHOODS", "PRIOR_FAMILIES"]
+
+LIKELIHOODS = ("gaussian", "student-t")
+PRIOR_FAMILIES = ("uniform", "loguniform", "normal", "lognormal")
+QUANTILES = (2.5, 16.0, 50.0, 84.0, 97.5)
+_LOG_SIGMA_RANGE = (-30.0, 10.0)
+
+
+def _prior_term(spec: ParamSpec, user):
+    """log prior density (up to a constant) of one parameter, as a function of its value array.
+
+    Default ("bounds"): uniform inside the declared bounds; log-uniform (∝ 1/p) for scale parameters whose lower
+    bound is positive (1/p is not integrable at 0, so scale parameters bounded by 0 stay uniform).
+    """
+    if user is None:
+        if spec.scale and spec.lower > 0:
+            return lambda v: -jnp.sum(jnp.log(v))
+        return lambda v: jnp.zeros(())
+    if callable(user):
+        return lambda v: jnp.sum(user(v))
+    family, a, b = user
+    if family == "uniform":
+        return lambda v: jnp.sum(jnp.where((v >= a) & (v <= b), 0.0, -jnp.inf))
+    if family == "loguniform":
+        return lambda v: jnp.sum(jnp.where((v >= a) & (v <= b), -jnp.log(v), -jnp.inf))
+    if family == "normal":
+        return lambda v: jnp.sum(-0.5 * ((v - a) / b) ** 2)
+    if family == "lognormal":
+        return lambda v: jnp.sum(jnp.where(v > 0, -0.5 * ((jnp.log(jnp.maximum(v, 1e-300)) - a) / b) ** 2
+                                           - jnp.log(jnp.maximum(v, 1e-300)), -jnp.inf))
+    raise ValueError(f"unknown prior family {family!r}; use one of {', '.join(PRIOR_FAMILIES)} or a callable")
+
+
+def _check_priors(prior, free):
+    if prior == "bounds" or prior is None:
+        return {}
+    if not isinstance(prior, dict):
+        raise ValueError("prior must be 'bounds' or a dict name -> (family, a, b) or callable log density")
+    for name, value in prior.items():
+        if name not in free:
+            raise ValueError(f"prior for {name!r}: not a free parameter of this fit ({', '.join(free)})")
+        if not callable(value) and (not isinstance(value, tuple) or len(value) != 3
+                                    or value[0] not in PRIOR_FAMILIES):
+            raise ValueError(f"prior for {name!r} must be a callable or (family, a, b) with family in "
+                             f"{', '.join(PRIOR_FAMILIES)}, got {value!r}")
+    return prior
+
+
+def _split_r_hat(chain: np.ndarray) -> np.ndarray:
+    """Gelman-Rubin R-hat per parameter with the walkers split into two halves, each pooled as one chain.
+
+    Arguments:
+        chain: ``(steps, walkers, ndim)`` after burn-in.
+
+    Returns:
+        ``(ndim,)``; values near 1 mean both halves sample the same distribution.
+    """
+    steps, walkers, ndim = chain.shape
+    half = walkers // 2
+    groups = [chain[:, :half, :].reshape(-1, ndim), chain[:, half:2 * half, :].reshape(-1, ndim)]
+    n = groups[0].shape[0]
+    means = np.stack([g.mean(axis=0) for g in groups])
+    within = np.mean([g.var(axis=0, ddof=1) for g in groups], axis=0)
+    between = n * means.var(axis=0, ddof=1)
+    pooled = (n - 1) / n * within + between / n
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(pooled / within)
+
+
+@dataclasses.dataclass
+class Posterior:
+    """What `brdffit.posterior` returns.
+
+    Attributes:
+        names: labels of the sampled dimensions (``name`` or ``name[i]``; noise scales ``noise_sigma[i]``).
+        samples: flat posterior samples after burn-in and thinning, ``(n, ndim)``, physical units (noise as σ).
+        chain: the whole chain ``(steps, walkers, ndim)`` in the same units (for trace plots).
+        log_prob: ``(steps, walkers)`` log posterior of the chain.
+        burn, thin: what was discarded and kept.
+        summary: name -> {"mean", "median", "std", "q2.5", "q16", "q84", "q97.5"}.
+        correlation: posterior correlation matrix of the samples.
+        laplace_stderr: name -> the least-squares fit's Laplace standard error (NaN for noise scales).
+        fit_values: name -> the least-squares value.
+        diagnostics: acceptance fraction, autocorrelation times, effective sample sizes, split R-hat, lengths.
+        warnings: human-readable warnings (too short a chain, odd acceptance, subsampled data).
+        model_spec: the fitted model's spec; ``fit`` the `FitResult` sampled around.
+        likelihood, noise, subsample: how the posterior was defined (subsample: None or (n used, n total)).
+        wall_time: seconds spent sampling.
+    """
+
+    names: list
+    samples: np.ndarray
+    chain: np.ndarray
+    log_prob: np.ndarray
+    burn: int
+    thin: int
+    summary: dict
+    correlation: np.ndarray
+    laplace_stderr: dict
+    fit_values: dict
+    diagnostics: dict
+    warnings: list
+    model_spec: str
+    likelihood: str
+    noise: str
+    subsample: tuple | None
+    wall_time: float
+    fit: FitResult | None = None
+
+    def table(self) -> str:
+        """A readable table: least-squares value ± Laplace error next to posterior median and intervals."""
+        lines = [f"posterior of {self.model_spec} ({self.likelihood} likelihood, noise {self.noise})",
+                 f"{'parameter':<16}{'LS value':>12}{'± Laplace':>12}{'median':>12}{'68% interval':>26}"
+                 f"{'95% interval':>26}"]
+        for name in self.names:
+            s = self.summary[name]
+            ls = self.fit_values.get(name, float("nan"))
+            err = self.laplace_stderr.get(name, float("nan"))
+            lines.append(f"{name:<16}{ls:>12.5g}{err:>12.3g}{s['median']:>12.5g}"
+                         f"{'[' + format(s['q16'], '.5g') + ', ' + format(s['q84'], '.5g') + ']':>26}"
+                         f"{'[' + format(s['q2.5'], '.5g') + ', ' + format(s['q97.5'], '.5g') + ']':>26}")
+        d = self.diagnostics
+        lines.append(f"acceptance {d['acceptance_fraction']:.3f}  max autocorrelation time {d['tau_max']:.1f}  "
+                     f"steps {d['steps']}  burn {self.burn}  thin {self.thin}  samples {len(self.samples)}  "
+                     f"min ESS {d['ess_min']:.0f}  max split R-hat {d['r_hat_max']:.4f}")
+        lines.extend(f"warning: {w}" for w in self.warnings)
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.table()
+
+    def to_dict(self) -> dict:
+        """``{"params": {name: {"mean", "median", "std", "q2.5", "q16", "q84", "q97.5"}}, "diagnostics": {...}}``
+        plus the correlation matrix, names, warnings and settings; JSON-ready."""
+        def clean(x):
+            x = float(x)
+            return x if math.isfinite(x) else None
+
+        return {
+            "params": {n: {k: clean(v) for k, v in s.items()} for n, s in self.summary.items()},
+            "diagnostics": {k: ([clean(x) for x in v] if isinstance(v, list) else
+                                (clean(v) if isinstance(v, float) else v)) for k, v in self.diagnostics.items()},
+            "names": list(self.names),
+            "correlation": [[clean(x) for x in row] for row in self.correlation],
+            "laplace_stderr": {k: clean(v) for k, v in self.laplace_stderr.items()},
+            "fit_values": {k: clean(v) for k, v in self.fit_values.items()},
+            "warnings": list(self.warnings),
+            "model": self.model_spec,
+            "likelihood": self.likelihood,
+            "noise": self.noise,
+            "subsample": list(self.subsample) if self.subsample else None,
+            "burn": self.burn,
+            "thin": self.thin,
+            "wall_time": self.wall_time,
+        }
+
+    def save(self, path, name: str | None = None) -> str:
+        """Write the summary (JSON attribute ``summary``) and the flat samples under ``/posteriors/<name>/result``
+        of an HDF5 file; other groups (measurements, fits, a stored chain) are kept, the file replaced atomically.
+
+        Returns:
+            The group path written.
+        """
+        from .io.hdf5 import update_hdf5
+
+        group = f"posteriors/{(name or self.model_spec).replace('/', '_')}/result"
+
+        def write(g):
+            g.attrs["summary"] = json.dumps(self.to_dict())
+            g.create_dataset("samples", data=self.samples)
+            g.attrs["names"] = json.dumps(self.names)
+
+        update_hdf5(path, group, write)
+        return "/" + group
+
+    def draws(self, n: int, seed: int = 0) -> np.ndarray:
+        """``n`` rows of `samples` drawn with a seed (with replacement when n exceeds the sample count)."""
+        rng = np.random.default_rng(seed)
+        return self.samples[rng.choice(len(self.samples), n, replace=n > len(self.samples))]
+
+    def predictive_band(self, theta_i, phi_i, theta_o, phi_o, *, quantiles=QUANTILES, n_draws: int = 200,
+                        seed: int = 0) -> dict:
+        """Credible bands of the BRDF along any set of directions (e.g. an in-plane slice).
+
+        Arguments:
+            theta_i, phi_i, theta_o, phi_o: angles (radians), broadcastable.
+            quantiles: percentiles to return.
+            n_draws: posterior draws evaluated.
+            seed: seed of the draws.
+
+        Returns:
+            percentile -> array ``(..., channels)`` of f_r in 1/sr (noise scales are not added: this is the band
+            of the model, not of new measurements).
+        """
+        model = self.fit.model
+        free = [n for n in self.fit.params if n not in self.fit.fixed]
+        draws = self.draws(n_draws, seed)
+        values = []
+        for row in draws:
+            flat = dict(zip(self.names, row))
+            params = {}
+            for name in free:
+                shape = np.shape(self.fit.params[name])
+                if len(shape) == 0:
+                    params[name] = flat[name]
+                else:
+                    params[name] = np.array([flat[f"{name}[{i}]"] for i in range(shape[0])])
+            values.append(np.asarray(evaluate(model.replace(**params), theta_i, phi_i, theta_o, phi_o)))
+        stack = np.stack(values)
+        return {q: np.percentile(stack, q, axis=0) for q in quantiles}
+
+
+@functools.lru_cache(maxsize=32)
+def _log_prob_fn(problem: Problem, estimate: bool, likelihood: str, nu: float, priors: tuple):
+    """The jitted log posterior, vmapped over walkers: ``f(thetas (W, ndim), context) -> (W,)``.
+
+    Cached by its static definition, so repeated posteriors of data of the same shape compile once. ``context``
+    holds the data (`FitData`), the residual scale for known noise, the bounds and the optimum.
+    """
+    specs = problem.specs
+    template = {n: jnp.zeros((problem.channels,) if specs[n].colour else ()) for n in problem.free}
+    _, unravel = flatten_free(problem, template)
+    p = sum(int(np.size(v)) for v in template.values())
+    user = dict(priors)
+    prior_terms = {n: _prior_term(specs[n], user.get(n)) for n in problem.free}
+    log_norm_t = gammaln((nu + 1) / 2) - gammaln(nu / 2) - 0.5 * jnp.log(nu * jnp.pi)
+
+    def one(theta, context):
+        data = context["data"]
+        mask = data.mask
+        flat = theta[:p]
+        inside = jnp.all((flat > context["lowers"]) & (flat < context["uppers"]))
+        params = unravel(jnp.where(inside, flat, context["flat0"]))
+        lp = sum(term(params[n]) for n, term in prior_terms.items())
+        r = residual_fn(problem, physical_params(problem, {}, dict(data.fixed, **params)), data)
+        if estimate:
+            log_s = theta[p:]
+            inside = inside & jnp.all((log_s > _LOG_SIGMA_RANGE[0]) & (log_s < _LOG_SIGMA_RANGE[1]))
+            s = jnp.exp(log_s)[None, :]
+            log_s_total = jnp.sum(jnp.sum(mask, axis=0) * log_s)
+        else:
+            s = context["scale"]
+            log_s_total = jnp.sum(jnp.where(mask, jnp.log(s), 0.0))
+        z = r / s
+        if likelihood == "gaussian":
+            ll = -0.5 * jnp.sum(jnp.where(mask, z * z, 0.0)) - log_s_total
+        else:  # Student-t with nu degrees of freedom and scale s
+            ll = jnp.sum(jnp.where(mask, log_norm_t - 0.5 * (nu + 1) * jnp.log1p(z * z / nu), 0.0)) - log_s_total
+        total = lp + ll
+        return jnp.where(inside & jnp.isfinite(total), total, -jnp.inf)
+
+    return jax.jit(jax.vmap(one, in_axes=(0, None)))
+
+
+def _progress_printer(total: int, enabled: bool):
+    """A minimal progress line on stderr (no extra dependency); returns update(step) and close()."""
+    state = {"last": -1, "start": time.perf_counter()}
+
+    def update(step):
+        if not enabled:
+            return
+        percent = int(100 * step / max(total, 1))
+        if percent != state["last"]:
+            state["last"] = percent
+            elapsed = time.perf_counter() - state["start"]
+            print(f"\rMCMC {step}/{total} steps ({percent}%) {elapsed:.0f} s", end="", file=sys.stderr)
+
+    def close():
+        if enabled:
+            print(file=sys.stderr)
+
+    return update, close
+
+
+def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps: int = 5000, burn="auto",
+              thin="auto", likelihood: str = "gaussian", noise="estimate", prior="bounds", nu: float = 4.0,
+              max_samples: int | None = None, store=None, name: str | None = None, resume: bool = True,
+              progress: bool = True, seed: int = 0) -> Posterior:
+    """Sample the posterior of a fit's free parameters with emcee.
+
+    Arguments:
+        fit_result: a shared-shape `FitResult` (its model, fixed parameters, loss and Laplace errors are used).
+        measurements: the data the fit used (or others with the same channels).
+        nwalkers: emcee walkers (at least twice the dimension).
+        nsteps: steps per walker (in total, counting those already stored when resuming).
+        burn: steps discarded at the start; ``"auto"``: twice the largest integrated autocorrelation time.
+        thin: keep every ``thin``-th step; ``"auto"``: half the smallest autocorrelation time.
+        likelihood: ``"gaussian"`` or ``"student-t"`` (robust, ``nu`` degrees of freedom) on the fit's residuals.
+        noise: ``"estimate"`` (one noise scale per channel sampled as log σ with a uniform prior in log σ),
+            ``"known"`` (the measurements' σ), or a number (a fixed σ in 1/sr). σ is mapped into the loss's
+            residual units by the loss's derivative at the data.
+        prior: ``"bounds"`` (uniform within the declared bounds; log-uniform for scale parameters with a positive
+            lower bound), or a dict name -> ``(family, a, b)`` (``uniform``/``loguniform`` with bounds a, b;
+            ``normal``/``lognormal`` with mean a and sd b) or a callable log density; unnamed parameters keep
+            the bounds prior.
+        nu: degrees of freedom of the Student-t likelihood.
+        max_samples: run on a seeded stratified subsample of at most this many samples (said in the summary).
+        store: an HDF5 path: the chain is written as it runs through emcee's HDF backend, in group
+            ``posteriors/<name>/chain``.
+        name: the run's group name (default: the model spec).
+        resume: with ``store``, continue a stored chain of the same run up to ``nsteps`` instead of restarting.
+        progress: print a progress line on stderr.
+        seed: seed of the walkers' start, the subsample and emcee's random state.
+
+    Returns:
+        A `Posterior`.
+
+    Raises:
+        ValueError: bad arguments, a fit in independent channel mode, or a non-finite log probability at the
+            start (emcee's own checks, e.g. walkers not linearly independent, also raise ValueError).
+    """
+    if fit_result.model is None:
+        raise ValueError("posterior needs a shared-shape fit; fit each channel separately for independent mode")
+    if likelihood not in LIKELIHOODS:
+        raise ValueError(f"likelihood must be one of {', '.join(LIKELIHOODS)}, got {likelihood!r}")
+    model = fit_result.model
+    specs = model.param_specs
+    free = tuple(n for n in model.params if n not in fit_result.fixed)
+    priors = _check_priors(prior, free)
+    problem = Problem(lobes=model.lobes, channels=model.channels, free=free, loss=fit_result.loss, robust=None,
+                      solver=None, max_steps=0)
+    total = measurements.n
+    subsample = None
+    if max_samples is not None and measurements.n > max_samples:
+        measurements = measurements.subsample(max_samples, seed=seed, stratified=True)
+        subsample = (measurements.n, total)
+    fixed = {k: jnp.asarray(v) for k, v in model.params.items() if k in fit_result.fixed}
+    data = make_fit_data(measurements, fixed, relative_epsilon(measurements.values))
+    channels = model.channels
+
+    if noise == "estimate":
+        scale = None
+        noise_label = "estimated per channel"
+    elif noise == "known":
+        if measurements.sigma is None:
+            raise ValueError("noise='known' needs measurements with sigma")
+        sigma = np.where(np.isfinite(measurements.sigma), measurements.sigma, 1.0)
+        scale = np.where(np.asarray(data.mask), sigma * residual_scale(problem.loss, data), 1.0)
+        noise_label = "known (measurement sigma)"
+    elif isinstance(noise, (int, float)) and noise > 0:
+        scale = np.where(np.asarray(data.mask), float(noise) * residual_scale(problem.loss, data), 1.0)
+        noise_label = f"fixed sigma {float(noise):g} 1/sr"
+    else:
+        raise ValueError(f"noise must be 'estimate', 'known' or a positive number, got {noise!r}")
+    if scale is not None:
+        scale = jnp.asarray(np.where(scale > 0, scale, 1.0))
+
+    fit_values = {k: jnp.asarray(model.params[k]) for k in free}
+    flat0, _ = flatten_free(problem, fit_values)
+    p = int(flat0.size)
+    labels = param_labels(model.params, free)
+    estimate = noise == "estimate"
+    ndim = p + (channels if estimate else 0)
+    if nwalkers < 2 * ndim or nwalkers % 2:
+        raise ValueError(f"nwalkers must be even and at least twice the number of sampled dimensions ({ndim}: "
+                         f"{p} parameters{' + one noise scale per channel' if ndim > p else ''}); use "
+                         f"nwalkers={2 * ndim + (2 * ndim) % 2} or more")
+    context = {
+        "data": data,
+        "scale": jnp.ones_like(data.values) if scale is None else scale,
+        "lowers": jnp.concatenate([jnp.full(np.size(model.params[n]), specs[n].lower) for n in free]),
+        "uppers": jnp.concatenate([jnp.full(np.size(model.params[n]), specs[n].upper) for n in free]),
+        "flat0": flat0,
+    }
+    log_prob = _log_prob_fn(problem, estimate, likelihood, float(nu), tuple(sorted(priors.items())))
+    lowers, uppers = context["lowers"], context["uppers"]
+
+    def log_prob_numpy(thetas):
+        return np.asarray(log_prob(jnp.asarray(thetas, dtype=float), context))
+
+    run_name = (name or model.spec).replace("/", "_")
+    backend = None
+    if store is not None:
+        backend = emcee.backends.HDFBackend(str(store), name=f"posteriors/{run_name}/chain")
+        if backend.initialized and not resume:
+            backend.reset(nwalkers, ndim)
+        if backend.initialized and backend.iteration > 0 and backend.shape != (nwalkers, ndim):
+            raise ValueError(f"{store}: the stored chain has shape {backend.shape}, this run needs "
+                             f"{(nwalkers, ndim)}; pass resume=False or another name")
+    sampler = emcee.EnsembleSampler(nwalkers, ndim, log_prob_numpy, vectorize=True, backend=backend)
+    already = backend.iteration if (backend is not None and backend.initialized) else 0
+    if already == 0:
+        sampler.random_state = np.random.RandomState(seed).get_state()
+        start = _initial_ball(fit_result, free, labels, flat0, lowers, uppers, nwalkers, ndim, p, data, problem,
+                              seed)
+    else:
+        start = backend.get_last_sample()
+    if already == 0:
+        initial = log_prob_numpy(start)
+        if np.any(np.isnan(initial)):
+            raise ValueError("the initial log probability is NaN for some walkers: check the data for NaN sigma "
+                             "or the user priors")
+        if not np.all(np.isfinite(initial)):
+            bad = int(np.flatnonzero(~np.isfinite(initial))[0])
+            raise ValueError(f"walker {bad} starts where the posterior is zero (outside a prior's support): "
+                             "the least-squares optimum lies outside the priors given")
+    remaining = max(nsteps - already, 0)
+    update, close = _progress_printer(remaining, progress)
+    t0 = time.perf_counter()
+    if remaining:
+        for step, _ in enumerate(sampler.sample(start, iterations=remaining), start=1):
+            update(step)
+    close()
+    wall = time.perf_counter() - t0
+
+    chain = sampler.get_chain()
+    lp_chain = sampler.get_log_prob()
+    steps = chain.shape[0]
+    emcee_log = logging.getLogger("emcee.autocorr")
+    level = emcee_log.level
+    emcee_log.setLevel(logging.ERROR)  # its "chain too short" message is in our own warnings
+    try:
+        tau = emcee.autocorr.integrated_time(chain, quiet=True)
+    finally:
+        emcee_log.setLevel(level)
+    tau = np.where(np.isfinite(tau) & (tau > 0), tau, float(steps))
+    burn_n = int(min(math.ceil(2 * tau.max()), steps // 2)) if burn == "auto" else int(burn)
+    thin_n = int(max(1, math.floor(0.5 * tau.min()))) if thin == "auto" else int(thin)
+    kept = chain[burn_n::thin_n]
+    names = labels + ([f"noise_sigma[{c}]" for c in range(channels)] if noise == "estimate" else [])
+    physical = _to_reported(chain, p)
+    flat = _to_reported(kept, p).reshape(-1, ndim)
+    after = chain[burn_n:]
+    ess = (after.shape[0] * nwalkers) / tau
+    r_hat = _split_r_hat(_to_reported(after, p)) if after.shape[0] > 1 else np.full(ndim, np.nan)
+    acceptance = float(np.mean(sampler.acceptance_fraction))
+    warnings = []
+    if steps < 50 * tau.max():
+        warnings.append(f"the chain ({steps} steps) is shorter than 50 autocorrelation times "
+                        f"(tau max = {tau.max():.1f}): run at least {int(50 * tau.max())} steps for reliable "
+                        "intervals")
+    if not 0.15 <= acceptance <= 0.6:
+        warnings.append(f"acceptance fraction {acceptance:.3f} is outside 0.15-0.6")
+    if subsample:
+        warnings.append(f"the chain ran on a stratified subsample of {subsample[0]} of {subsample[1]} samples")
+    summary = {}
+    for k, n in enumerate(names):
+        x = flat[:, k]
+        q = np.percentile(x, QUANTILES)
+        summary[n] = {"mean": float(x.mean()), "median": float(q[2]), "std": float(x.std(ddof=1)),
+                      "q2.5": float(q[0]), "q16": float(q[1]), "q84": float(q[3]), "q97.5": float(q[4])}
+    laplace = dict(zip(labels, np.concatenate([np.ravel(fit_result.stderr[n]) for n in free])))
+    laplace.update({n: float("nan") for n in names[p:]})
+    values = dict(zip(labels, np.asarray(flat0, dtype=float)))
+    diagnostics = {
+        "acceptance_fraction": acceptance,
+        "tau": [float(t) for t in tau],
+        "tau_max": float(tau.max()),
+        "ess": [float(e) for e in ess],
+        "ess_min": float(ess.min()),
+        "r_hat": [float(r) for r in r_hat],
+        "r_hat_max": float(np.nanmax(r_hat)) if np.isfinite(r_hat).any() else float("nan"),
+        "steps": int(steps),
+        "walkers": int(nwalkers),
+        "samples": int(flat.shape[0]),
+    }
+    return Posterior(names=names, samples=flat, chain=physical, log_prob=lp_chain, burn=burn_n, thin=thin_n,
+                     summary=summary, correlation=np.corrcoef(flat, rowvar=False) if flat.shape[0] > 1 else
+                     np.eye(ndim), laplace_stderr={k: float(v) for k, v in laplace.items()},
+                     fit_values={k: float(v) for k, v in values.items()}, diagnostics=diagnostics,
+                     warnings=warnings, model_spec=model.spec, likelihood=likelihood, noise=noise_label,
+                     subsample=subsample, wall_time=wall, fit=fit_result)
+
+
+def _to_reported(chain: np.ndarray, p: int) -> np.ndarray:
+    """Turn sampled log σ columns (after the first p) into σ."""
+    out = np.array(chain, dtype=float, copy=True)
+    out[..., p:] = np.exp(out[..., p:])
+    return out
+
+
+def _initial_ball(fit_result, free, labels, flat0, lowers, uppers, nwalkers, ndim, p, data, problem, seed):
+    """Walkers in a ball around the optimum: 0.1 Laplace standard errors wide, kept inside the bounds."""
+    rng = np.random.default_rng(seed)
+    centre = np.asarray(flat0, dtype=float)
+    width = np.concatenate([np.ravel(np.asarray(fit_result.stderr[n], dtype=float)) for n in free])
+    fallback = 1e-3 * np.maximum(np.abs(centre), 1e-3)
+    width = np.where(np.isfinite(width) & (width > 0), width, fallback)
+    ball = centre + 0.1 * width * rng.standard_normal((nwalkers, p))
+    lo, hi = np.asarray(lowers), np.asarray(uppers)
+    margin = 1e-9 * np.maximum(np.abs(centre), 1.0)
+    ball = np.clip(ball, lo + margin, hi - margin)
+    if ndim == p:
+        return ball
+    r = np.asarray(residual_fn(problem, physical_params(problem, {}, dict(data.fixed,
+                                                                          **{k: jnp.asarray(v) for k, v in
+                                                                             fit_result.params.items()
+                                                                             if k in free})), data))
+    mask = np.asarray(data.mask)
+    rms = np.sqrt(np.sum(np.where(mask, r * r, 0.0), axis=0) / np.maximum(mask.sum(axis=0), 1))
+    log_sigma = np.log(np.maximum(rms, 1e-12))
+    return np.concatenate([ball, log_sigma + 0.01 * rng.standard_normal((nwalkers, ndim - p))], axis=1)
