@@ -8,6 +8,7 @@ Public API:
 - models: `models.names`, `models.get`, `Model`, `evaluate`, `evaluate_dirs`, `ParamSpec`;
 - data: `Measurements`, `MeasurementError`, `io.load`, `io.save`, `synth.generate`;
 - fitting: `fit`, `fit_many`, `FitResult`, `FitError`;
+- uncertainty: `posterior`, `Posterior`;
 - physical checks: `properties`.
 """
 
@@ -19,6 +20,7 @@ from . import geometry, io, models, params, properties, synth  # noqa: E402
 from .fit import FitError, fit, fit_many  # noqa: E402
 from .fit_result import FitResult  # noqa: E402
 from .measurements import MeasurementError, Measurements  # noqa: E402
+from .posterior import Posterior, posterior  # noqa: E402
 from .models import Model, evaluate, evaluate_dirs  # noqa: E402
 from .params import ParamSpec  # noqa: E402
 
@@ -26,5 +28,5 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Model", "ParamSpec", "evaluate", "evaluate_dirs", "Measurements", "MeasurementError", "fit", "fit_many",
-    "FitResult", "FitError", "geometry", "io", "models", "params", "properties", "synth", "__version__",
+    "FitResult", "FitError", "posterior", "Posterior", "geometry", "io", "models", "params", "properties", "synth", "__version__",
 ]
