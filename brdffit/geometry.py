@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 
 __all__ = [
@@ -61,8 +62,8 @@ def safe_pow(x, n):
 
 
 def logistic(u):
-    """The logistic function 1 / (1 + e^(-u)), written with tanh so it is stable for large |u|."""
-    return 0.5 * (jnp.tanh(0.5 * u) + 1.0)
+    """The logistic function 1 / (1 + e^(-u)), accurate in relative terms in both tails (jax.nn.sigmoid)."""
+    return jax.nn.sigmoid(u)
 
 
 def spherical_to_vector(theta, phi):
@@ -162,7 +163,8 @@ class LocalPair(NamedTuple):
         cos_i, cos_o: n·ωi and n·ωo, clamped to at least TINY so that lobes may divide by them.
         h: half vector, shape ``(..., 3)``.
         cos_h: n·h.
-        cos_d: ωi·h (= ωo·h), the angle the Fresnel term sees.
+        cos_d: ωi·h (= ωo·h), the angle the Fresnel term sees; computed as the mean of the two so that it is
+            exactly symmetric in ωi and ωo (reciprocity to the last bit).
         above: True where both directions are strictly above the horizon; the model is zero elsewhere.
     """
 
@@ -188,6 +190,6 @@ class LocalPair(NamedTuple):
             cos_o=jnp.maximum(wo[..., 2], TINY),
             h=h,
             cos_h=jnp.maximum(h[..., 2], TINY),
-            cos_d=jnp.maximum(jnp.sum(wi * h, axis=-1), TINY),
+            cos_d=jnp.maximum(0.5 * jnp.sum((wi + wo) * h, axis=-1), TINY),
             above=above,
         )

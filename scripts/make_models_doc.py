@@ -77,8 +77,10 @@ NOTES = {
     "phong": "The modified (normalised) Phong lobe of Lafortune & Willems; energy conserving for ks ≤ 1.",
     "blinn-phong": "The (n + 8)/(8π) factor is an approximate normalisation (Real-Time Rendering, 3rd ed., "
                    "Eq. 7.48).",
-    "ward": "Ward's √(ci co) normalisation lets the albedo exceed ks at grazing incidence for large α.",
-    "ward-duer": "Dür's ci co normalisation is closer to energy balance at grazing angles than Ward's.",
+    "ward": "With ks = 1 the albedo of Ward's √(ci co) normalisation stays below 1 up to about 89.8° of "
+            "incidence (0.68 at 89.5° for α = 0.5) and exceeds 1 only beyond; see properties.md.",
+    "ward-duer": "Dür's ci co normalisation is closer to energy balance than Ward's away from grazing for small "
+                 "α, but its albedo grows without bound towards grazing (9.9 at 89.5° for α = 0.5, ks = 1).",
     "cook-torrance": "Walter et al.'s normalisation 1/(4 ci co) (not Cook & Torrance's 1/(π ci co)); m is the "
                      "width of the distribution (Beckmann m, GGX α). With fresnel=dielectric or conductor the "
                      "option material=NAME takes the default η (and κ) from a preset, see the tables at the end. "
@@ -171,7 +173,9 @@ def render() -> str:
         "`\"lambert+cook-torrance(distribution=ggx, fresnel=conductor, material=gold)\"`; options given as keywords "
         "to `get` apply to every lobe that accepts them.",
         "- When two lobes of a sum declare the same parameter, the second gets the suffix `_2`, the third `_3`: "
-        "`\"lambert+ward+ward\"` has `rho_d, ks, alpha, ks_2, alpha_2`.",
+        "`\"lambert+ward+ward\"` has `rho_d, ks, alpha, ks_2, alpha_2`. A suffixed name that another lobe declares "
+        "itself is skipped: in `\"phong+phong+lafortune(lobes=2)\"` the second Phong has `ks_3, n_3`, since `ks_2` "
+        "and `n_2` are the Lafortune lobe 2's.",
         "- A *colour* parameter has one value per channel (shape `(channels,)`); a *shape* parameter is one scalar "
         "shared by all channels. Fits keep every parameter strictly inside its bounds through smooth transforms "
         "(see `brdffit.params`).",

@@ -468,3 +468,12 @@ def test_models_doc_is_up_to_date():
     spec.loader.exec_module(module)
     assert (root / "docs" / "models.md").read_text(encoding="utf-8") == module.render(), \
         "docs/models.md is stale: run python scripts/make_models_doc.py"
+
+
+def test_suffixed_names_never_collide_with_declared_names():
+    # A second Phong's "ks_2" would clash with Lafortune lobe 2's own ks_2: the suffix skips to _3.
+    model = models.get("phong+phong+lafortune(lobes=2)", channels=1)
+    names = list(model.params)
+    assert len(names) == len(set(names)) == 12
+    assert names[:4] == ["ks", "n", "ks_3", "n_3"]
+    assert sum(len(n) for n in model.names_by_lobe) == len(model.params)

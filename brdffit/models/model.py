@@ -21,20 +21,34 @@ __all__ = ["Model", "evaluate", "evaluate_dirs", "evaluate_pair"]
 def global_names(lobes: tuple[Lobe, ...]) -> tuple[tuple[str, ...], ...]:
     """Model-level parameter names of each lobe: a name already used gets the suffix ``_2``, ``_3``, ...
 
+    The k-th lobe declaring a name gets ``name_k``, unless another lobe declares that name itself (Lafortune's
+    ``ks_2``) or it is already taken; then the count goes on to the next free suffix. So ``"lambert+ward+ward"``
+    has ``rho_d, ks, alpha, ks_2, alpha_2`` and ``"phong+phong+lafortune(lobes=2)"`` gives the second Phong
+    ``ks_3`` and ``n_3``, since ``ks_2`` and ``n_2`` belong to Lafortune's second lobe.
+
     Arguments:
         lobes: the lobes of the sum, in order.
 
     Returns:
         For each lobe, the model-level names of its parameters in declaration order.
     """
+    declared = {spec.name for lobe in lobes for spec in lobe.param_specs()}
     seen: Counter[str] = Counter()
+    taken: set[str] = set()
     names = []
     for lobe in lobes:
         lobe_names = []
         for spec in lobe.param_specs():
             seen[spec.name] += 1
-            count = seen[spec.name]
-            lobe_names.append(spec.name if count == 1 else f"{spec.name}_{count}")
+            name = spec.name
+            if seen[spec.name] > 1:
+                count = seen[spec.name]
+                while f"{spec.name}_{count}" in declared or f"{spec.name}_{count}" in taken:
+                    count += 1
+                seen[spec.name] = count
+                name = f"{spec.name}_{count}"
+            taken.add(name)
+            lobe_names.append(name)
         names.append(tuple(lobe_names))
     return tuple(names)
 
