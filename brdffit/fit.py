@@ -19,7 +19,7 @@ from .fit_result import FitResult, param_labels
 from .initial_guess import MAX_INIT_SAMPLES, initial_guesses
 from .losses import LOSSES, ROBUST, relative_epsilon
 from .metrics import fit_metrics
-from .models.model import Model
+from .models.model import Model, global_names
 from .models.registry import get as get_model
 from .params import at_bound
 from .problem import (FitData, Problem, chunk_data, compiled_solve, flatten_free, make_fit_data, physical_params,
@@ -214,6 +214,25 @@ def _json_params(params: dict) -> dict:
     return {k: np.asarray(v, dtype=float).tolist() for k, v in params.items()}
 
 
+def _canonical(problem: Problem, y: dict, fixed: dict, outcome: dict):
+    """Put the solution in each lobe's canonical order (`Lobe.canonical`, e.g. Lafortune lobes sorted by n).
+
+    Returns the (possibly reordered) unconstrained values and the outcome, without the refinement's normal
+    matrices when the order changed (they belong to the old order).
+    """
+    params = physical_params(problem, y, fixed)
+    ordered = dict(params)
+    for lobe, names in zip(problem.lobes, global_names(problem.lobes)):
+        local = {spec.name: params[name] for spec, name in zip(lobe.param_specs(), names)}
+        canon = lobe.canonical(local)
+        ordered.update({name: canon[spec.name] for spec, name in zip(lobe.param_specs(), names)})
+    if all(np.array_equal(np.asarray(ordered[k]), np.asarray(params[k])) for k in params):
+        return y, outcome
+    specs = problem.specs
+    y = {k: specs[k].to_unconstrained(ordered[k]) for k in problem.free}
+    return y, {k: v for k, v in outcome.items() if k != "normal_matrices"}
+
+
 def _use_coarse(coarse, measurements) -> bool:
     if coarse not in ("auto", True, False):
         raise ValueError(f"coarse must be 'auto', True or False, got {coarse!r}")
@@ -261,6 +280,13 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
                             "identifiable from these data")
     if hit:
         warnings.append(f"parameters at a bound: {', '.join(hit)}")
+    specs = problem.specs
+    for name in problem.free:
+        spec = specs[name]
+        if spec.colour and spec.scale and spec.lower == 0 and all(f"{name}[{c}]" in hit
+                                                                    for c in range(problem.channels)):
+            warnings.append(f"{name} went to 0 in every channel: its lobe contributes nothing, a model without "
+                            "it suffices")
     cost = float(outcome["cost"])
     k = len(labels)
     aic, bic = _information_criteria(problem.loss, cost, n_valid, k)
@@ -308,12 +334,15 @@ def _starting_points(problem: Problem, model: Model, measurements, fixed_values:
         starts = initial_guesses(plain, base, sub, multistart, seed)
     elif isinstance(init, str) and init == "model":
         starts = [base] + initial_guesses(plain, base, sub, multistart, seed)[1:]
+    elif isinstance(init, list):
+        starts = initial_guesses(plain, base, sub, multistart, seed, candidates=init)
     elif isinstance(init, (dict, Model)):
         given = init.params if isinstance(init, Model) else model.replace(**init).params
         starts = [dict(base, **{k: v for k, v in given.items() if k not in fixed_values})]
         starts += initial_guesses(plain, base, sub, multistart, seed)[1:]
     else:
-        raise ValueError(f"init must be 'auto', 'model', a Model or a dict of values, got {init!r}")
+        raise ValueError(f"init must be 'auto', 'model', a Model, a dict of values or a list of candidate "
+                         f"shape settings, got {init!r}")
     if problem.robust is not None and robust_scale is None:
         r = np.asarray(residual_fn(plain, {k: jnp.asarray(v) for k, v in starts[0].items()}, sub))
         mask = np.asarray(sub.mask)
@@ -334,7 +363,8 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
         solver: a name from `brdffit.solvers.SOLVERS` (``"lm"``, ``"gauss-newton"``, ``"dogleg"``,
             ``"indirect-lm"``, ``"bfgs"``) or any optimistix least-squares solver or minimiser.
         init: ``"auto"`` (data-driven guess, `brdffit.initial_guess`), ``"model"`` (the model's values), a
-            `Model`, or a dict of starting values.
+            `Model`, a dict of starting values, or a list of candidate shape-parameter settings (dicts) that the
+            initial guess scores, with their amplitudes solved, instead of its own grid.
         fixed: parameters held fixed: a dict name -> value, or names held at the model's values.
         free: names of parameters declared fixed by default (e.g. the toon ``width``) that this fit frees.
         multistart: extra quasi-random starts over the bounds; all run in one vmapped solve, the lowest cost is
@@ -400,6 +430,7 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
         y, outcome = refine(problem, y, data, rtol=rtol, atol=atol)
         outcome["steps"] = coarse_steps + int(outcome["steps"])
         run_time += time.perf_counter() - t0
+    y, outcome = _canonical(problem, y, data.fixed, outcome)
     result = _finish(problem, model, measurements, data, y, outcome, starts=records, strategy=strategy,
                      times={"compile": compile_time, "run": run_time, "init": init_time})
     if strict and not result.converged:
@@ -500,9 +531,10 @@ def fit_many(measurements_list, model, *, loss: str = "cosine", solver="lm", ini
     results = []
     for i, (m, d, start) in enumerate(zip(items, datas, firsts)):
         outcome = {k: v[i] for k, v in out.items() if k != "y"}
+        y_i, outcome = _canonical(problem, {k: v[i] for k, v in out["y"].items()}, d.fixed, outcome)
         record = [{"init": _json_params(start), "cost": float(outcome["cost"]), "status": _start_status(outcome),
                    "steps": int(outcome["steps"])}]
-        results.append(_finish(problem, prepared[i][1], m, d, {k: v[i] for k, v in out["y"].items()}, outcome,
+        results.append(_finish(problem, prepared[i][1], m, d, y_i, outcome,
                                starts=record,
                                times={"compile": compile_time, "run": run_time, "init": init_time}))
     return results

@@ -6,11 +6,14 @@ bounded linear least-squares problem. The initial guess therefore:
 
 1. takes a seeded subsample of the valid data (at most `MAX_INIT_SAMPLES`);
 2. proposes shape-parameter candidates: a grid over each free shape parameter's bounds (log-spaced for scale
-   parameters), or Sobol points when the grid would be too large, plus the model's own values;
+   parameters), or Sobol points when the grid would be too large, plus the model's own values and the lobes'
+   own suggestions (`Lobe.start_candidates`, e.g. Lafortune lobes started forward, off-specular and retro at
+   increasing sharpness);
 3. for each candidate solves the amplitudes per channel by bounded linear least squares in the fit's loss,
    linearised at the data (`scipy.optimize.lsq_linear`), which is where the diffuse level comes from the
    off-specular samples and the specular amplitude and width from the peak around the mirror direction;
-4. ranks candidates by the true (nonlinear) loss of the resulting parameters and returns the best ones.
+4. ranks candidates by the true (nonlinear) loss of the resulting parameters and starts from the best one,
+   preferring among nearly equal ones the candidate with the most amplitudes at zero.
 """
 
 from __future__ import annotations
@@ -27,12 +30,16 @@ from scipy.stats import qmc
 from .models.model import evaluate_pair
 from .losses import residual_scale
 from .params import bound_margin
+from .models.model import global_names
 from .problem import FitData, Problem, residual_fn
 
 __all__ = ["initial_guesses", "interior", "MAX_INIT_SAMPLES"]
 
 MAX_INIT_SAMPLES = 10_000
 MAX_CANDIDATES = 256
+# Candidates whose cost is within this relative distance of the best count as equally good (see
+# `_sparsest_near_best`).
+SPARSE_TOLERANCE = 1e-3
 _CHUNK = 32
 
 
@@ -90,6 +97,30 @@ def _shape_candidates(shape_specs, base: dict, n_extra: int, seed: int) -> tuple
     extra_units = qmc.Sobol(d, scramble=True, seed=seed + 1).random(max(n_extra, 1))[:n_extra]
     extra = [{s.name: _unit_to_value(u[k], s) for k, s in enumerate(shape_specs)} for u in extra_units]
     return grid, extra
+
+
+def _lobe_candidates(problem: Problem, free_shape: set, seed: int) -> list[dict]:
+    """The lobes' own start candidates (`Lobe.start_candidates`) under model-level names, combined across lobes
+    (at most `MAX_CANDIDATES`, a seeded choice when there are more)."""
+    per_lobe = []
+    for lobe, names in zip(problem.lobes, global_names(problem.lobes)):
+        mapping = {spec.name: name for spec, name in zip(lobe.param_specs(), names)}
+        starts = [{mapping[k]: v for k, v in c.items() if mapping[k] in free_shape} for c in lobe.start_candidates()]
+        if starts:
+            per_lobe.append(starts)
+    if not per_lobe:
+        return []
+    sizes = [len(c) for c in per_lobe]
+    total = int(np.prod(sizes))
+    rng = np.random.default_rng(seed)
+    picks = range(total) if total <= MAX_CANDIDATES else rng.choice(total, MAX_CANDIDATES, replace=False)
+    combined = []
+    for flat in picks:
+        merged = {}
+        for starts, index in zip(per_lobe, np.unravel_index(int(flat), sizes)):
+            merged.update(starts[index])
+        combined.append(merged)
+    return combined
 
 
 def _is_affine(problem: Problem, base: dict, name: str, data: FitData) -> bool:
@@ -158,7 +189,19 @@ def _fill_amplitudes(problem: Problem, shape_sets: list[dict], base: dict, affin
     return results
 
 
-def initial_guesses(problem: Problem, base: dict, data: FitData, n_extra: int, seed: int) -> list[dict]:
+def _sparsest_near_best(candidates: list[dict], costs: np.ndarray, affine: list) -> int:
+    """Index of the candidate to start from: among those within `SPARSE_TOLERANCE` of the lowest cost, the one
+    with the most amplitudes at zero (then the lowest cost). A lobe the data do not need then starts switched
+    off, rather than as a copy of another lobe that shares its work (a flat valley solvers crawl along)."""
+    best = float(np.min(costs))
+    near = np.flatnonzero(costs <= best * (1.0 + SPARSE_TOLERANCE) + 1e-300)
+    zeros = [sum(bool(np.all(np.asarray(candidates[i][a]) == 0.0)) for a in affine) for i in near]
+    order = sorted(range(len(near)), key=lambda k: (-zeros[k], costs[near[k]]))
+    return int(near[order[0]])
+
+
+def initial_guesses(problem: Problem, base: dict, data: FitData, n_extra: int, seed: int,
+                    candidates: list[dict] | None = None) -> list[dict]:
     """Starting points for a fit: the best data-driven guess first, then ``n_extra`` quasi-random starts.
 
     Arguments:
@@ -167,6 +210,8 @@ def initial_guesses(problem: Problem, base: dict, data: FitData, n_extra: int, s
         data: `FitData` of a subsample of the measurements (at most `MAX_INIT_SAMPLES` samples).
         n_extra: number of extra starts (``multistart``).
         seed: seed of the quasi-random sequences.
+        candidates: shape-parameter settings to score instead of the grid and the lobes' suggestions (missing
+            names take their ``base`` values); amplitudes are solved for each as usual.
 
     Returns:
         A list of ``1 + n_extra`` dicts name -> physical value (NumPy), each moved inside the bounds.
@@ -178,10 +223,15 @@ def initial_guesses(problem: Problem, base: dict, data: FitData, n_extra: int, s
     colour_free = [s.name for s in specs if s.name in free and s.colour]
     affine = [a for a in colour_free if _is_affine(problem, base, a, data)]
     grid, extra = _shape_candidates(shape_specs, base, n_extra, seed)
+    if candidates is not None:
+        shape_names = {s.name for s in shape_specs}
+        grid = [grid[0]] + [{k: v for k, v in c.items() if k in shape_names} for c in candidates]
+    else:
+        grid = grid + _lobe_candidates(problem, {s.name for s in shape_specs}, seed)
     weights = residual_scale(problem.loss, data)
     candidates = _fill_amplitudes(problem, grid, base, affine, data, weights)
     costs = _batched(_cost_fn, problem, candidates, data)
     costs = np.where(np.isfinite(costs), costs, np.inf)
-    best = candidates[int(np.argmin(costs))]
+    best = candidates[_sparsest_near_best(candidates, costs, affine)]
     starts = [best] + _fill_amplitudes(problem, extra, base, affine, data, weights)
     return [{k: interior(v, specs[k]) if k in free else v for k, v in s.items()} for s in starts]

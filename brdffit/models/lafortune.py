@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import jax.numpy as jnp
 
@@ -15,7 +16,17 @@ __all__ = ["Lafortune"]
 
 
 def _coefficient(name: str, default: float, doc: str) -> ParamSpec:
-    return ParamSpec(name, default, -1.0, 1.0, unit="1", doc=doc)
+    return ParamSpec(name, default, -2.0, 2.0, unit="1", doc=doc)
+
+
+def _cz(name: str, doc: str) -> ParamSpec:
+    # Under the normalisation only the direction of (cxy, cz) matters: cz is held at 1 so that a fit is identifiable.
+    return ParamSpec(name, 1.0, -1.0, 1.0, unit="1", doc=doc, fixed=True)
+
+
+# Starting directions of a lobe (cxy with cz = 1) and sharpness values for `start_candidates`.
+_DIRECTIONS = {"forward": -1.0, "off-specular": 0.0, "retro": 1.0}
+_SHARPNESS = (3.0, 10.0, 30.0, 100.0, 300.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -26,8 +37,10 @@ class Lafortune(Lobe):
 
     With ``anisotropic=True`` the tangent and bitangent terms have their own coefficients cx_j and cy_j and the
     normalisation uses max(cx_j², cy_j², cz_j²). cxy = −cz gives a specular lobe, cxy = cz a retro-reflective
-    one and cxy = 0 an off-specular lobe towards the normal. Because of the normalisation, only the direction of
-    (cxy, cz) matters, not its length. Reciprocal.
+    one and cxy = 0 an off-specular lobe towards the normal. Because of the normalisation only the direction of
+    (cxy, cz) matters, not its length, so cz_j is declared fixed at 1 (fits hold it unless freed) and cxy_j ranges
+    over [−2, 2]. Reciprocal. Fits start the lobes apart (`start_candidates`) and report them sorted by
+    sharpness, n_1 <= n_2 <= ... (`canonical`).
 
     Options:
         lobes: number of lobes K (parameters ``ks_j``, ``cxy_j``, ``cz_j``, ``n_j`` for j = 1..K).
@@ -56,9 +69,36 @@ class Lafortune(Lobe):
                 specs.append(_coefficient(f"cy_{j}", -1.0, f"lobe {j}: weight of ωi.y ωo.y"))
             else:
                 specs.append(_coefficient(f"cxy_{j}", -1.0, f"lobe {j}: weight of ωi.x ωo.x + ωi.y ωo.y"))
-            specs.append(_coefficient(f"cz_{j}", 1.0, f"lobe {j}: weight of ωi.z ωo.z"))
+            specs.append(_cz(f"cz_{j}", f"lobe {j}: weight of ωi.z ωo.z (held at 1 unless freed)"))
             specs.append(exponent(f"n_{j}", 10.0, doc=f"lobe {j}: exponent"))
         return tuple(specs)
+
+    def _lobe_names(self, j: int) -> tuple[str, ...]:
+        xy = (f"cx_{j}", f"cy_{j}") if self.anisotropic else (f"cxy_{j}",)
+        return (f"ks_{j}",) + xy + (f"cz_{j}", f"n_{j}")
+
+    def start_candidates(self):
+        """Every assignment of forward / off-specular / retro directions to the lobes, with sharpness increasing
+        from lobe to lobe (e.g. for K = 2: 9 direction pairs x 10 increasing pairs of exponents)."""
+        candidates = []
+        for directions in itertools.product(_DIRECTIONS.values(), repeat=self.lobes):
+            for sharpness in itertools.combinations(_SHARPNESS, self.lobes):
+                start = {}
+                for j, (c, n) in enumerate(zip(directions, sharpness), start=1):
+                    xy = (f"cx_{j}", f"cy_{j}") if self.anisotropic else (f"cxy_{j}",)
+                    start.update({name: c for name in xy})
+                    start[f"n_{j}"] = n
+                candidates.append(start)
+        return candidates
+
+    def canonical(self, params):
+        """Lobes sorted by exponent, n_1 <= n_2 <= ... (the sum does not depend on their order)."""
+        order = sorted(range(1, self.lobes + 1), key=lambda j: float(jnp.asarray(params[f"n_{j}"])))
+        out = dict(params)
+        for new, old in enumerate(order, start=1):
+            for new_name, old_name in zip(self._lobe_names(new), self._lobe_names(old)):
+                out[new_name] = params[old_name]
+        return out
 
     def __call__(self, params, pair: LocalPair):
         wi, wo = pair.wi, pair.wo

@@ -43,6 +43,16 @@ class Lobe(abc.ABC):
         """The option values of this lobe, as a dict."""
         return {name: getattr(self, name) for name in self.option_names()}
 
+    def start_candidates(self) -> list[dict]:
+        """Starting values of shape parameters (local names) worth trying first; the initial guess adds them to
+        its grid. Lobes with several similar sub-lobes use this to start them apart. Default: none."""
+        return []
+
+    def canonical(self, params: dict) -> dict:
+        """The same lobe with its parameters in canonical order (e.g. sub-lobes sorted), so that equivalent
+        solutions are reported one way. Default: unchanged."""
+        return params
+
     @abc.abstractmethod
     def param_specs(self) -> tuple[ParamSpec, ...]:
         """The parameter declarations of this lobe with its local names."""
