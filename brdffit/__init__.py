@@ -9,6 +9,7 @@ Public API:
 - data: `Measurements`, `MeasurementError`, `io.load`, `io.save`, `synth.generate`;
 - fitting: `fit`, `fit_many`, `FitResult`, `FitError`;
 - uncertainty: `posterior`, `Posterior`;
+- model selection: `select`, `Selection`, `fit_lobes`, `Scene` (and `scene.interpolate`, `scene.scene_error`);
 - physical checks: `properties`.
 """
 
@@ -16,11 +17,14 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from . import geometry, io, models, params, properties, synth  # noqa: E402
+from . import geometry, io, models, params, properties, scene, synth  # noqa: E402
 from .fit import FitError, fit, fit_many  # noqa: E402
 from .fit_result import FitResult  # noqa: E402
 from .measurements import MeasurementError, Measurements  # noqa: E402
+from .multilobe import fit_lobes  # noqa: E402
 from .posterior import Posterior, posterior  # noqa: E402
+from .scene import Scene  # noqa: E402
+from .select import Selection, select  # noqa: E402
 from .models import Model, evaluate, evaluate_dirs  # noqa: E402
 from .params import ParamSpec  # noqa: E402
 
@@ -28,5 +32,5 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Model", "ParamSpec", "evaluate", "evaluate_dirs", "Measurements", "MeasurementError", "fit", "fit_many",
-    "FitResult", "FitError", "posterior", "Posterior", "geometry", "io", "models", "params", "properties", "synth", "__version__",
+    "FitResult", "FitError", "posterior", "Posterior", "select", "Selection", "fit_lobes", "Scene", "geometry", "io", "models", "params", "properties", "scene", "synth", "__version__",
 ]

@@ -16,7 +16,7 @@ import numpy as np
 from .fit import fit
 from .fit_result import FitResult
 
-__all__ = ["fit_lobes", "lobe_spec", "NEW_LOBE_DIRECTIONS", "NEW_LOBE_SHARPNESS"]
+__all__ = ["fit_lobes", "lobe_spec", "new_lobe_candidates", "NEW_LOBE_DIRECTIONS", "NEW_LOBE_SHARPNESS"]
 
 NEW_LOBE_DIRECTIONS = (-1.0, 0.0, 1.0)  # cxy of a forward, an off-specular and a retro-reflective lobe (cz = 1)
 NEW_LOBE_SHARPNESS = (3.0, 10.0, 30.0, 100.0, 300.0)
@@ -29,7 +29,9 @@ def lobe_spec(k: int, base: str = "lambert", anisotropic: bool = False) -> str:
     return f"{base}+{lobes}" if base else lobes
 
 
-def _new_lobe_candidates(previous: FitResult | None, k: int, anisotropic: bool) -> list[dict] | str:
+def new_lobe_candidates(previous: FitResult | None, k: int, anisotropic: bool) -> list[dict] | str:
+    """Start candidates of a K-lobe fit: the (K − 1)-lobe solution's shape parameters plus lobe K forward,
+    off-specular or retro at each of `NEW_LOBE_SHARPNESS` (``"auto"`` when there is no previous fit)."""
     if previous is None:
         return "auto"
     kept = {name: np.asarray(value) for name, value in previous.params.items()
@@ -63,6 +65,6 @@ def fit_lobes(measurements, kmax: int = 3, *, base: str = "lambert", anisotropic
         raise ValueError(f"kmax must be at least 1, got {kmax}")
     results: list[FitResult] = []
     for k in range(1, kmax + 1):
-        init = _new_lobe_candidates(results[-1] if results else None, k, anisotropic)
+        init = new_lobe_candidates(results[-1] if results else None, k, anisotropic)
         results.append(fit(measurements, lobe_spec(k, base, anisotropic), init=init, **fit_options))
     return results

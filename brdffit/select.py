@@ -1,0 +1,304 @@
+"""Model selection: fit candidate models and choose the smallest that is good enough (docs/model-selection.md).
+
+`select(measurements, candidates, criterion)` fits every candidate, scores it by AIC, BIC or cross-validated
+held-out error, and chooses the simplest candidate whose score is within a stated margin of the best. Given a
+scene (`brdffit.scene.Scene`) and a tolerance, it chooses the cheapest candidate whose error in that scene stays
+under the tolerance: a scene that only sees diffuse-dominated directions can then pick a diffuse model even when
+the full data need a specular lobe.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import time
+
+import jax
+import numpy as np
+
+from .fit import fit
+from .fit_result import FitResult
+from .geometry import spherical_to_vector
+from .losses import relative_epsilon
+from .models.model import evaluate_dirs
+from .multilobe import new_lobe_candidates
+from .problem import Problem, make_fit_data, residual_fn
+
+__all__ = ["select", "Selection", "DEFAULT_CANDIDATES", "CRITERIA", "DEFAULT_MARGIN"]
+
+DEFAULT_CANDIDATES = (
+    "lambert",
+    "oren-nayar",
+    "lambert+blinn-phong",
+    "lambert+ward",
+    "lambert+cook-torrance",
+    "lambert+ggx",
+    "lambert+ashikhmin-shirley",
+    "lambert+lafortune",
+    "lambert+lafortune(lobes=2)",
+    "lambert+lafortune(lobes=3)",
+)
+CRITERIA = ("aic", "bic", "cv")
+# ΔAIC or ΔBIC within which a simpler model counts as good as the best (Kass & Raftery 1995: < 2 is "not worth
+# more than a bare mention").
+DEFAULT_MARGIN = 2.0
+_COST_SAMPLES = 65_536
+_LAFORTUNE = re.compile(r"^(?P<base>.*?)\+?lafortune(?:\((?P<options>[^)]*)\))?$")
+
+
+@dataclasses.dataclass
+class Selection:
+    """What `select` returns.
+
+    Attributes:
+        table: one dict per candidate: ``spec``, ``n_params``, ``train_error``, ``heldout_error``,
+            ``heldout_se``, ``aic``, ``bic``, ``score``, ``cost_ns`` (measured evaluation cost per sample,
+            nanoseconds), ``status``, and with a scene ``scene_error``.
+        chosen: the chosen spec (the scene's choice when a scene was given, else the criterion's).
+        criterion: ``"aic"``, ``"bic"`` or ``"cv"``; margin: the margin used.
+        best: the candidate with the best score.
+        chosen_by_criterion: the criterion's choice (equals ``chosen`` without a scene).
+        chosen_by_scene: the scene's choice, or None.
+        results: spec -> the full-data `FitResult`.
+        scene_results: spec -> the `FitResult` fitted to what the scene sees (empty without a scene).
+        warnings: human-readable warnings.
+    """
+
+    table: list
+    chosen: str
+    criterion: str
+    margin: float
+    best: str
+    chosen_by_criterion: str
+    chosen_by_scene: str | None
+    results: dict
+    warnings: list
+    scene_results: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def result(self) -> FitResult:
+        """The fit of the chosen model: to the scene when the scene chose it, else to all the data."""
+        if self.chosen_by_scene is not None:
+            return self.scene_results[self.chosen]
+        return self.results[self.chosen]
+
+    def summary(self) -> str:
+        """The table as text, with the choice and the rule that made it."""
+        has_scene = any("scene_error" in row for row in self.table)
+        head = (f"{'candidate':<32}{'params':>7}{'train':>11}{'held-out':>11}{'AIC':>13}{'BIC':>13}"
+                f"{'ns/sample':>10}" + (f"{'scene err':>11}" if has_scene else "") + "  status")
+        lines = [head]
+        for row in self.table:
+            mark = "*" if row["spec"] == self.chosen else " "
+            line = (f"{mark}{row['spec']:<31}{row['n_params']:>7}{row['train_error']:>11.4g}"
+                    f"{row['heldout_error']:>11.4g}{row['aic']:>13.6g}{row['bic']:>13.6g}{row['cost_ns']:>10.1f}")
+            if has_scene:
+                line += f"{row['scene_error']:>11.4g}"
+            lines.append(line + f"  {row['status']}")
+        rule = {"aic": f"ΔAIC <= {self.margin:g}", "bic": f"ΔBIC <= {self.margin:g}",
+                "cv": "CV error within one standard error"}[self.criterion]
+        lines.append(f"best by {self.criterion}: {self.best}; simplest with {rule}: {self.chosen_by_criterion}")
+        if self.chosen_by_scene is not None:
+            lines.append(f"cheapest within the scene tolerance: {self.chosen_by_scene}")
+        lines.extend(f"warning: {w}" for w in self.warnings)
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """JSON-ready: the table, the choices and the warnings."""
+        def clean(v):
+            return None if isinstance(v, float) and not math.isfinite(v) else v
+
+        return {"table": [{k: clean(v) for k, v in row.items()} for row in self.table], "chosen": self.chosen,
+                "criterion": self.criterion, "margin": self.margin, "best": self.best,
+                "chosen_by_criterion": self.chosen_by_criterion, "chosen_by_scene": self.chosen_by_scene,
+                "warnings": list(self.warnings)}
+
+
+def _loss_rmse(result: FitResult, measurements, rows: np.ndarray) -> float:
+    """RMS of the fit's loss residuals on the given rows (held-out samples), over channels."""
+    model = result.model
+    held = measurements.take(rows)
+    problem = Problem(lobes=model.lobes, channels=model.channels, free=(), loss=result.loss, robust=None,
+                      solver=None, max_steps=0)
+    data = make_fit_data(held, {}, relative_epsilon(measurements.values))
+    r = np.asarray(residual_fn(problem, dict(model.params), data))
+    mask = np.asarray(data.mask)
+    return float(np.sqrt(np.sum(r[mask] ** 2) / max(mask.sum(), 1)))
+
+
+def _masked(measurements, rows: np.ndarray):
+    """The measurements with the given rows marked missing (same shape, so fits reuse their compilation)."""
+    values = np.array(measurements.values, dtype=float)
+    values[rows] = np.nan
+    return measurements.replace(values=values)
+
+
+def _eval_cost_ns(result: FitResult, seed: int) -> float:
+    """Measured cost of evaluating the fitted model, nanoseconds per sample (jitted, 65,536 random pairs)."""
+    rng = np.random.default_rng(seed)
+    u = rng.random((4, _COST_SAMPLES))
+    wi = spherical_to_vector(np.arccos(u[0]), 2 * np.pi * u[1])
+    wo = spherical_to_vector(np.arccos(u[2]), 2 * np.pi * u[3])
+    fn = jax.jit(evaluate_dirs)
+    jax.block_until_ready(fn(result.model, wi, wo))
+    best = math.inf
+    for _ in range(5):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn(result.model, wi, wo))
+        best = min(best, time.perf_counter() - t0)
+    return 1e9 * best / _COST_SAMPLES
+
+
+def _smaller_lafortune(spec: str, done: dict):
+    """The fit of the same base with one Lafortune lobe fewer, if it was already fitted (progressive start)."""
+    match = _LAFORTUNE.match(spec)
+    if not match:
+        return None, None
+    options = match.group("options") or ""
+    lobes = re.search(r"lobes\s*=\s*(\d+)", options)
+    k = int(lobes.group(1)) if lobes else 1
+    if k < 2:
+        return None, None
+    rest = re.sub(r"\s*lobes\s*=\s*\d+\s*,?\s*", "", options).strip(", ")
+    smaller_options = ", ".join(x for x in ([f"lobes={k - 1}"] if k - 1 > 1 else []) + ([rest] if rest else []))
+    lobe = "lafortune" + (f"({smaller_options})" if smaller_options else "")
+    base = match.group("base")
+    smaller = f"{base}+{lobe}" if base else lobe
+    return done.get(smaller), k
+
+
+def _fit_candidate(spec, measurements, done, fit_options):
+    previous, k = _smaller_lafortune(spec, done)
+    init = "auto"
+    if previous is not None and previous.model is not None:
+        anisotropic = "anisotropic=true" in spec.replace(" ", "").lower()
+        init = new_lobe_candidates(previous, k, anisotropic)
+    return fit(measurements, spec, init=init, **fit_options), init
+
+
+def _simplest(rows: list[dict], eligible) -> dict:
+    return min((r for r in rows if eligible(r)), key=lambda r: (r["n_params"], r["cost_ns"]))
+
+
+def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", *, loss: str = "cosine",
+           margin: float | None = None, folds: int = 5, holdout: float = 0.2, scene=None,
+           tolerance: float | None = None, scene_metric: str = "relative", reference: str = "data", seed: int = 0,
+           **fit_options) -> Selection:
+    """Fit candidate models and choose the smallest one that is good enough.
+
+    Arguments:
+        measurements: `brdffit.Measurements`.
+        candidates: spec strings (default `DEFAULT_CANDIDATES`).
+        criterion: ``"aic"``, ``"bic"`` (default) or ``"cv"`` (``folds``-fold cross-validated loss RMSE).
+        loss: the fits' loss (same for all candidates, so scores compare).
+        margin: ΔAIC/ΔBIC within which a simpler model is preferred (default 2); ignored for ``cv``, which uses
+            the one-standard-error rule.
+        folds: folds of the ``cv`` criterion.
+        holdout: fraction of samples held out (seeded) to report each candidate's held-out error with
+            ``aic``/``bic``.
+        scene: a `brdffit.scene.Scene`: with ``tolerance``, choose the cheapest candidate whose error in the
+            scene is at most ``tolerance``. Each candidate is judged at its best for the scene: fitted to the
+            reference at the scene's directions (radiance-weighted cosine loss, starting from its full-data fit),
+            then rendered in the scene and compared with the reference.
+        tolerance: the scene tolerance, in the units of ``scene_metric``.
+        scene_metric: ``"relative"`` (relative RMS radiance error), ``"max-relative"`` or ``"delta-e"`` (mean
+            CIE ΔE*ab; 3 channels) (`brdffit.scene.scene_error`).
+        reference: what a candidate's scene radiance is compared with: ``"data"`` (the measurements interpolated
+            at the scene's directions, `brdffit.scene.interpolate`) or ``"best"`` (the best-scoring candidate).
+        seed: seed of the held-out split, folds and cost measurement.
+        **fit_options: passed to every `brdffit.fit` (solver, fixed, max_steps, ...).
+
+    Returns:
+        A `Selection`; ``.chosen`` is the chosen spec, ``.table`` the per-candidate rows.
+    """
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {', '.join(CRITERIA)}, got {criterion!r}")
+    candidates = list(candidates)
+    if not candidates:
+        raise ValueError("select needs at least one candidate")
+    if scene is not None and tolerance is None:
+        raise ValueError("a scene needs a tolerance (e.g. tolerance=0.05 for a 5% relative radiance error)")
+    if reference not in ("data", "best"):
+        raise ValueError(f"reference must be 'data' or 'best', got {reference!r}")
+    margin = DEFAULT_MARGIN if margin is None else float(margin)
+    rng = np.random.default_rng(seed)
+    valid_rows = np.flatnonzero(np.any(np.isfinite(measurements.values), axis=1))
+    order = rng.permutation(valid_rows)
+    fold_rows = np.array_split(order, folds) if criterion == "cv" else [order[: int(round(holdout * len(order)))]]
+    options = dict(loss=loss, seed=seed, **fit_options)
+    done: dict[str, FitResult] = {}
+    rows, warnings = [], []
+    for spec in candidates:
+        result, init = _fit_candidate(spec, measurements, done, options)
+        done[spec] = result
+        errors = []
+        for held in fold_rows:
+            train = fit(_masked(measurements, held), spec, init=init, **options)
+            errors.append(_loss_rmse(train, measurements, held))
+        rows.append({
+            "spec": spec,
+            "n_params": result.n_params,
+            "train_error": float(np.sqrt(result.cost / max(result.n_samples, 1))),
+            "heldout_error": float(np.mean(errors)),
+            "heldout_se": float(np.std(errors, ddof=1) / np.sqrt(len(errors))) if len(errors) > 1 else math.nan,
+            "aic": result.aic,
+            "bic": result.bic,
+            "cost_ns": _eval_cost_ns(result, seed),
+            "status": result.status,
+        })
+    for row in rows:
+        row["score"] = row["heldout_error"] if criterion == "cv" else row[criterion]
+    usable = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r["score"])]
+    if not usable:
+        raise ValueError("no candidate produced a finite score; check the data and candidates")
+    best = min(usable, key=lambda r: r["score"])
+    if criterion == "cv":
+        se = best["heldout_se"] if math.isfinite(best["heldout_se"]) else 0.0
+        chosen = _simplest(usable, lambda r: r["score"] <= best["score"] + se)
+    else:
+        chosen = _simplest(usable, lambda r: r["score"] <= best["score"] + margin)
+    by_scene = None
+    scene_results = {}
+    if scene is not None:
+        from .scene import interpolate, scene_error
+
+        if reference == "data":
+            seen = interpolate(measurements, scene.wi, scene.wo)
+        else:
+            seen = np.asarray(evaluate_dirs(done[best["spec"]].model, scene.wi, scene.wo))
+        ref = scene.radiance(seen)
+        scene_data = _scene_measurements(scene, seen, measurements.channels)
+        for row in rows:
+            # Each candidate at its best for what the scene sees: fitted to the reference at the scene's
+            # directions (cosine loss with the light intensity as weight, i.e. the error in radiance), starting
+            # from its full-data fit.
+            scene_fit = fit(scene_data, row["spec"], init=done[row["spec"]].model, loss="cosine",
+                            **{k: v for k, v in fit_options.items() if k != "loss"})
+            scene_results[row["spec"]] = scene_fit
+            row["scene_error"] = float(scene_error(scene.radiance_of(scene_fit.model), ref, scene_metric))
+        within = [r for r in usable if r["scene_error"] <= tolerance]
+        if within:
+            by_scene = _simplest(within, lambda r: True)["spec"]
+        else:
+            closest = min(usable, key=lambda r: r["scene_error"])
+            by_scene = closest["spec"]
+            warnings.append(f"no candidate stays within the scene tolerance {tolerance:g} ({scene_metric}); "
+                            f"the closest is {by_scene} ({closest['scene_error']:.4g})")
+    return Selection(table=rows, chosen=by_scene or chosen["spec"], criterion=criterion, margin=margin,
+                     best=best["spec"], chosen_by_criterion=chosen["spec"], chosen_by_scene=by_scene,
+                     results=done, warnings=warnings, scene_results=scene_results)
+
+
+def _scene_measurements(scene, values, channels):
+    """Measurements at a scene's rows: the reference BRDF values, weighted by the squared light intensity so
+    that the cosine loss is the radiance error; rows whose view lies below the horizon are left out."""
+    from .geometry import vector_to_spherical
+    from .measurements import Measurements
+
+    keep = (scene.wi[:, 2] > 0) & (scene.wo[:, 2] > 0) & np.all(np.isfinite(values), axis=1)
+    theta_i, phi_i = (np.asarray(a) for a in vector_to_spherical(scene.wi[keep]))
+    theta_o, phi_o = (np.asarray(a) for a in vector_to_spherical(scene.wo[keep]))
+    return Measurements(theta_i, phi_i, theta_o, phi_o, np.maximum(values[keep], 0.0),
+                        weights=np.asarray(scene.intensity, dtype=float)[keep] ** 2, channels=channels,
+                        meta={"source": f"scene {scene.name}"})

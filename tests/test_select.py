@@ -1,0 +1,99 @@
+"""Model selection with synthetic truth: the right model, the right number of lobes, simpler models under more
+noise, and a scene-aware choice that flips with what the scene sees."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from brdffit import io, models, synth
+from brdffit.multilobe import fit_lobes
+from brdffit.scene import Scene
+from brdffit.select import select
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_blinn_phong_data_select_blinn_phong_not_bigger_models():
+    truth = models.get("lambert+blinn-phong", rho_d=[0.3, 0.2, 0.1], ks=[0.6, 0.5, 0.4], n=60.0)
+    data = synth.generate(truth, pattern="half-diff", n=800, noise="relative:0.01", seed=0)
+    candidates = ["lambert", "lambert+blinn-phong", "lambert+cook-torrance", "lambert+lafortune",
+                  "lambert+lafortune(lobes=2)", "lambert+lafortune(lobes=3)"]
+    selection = select(data, candidates, criterion="bic", loss="sigma")
+    assert selection.chosen == "lambert+blinn-phong", selection.summary()
+    rows = {r["spec"]: r for r in selection.table}
+    assert rows["lambert+blinn-phong"]["bic"] < rows["lambert+cook-torrance"]["bic"] - 10
+    assert rows["lambert+blinn-phong"]["bic"] < rows["lambert+lafortune(lobes=3)"]["bic"] - 10
+    assert all(r["cost_ns"] > 0 and np.isfinite(r["heldout_error"]) for r in selection.table)
+    # Held-out error of the true model is at the noise level (loss="sigma": 1 per residual).
+    assert rows["lambert+blinn-phong"]["heldout_error"] == pytest.approx(1.0, rel=0.15)
+
+
+def test_two_lobe_lafortune_data_select_two_lobes():
+    data = io.load(ROOT / "data" / "synthetic" / "lafortune-retro.h5")  # lambert + 2 Lafortune lobes
+    candidates = ["lambert+lafortune", "lambert+lafortune(lobes=2)", "lambert+lafortune(lobes=3)"]
+    selection = select(data, candidates, criterion="bic", loss="sigma")
+    assert selection.chosen == "lambert+lafortune(lobes=2)", selection.summary()
+
+
+def test_progressive_lobes_recover_both_lobes_sorted_by_sharpness():
+    data = io.load(ROOT / "data" / "synthetic" / "lafortune-retro.h5")
+    one, two = fit_lobes(data, kmax=2, loss="sigma")
+    assert two.converged
+    # Truth: retro lobe (cxy/cz = 0.8/0.8 = 1, n = 6) and forward lobe (cxy/cz = -0.95/0.9, n = 40), reported
+    # in the canonical order n_1 <= n_2.
+    assert float(two.params["n_1"]) == pytest.approx(6.0, rel=0.02)
+    assert float(two.params["n_2"]) == pytest.approx(40.0, rel=0.02)
+    assert float(two.params["cxy_1"]) == pytest.approx(1.0, rel=0.02)
+    assert float(two.params["cxy_2"]) == pytest.approx(-0.95 / 0.9, rel=0.02)
+    assert two.bic < one.bic
+
+
+def test_more_noise_selects_a_simpler_model():
+    # A faint, wide lobe: plain to see under little noise, lost in noise 100 times larger.
+    truth = models.get("lambert+ward", rho_d=[0.4, 0.3, 0.2], ks=[0.01, 0.01, 0.01], alpha=0.3)
+    choices = []
+    for noise in ("gaussian:0.001", "gaussian:0.1"):
+        data = synth.generate(truth, pattern="half-diff", n=800, noise=noise, seed=1, negative="clip")
+        choices.append(select(data, ["lambert", "lambert+ward"], criterion="bic", loss="absolute").chosen)
+    assert choices == ["lambert+ward", "lambert"]
+
+
+def test_cross_validation_uses_the_one_standard_error_rule():
+    truth = models.get("lambert+ward", rho_d=[0.4, 0.3, 0.2], ks=[0.5, 0.4, 0.3], alpha=0.15)
+    data = synth.generate(truth, pattern="half-diff", n=600, noise="relative:0.01", seed=2)
+    selection = select(data, ["lambert", "lambert+ward", "lambert+ward+ward"], criterion="cv", folds=3,
+                       loss="sigma")
+    rows = {r["spec"]: r for r in selection.table}
+    assert all(np.isfinite(r["heldout_se"]) for r in selection.table)
+    # Two Ward lobes fit no better than one beyond a standard error, so the single lobe is chosen.
+    assert selection.chosen == "lambert+ward", selection.summary()
+    assert rows["lambert"]["heldout_error"] > 10 * rows["lambert+ward"]["heldout_error"]
+
+
+def test_scene_aware_choice_flips_with_what_the_scene_sees():
+    truth = models.get("lambert+ward", rho_d=[0.5, 0.4, 0.3], ks=[0.6, 0.6, 0.6], alpha=0.1)
+    data = synth.generate(truth, pattern="uniform", n=20_000, noise="relative:0.01", seed=3)
+    candidates = ["lambert", "lambert+ward"]
+    # Light at 50 deg, views on the light's own side only, far from the mirror direction: the lobe is invisible.
+    theta_o = np.radians(np.linspace(5, 70, 40))
+    diffuse_scene = Scene.from_angles(np.radians(50.0), 0.0, theta_o, 0.0)
+    flat = select(data, candidates, criterion="bic", scene=diffuse_scene, tolerance=0.05)
+    assert flat.chosen_by_criterion == "lambert+ward"
+    assert flat.chosen == "lambert", flat.summary()
+    # The same light seen around the mirror direction: the highlight matters and the lobe is needed.
+    specular_scene = Scene.from_angles(np.radians(50.0), 0.0, theta_o, np.pi)
+    shiny = select(data, candidates, criterion="bic", scene=specular_scene, tolerance=0.05)
+    assert shiny.chosen == "lambert+ward", shiny.summary()
+
+
+def test_selection_errors_and_output():
+    data = synth.generate("lambert", n=200, noise="relative:0.01", seed=0)
+    with pytest.raises(ValueError, match="criterion"):
+        select(data, ["lambert"], criterion="mdl")
+    with pytest.raises(ValueError, match="tolerance"):
+        select(data, ["lambert"], scene=Scene.from_angles(0.1, 0.0, 0.2, 3.0))
+    selection = select(data, ["lambert", "oren-nayar"], criterion="aic")
+    d = selection.to_dict()
+    assert d["chosen"] == "lambert" and len(d["table"]) == 2
+    assert "lambert" in selection.summary()
