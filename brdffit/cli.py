@@ -112,14 +112,47 @@ def _cmd_info(args) -> int:
     return EXIT_OK
 
 
+def _with_lobes(spec: str, k: int) -> str:
+    """The spec with every Lafortune lobe set to k sub-lobes."""
+    tokens = []
+    found = False
+    for name, options in models.parse_spec(spec):
+        if name == "lafortune":
+            found = True
+            options = dict(options, lobes=k)
+            if options == {"lobes": 1}:
+                options = {}
+        inner = ", ".join(f"{key}={value}" for key, value in options.items())
+        tokens.append(name + (f"({inner})" if inner else ""))
+    if not found:
+        raise UsageError(f"--lobes needs a model with a Lafortune lobe, e.g. --model lambert+lafortune; got {spec!r}")
+    return "+".join(tokens)
+
+
+def _fit_options(args) -> dict:
+    return dict(loss=args.loss, solver=args.solver, fixed=_parse_fixed(args.fixed), seed=args.seed,
+                max_steps=args.max_steps)
+
+
 def _cmd_fit(args) -> int:
-    from . import fit, io
+    from . import fit, io, select
 
     enable_compilation_cache()
     path = Path(args.file)
     measurements = _load(path)
-    result = fit(measurements, args.model, loss=args.loss, solver=args.solver, fixed=_parse_fixed(args.fixed),
-                 multistart=args.multistart, seed=args.seed, max_steps=args.max_steps)
+    selection = None
+    if args.lobes is None:
+        result = fit(measurements, args.model, multistart=args.multistart, **_fit_options(args))
+    elif args.lobes == "auto":
+        candidates = [_with_lobes(args.model, k) for k in range(1, args.max_lobes + 1)]
+        selection = select(measurements, candidates, criterion="bic", **_fit_options(args))
+        result = selection.result
+    else:
+        try:
+            k = int(args.lobes)
+        except ValueError:
+            raise UsageError(f"--lobes {args.lobes!r}: give a number of lobes or 'auto'") from None
+        result = fit(measurements, _with_lobes(args.model, k), multistart=args.multistart, **_fit_options(args))
     out = Path(args.out) if args.out else _default_out(path)
     out.mkdir(parents=True, exist_ok=True)
     h5 = out / "result.h5"
@@ -129,14 +162,47 @@ def _cmd_fit(args) -> int:
     (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "summary.txt").write_text(result.summary() + "\n")
     files = [str(h5), str(out / "result.json"), str(out / "summary.txt")]
+    if selection is not None:
+        (out / "selection.json").write_text(json.dumps(selection.to_dict(), indent=2) + "\n")
+        files.append(str(out / "selection.json"))
     if args.json:
         print(json.dumps({"model": summary["model"], "params": summary["params"], "stderr": summary["stderr"],
                           "posterior": None, "metrics": summary["metrics"], "status": summary["status"],
                           "files": files}))
     elif not args.quiet:
+        if selection is not None:
+            print(selection.summary())
         print(result.summary())
         print(f"wrote {', '.join(files)}")
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+
+
+def _cmd_select(args) -> int:
+    from . import select
+    from .select import DEFAULT_CANDIDATES
+
+    enable_compilation_cache()
+    measurements = _load(args.file)
+    candidates = [c.strip() for c in args.candidates.split(";")] if args.candidates else list(DEFAULT_CANDIDATES)
+    selection = select(measurements, candidates, criterion=args.criterion, folds=args.folds,
+                       **_fit_options(args))
+    if args.json:
+        print(json.dumps(selection.to_dict()))
+    else:
+        print(selection.summary())
+    return EXIT_OK
+
+
+def _add_fit_options(p):
+    from .losses import LOSSES
+    from .solvers import SOLVERS
+
+    p.add_argument("--loss", default="cosine", choices=LOSSES, help="residual definition (default cosine)")
+    p.add_argument("--solver", default="lm", choices=list(SOLVERS), help="least-squares solver (default lm)")
+    p.add_argument("--fixed", action="append", metavar="NAME=VALUE",
+                   help="hold a parameter at a value (repeatable; a colour takes R,G,B)")
+    p.add_argument("--seed", type=int, default=0, help="seed of subsamples and starts (default 0)")
+    p.add_argument("--max-steps", type=int, default=256, metavar="N", help="solver step limit (default 256)")
 
 
 def _add(sub, name, help_text, examples, run):
@@ -149,9 +215,6 @@ def _add(sub, name, help_text, examples, run):
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every ``brdffit`` command."""
-    from .losses import LOSSES
-    from .solvers import SOLVERS
-
     parser = argparse.ArgumentParser(
         prog="brdffit",
         description="Fit analytic BRDF models to measured reflectance.",
@@ -174,16 +237,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file", help="measurement file (.h5, .csv/.tsv, MERL .binary)")
     p.add_argument("--model", default=DEFAULT_MODEL,
                    help=f"model spec, lobes joined with '+' (default {DEFAULT_MODEL}; see `brdffit models`)")
-    p.add_argument("--loss", default="cosine", choices=LOSSES, help="residual definition (default cosine)")
-    p.add_argument("--solver", default="lm", choices=list(SOLVERS), help="least-squares solver (default lm)")
-    p.add_argument("--fixed", action="append", metavar="NAME=VALUE",
-                   help="hold a parameter at a value (repeatable; a colour takes R,G,B)")
+    p.add_argument("--lobes", metavar="K|auto",
+                   help="number of Lafortune lobes in the model's Lafortune term, or 'auto' to choose 1.."
+                        "--max-lobes by BIC")
+    p.add_argument("--max-lobes", type=int, default=3, metavar="K", help="largest K tried by --lobes auto")
+    _add_fit_options(p)
     p.add_argument("--multistart", type=int, default=0, metavar="N", help="extra quasi-random starts")
-    p.add_argument("--seed", type=int, default=0, help="seed of subsamples and starts (default 0)")
-    p.add_argument("--max-steps", type=int, default=256, metavar="N", help="solver step limit (default 256)")
     p.add_argument("--out", help="output folder (default: next to the input, <name>.brdffit/)")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON summary to stdout")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p = _add(sub, "select", "fit candidate models and choose the smallest that is good enough",
+             ["brdffit select data/synthetic/plastic.h5",
+              "brdffit select data/synthetic/lafortune-retro.h5 --candidates "
+              "'lambert+lafortune;lambert+lafortune(lobes=2)' --criterion cv"], _cmd_select)
+    p.add_argument("file", help="measurement file (.h5, .csv/.tsv, MERL .binary)")
+    p.add_argument("--candidates", help="model specs separated by ';' (default: the standard candidate list)")
+    p.add_argument("--criterion", default="bic", choices=["aic", "bic", "cv"], help="selection criterion")
+    p.add_argument("--folds", type=int, default=5, help="folds of --criterion cv (default 5)")
+    _add_fit_options(p)
+    p.add_argument("--json", action="store_true", help="print the selection as one JSON object")
     return parser
 
 

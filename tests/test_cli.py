@@ -99,3 +99,26 @@ def test_models_and_version(capsys):
     assert "cook-torrance" in out and "alpha_x" in out
     assert main(["--version"]) == EXIT_OK
     assert "brdffit 0.1.0" in capsys.readouterr().out
+
+
+def test_fit_lafortune_with_automatic_lobe_count(tmp_path, capsys):
+    data = ROOT / "data" / "synthetic" / "lafortune-retro.h5"
+    code = main(["fit", str(data), "--model", "lambert+lafortune", "--lobes", "auto", "--max-lobes", "3",
+                 "--loss", "sigma", "--out", str(tmp_path / "o"), "--json"])
+    printed = json.loads(capsys.readouterr().out)
+    assert code == EXIT_OK
+    assert printed["model"] == "lambert+lafortune(lobes=2)"
+    chosen = json.loads((tmp_path / "o" / "selection.json").read_text())
+    assert chosen["chosen"] == "lambert+lafortune(lobes=2)" and len(chosen["table"]) == 3
+
+
+def test_select_command_and_lobes_errors(tmp_path, capsys):
+    clay = ROOT / "data" / "synthetic" / "clay.h5"
+    assert main(["select", str(clay), "--candidates", "lambert;oren-nayar", "--json"]) == EXIT_OK
+    assert json.loads(capsys.readouterr().out)["chosen"] == "oren-nayar"
+    assert main(["fit", str(clay), "--model", "lambert", "--lobes", "2", "--out", str(tmp_path / "o")]) == \
+        EXIT_BAD_INPUT
+    assert "Lafortune" in capsys.readouterr().err
+    assert main(["fit", str(clay), "--model", "lafortune", "--lobes", "two", "--out", str(tmp_path / "o")]) == \
+        EXIT_BAD_INPUT
+    assert "number of lobes" in capsys.readouterr().err
