@@ -42,6 +42,27 @@ def check_not_lfs_pointer(path, head: bytes) -> None:
                                 "'git lfs pull' (or download it) and try again")
 
 
+def read_file_bytes(path) -> bytes:
+    """The bytes of a data file; a missing file or a Git LFS pointer is an error that names the file.
+
+    Arguments:
+        path: the file.
+
+    Returns:
+        Its content.
+
+    Raises:
+        FileNotFoundError: "<path>: no such file". FormatError: the file is a Git LFS pointer.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: no such file") from None
+    check_not_lfs_pointer(path, data[:64])
+    return data
+
+
 def _file_mode(path: Path) -> int:
     try:
         return path.stat().st_mode & 0o777  # keep an existing file's permissions

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..measurements import Measurements
-from ._common import FormatError, atomic_path, check_not_lfs_pointer
+from ._common import FormatError, atomic_path, read_file_bytes
 
 __all__ = ["MerlTable", "read_merl", "write_merl", "looks_like_merl", "DIMS", "SCALES", "theta_h_index",
            "theta_d_index", "phi_d_index", "theta_h_centre", "theta_d_centre", "phi_d_centre", "cell_weights",
@@ -272,11 +272,7 @@ def read_merl(path) -> MerlTable:
             other than 34,992,012 bytes (truncated or trailing data), or an infinite number.
     """
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: no such file") from None
-    check_not_lfs_pointer(path, data[:64])
+    data = read_file_bytes(path)
     if len(data) < HEADER_BYTES:
         raise FormatError(path, f"{len(data)} bytes: shorter than the 12-byte MERL header (truncated or not a "
                                 "MERL file)")

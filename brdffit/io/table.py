@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..measurements import MeasurementError, Measurements
-from ._common import FormatError, atomic_path, check_not_lfs_pointer
+from ._common import FormatError, atomic_path, read_file_bytes
 
 __all__ = ["read_table", "write_table", "ANGLE_COLUMNS", "META_PREFIX"]
 
@@ -157,11 +157,7 @@ def _split_lines(path, text: str, delimiter: str | None) -> _Table:
 
 def _read_text(path) -> str:
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: no such file") from None
-    check_not_lfs_pointer(path, data[:64])
+    data = read_file_bytes(path)
     if not data.strip():
         raise FormatError(path, "the file is empty")
     nul = data.find(b"\0")
