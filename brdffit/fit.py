@@ -7,6 +7,7 @@ covariance comes from the Gauss-Newton approximation JᵀJ of the residual Jacob
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import time
@@ -34,6 +35,7 @@ CHANNEL_MODES = ("shared-shape", "independent")
 # then refined on all of it (`brdffit.refine`).
 COARSE_RESIDUALS = 300_000
 COARSE_SAMPLES = 100_000
+COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
 _CORRELATION_WARNING = 0.99
 _JACOBIAN_BYTES = 256 * 2**20
 
@@ -233,6 +235,16 @@ def _canonical(problem: Problem, y: dict, fixed: dict, outcome: dict):
     return y, {k: v for k, v in outcome.items() if k != "normal_matrices"}
 
 
+def _coarse_problem(problem: Problem, solver) -> Problem:
+    """The coarse stage's problem: a named solver gets the looser `COARSE_RTOL`; its answer only has to land
+    within the subsample's statistical error of the optimum (about 1/√COARSE_SAMPLES), which the refinement
+    then removes. A solver object is used as given."""
+    if not isinstance(solver, str):
+        return problem
+    loose = make_solver(solver, max(COARSE_RTOL, problem.solver.rtol), max(COARSE_ATOL, problem.solver.atol))
+    return dataclasses.replace(problem, solver=loose)
+
+
 def _use_coarse(coarse, measurements) -> bool:
     if coarse not in ("auto", True, False):
         raise ValueError(f"coarse must be 'auto', True or False, got {coarse!r}")
@@ -404,11 +416,12 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
     two_stage = bool(problem.free) and _use_coarse(coarse, measurements)
     strategy = f"coarse ({COARSE_SAMPLES} samples) + refine" if two_stage else "full"
     if problem.free:
-        solve_data = data
+        solve_data, solve_problem = data, problem
         if two_stage:
             solve_data = make_fit_data(measurements.subsample(COARSE_SAMPLES, seed=seed), fixed_values, eps,
                                        robust_scale, dt)
-        executable, compile_time = compiled_solve(problem, y0, solve_data, data_batched=False)
+            solve_problem = _coarse_problem(problem, solver)
+        executable, compile_time = compiled_solve(solve_problem, y0, solve_data, data_batched=False)
         t0 = time.perf_counter()
         out = jax.block_until_ready(executable(y0, solve_data))
         run_time = time.perf_counter() - t0
