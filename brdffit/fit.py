@@ -446,9 +446,72 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
     y, outcome = _canonical(problem, y, data.fixed, outcome)
     result = _finish(problem, model, measurements, data, y, outcome, starts=records, strategy=strategy,
                      times={"compile": compile_time, "run": run_time, "init": init_time})
+    if not result.converged:
+        dead = _dead_amplitudes(problem, result.model.params, data, result.cost, result.dof)
+        if dead:
+            result = _refit_without(measurements, result, problem, dead, fixed_values, kwargs)
     if strict and not result.converged:
         raise FitError(f"fit of {result.spec} did not converge: {result.status}", result)
     return result
+
+
+def _dead_amplitudes(problem: Problem, params: dict, data: FitData, cost: float, dof: int) -> list[str]:
+    """Free amplitudes (colour scale parameters bounded by 0) whose lobe does not pay for its parameters: setting
+    the amplitude to 0 raises χ² (the cost over the noise variance, cost/dof or 1 for ``loss="sigma"``) by at most
+    twice the lobe's number of free scalars, AIC's price of those parameters (a useless lobe of k parameters
+    fits away about k of χ² of pure noise)."""
+    variance = 1.0 if problem.loss == "sigma" else cost / max(dof, 1)
+    specs = problem.specs
+    lobe_size = {}
+    for names in global_names(problem.lobes):
+        k = sum(int(np.size(params[n])) for n in names if n in problem.free)
+        lobe_size.update({n: k for n in names})
+    dead = []
+    for name in problem.free:
+        spec = specs[name]
+        if not (spec.colour and spec.scale and spec.lower == 0):
+            continue
+        trial = dict(params, **{name: jnp.zeros_like(jnp.asarray(params[name]))})
+        r = residual_fn(problem, trial, data)
+        if float(jnp.sum(r * r)) - cost <= 2.0 * lobe_size[name] * variance:
+            dead.append(name)
+    return dead
+
+
+def _refit_without(measurements, result: FitResult, problem: Problem, dead: list, fixed_values: dict,
+                   kwargs: dict) -> FitResult:
+    """Refit with the dead amplitudes held at 0 and the parameters that act only through them
+    (`Lobe.amplitude_partners`) held where they are.
+
+    A lobe that contributes nothing leaves its shape parameters undetermined; they drift and a step-size test
+    never passes. Holding them makes the rest converge, and the status then reports the amplitude at its bound.
+    """
+    hold = {k: np.asarray(v) for k, v in fixed_values.items()}
+    held_shapes = []
+    for lobe, names in zip(problem.lobes, global_names(problem.lobes)):
+        local_to_global = {spec.name: name for spec, name in zip(lobe.param_specs(), names)}
+        for spec in lobe.param_specs():
+            if local_to_global[spec.name] not in dead:
+                continue
+            hold[local_to_global[spec.name]] = 0.0
+            for partner in lobe.amplitude_partners(spec.name):
+                name = local_to_global[partner]
+                if name in problem.free and name not in dead and name not in held_shapes:
+                    hold[name] = np.asarray(result.params[name])
+                    held_shapes.append(name)
+    options = dict(kwargs, init=result.model, fixed=hold, multistart=0)
+    options.pop("strict", None)
+    again = fit(measurements, result.model, **options)
+    note = (f"{', '.join(dead)} went to 0 in every channel: the lobe contributes nothing and was pruned "
+            f"(amplitude held at 0{'; ' + ', '.join(held_shapes) + ' held where they were' if held_shapes else ''}); "
+            "a model without it suffices")
+    again.warnings.insert(0, note)
+    if again.converged:
+        again.status = "converged-at-bound"
+        again.bounds_hit = list(again.bounds_hit) + [f"{name}[{c}]" for name in dead
+                                                     for c in range(problem.channels)]
+    again.starts = result.starts + again.starts
+    return again
 
 
 def _fit_independent(measurements, model, **kwargs) -> FitResult:

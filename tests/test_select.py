@@ -97,3 +97,18 @@ def test_selection_errors_and_output():
     d = selection.to_dict()
     assert d["chosen"] == "lambert" and len(d["table"]) == 2
     assert "lambert" in selection.summary()
+
+
+def test_unneeded_lobe_goes_to_zero_and_the_status_says_so():
+    truth = models.get("lambert+lafortune", rho_d=[0.3, 0.3, 0.3], ks_1=[0.5, 0.4, 0.3], cxy_1=-1.0, n_1=30.0)
+    data = synth.generate(truth, pattern="half-diff", n=1500, noise="relative:0.01", seed=4)
+    one, two = fit_lobes(data, kmax=2, loss="sigma")
+    assert one.status == "converged"
+    # The spare lobe ends at ks = 0, is reported, and the real lobe is untouched.
+    assert two.status == "converged-at-bound", two.summary()
+    spare = [n for n in ("ks_1", "ks_2") if np.all(np.asarray(two.params[n]) == 0.0)]
+    assert len(spare) == 1
+    assert any(w.startswith(f"{spare[0]} went to 0") for w in two.warnings)
+    kept = "ks_2" if spare == ["ks_1"] else "ks_1"
+    np.testing.assert_allclose(two.params[kept], [0.5, 0.4, 0.3], rtol=0.01)
+    assert two.bic >= one.bic - 1e-6 * abs(one.bic)

@@ -91,6 +91,11 @@ class Lafortune(Lobe):
                 candidates.append(start)
         return candidates
 
+    def amplitude_partners(self, amplitude):
+        """The other parameters of the same sub-lobe (``ks_j`` -> ``cxy_j``, ``cz_j``, ``n_j``)."""
+        j = int(amplitude.rsplit("_", 1)[1])
+        return tuple(name for name in self._lobe_names(j) if name != amplitude)
+
     def canonical(self, params):
         """Lobes sorted by exponent, n_1 <= n_2 <= ... (the sum does not depend on their order)."""
         order = sorted(range(1, self.lobes + 1), key=lambda j: float(jnp.asarray(params[f"n_{j}"])))

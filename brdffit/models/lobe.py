@@ -48,6 +48,11 @@ class Lobe(abc.ABC):
         its grid. Lobes with several similar sub-lobes use this to start them apart. Default: none."""
         return []
 
+    def amplitude_partners(self, amplitude: str) -> tuple[str, ...]:
+        """Local names of the parameters that act only through the amplitude ``amplitude`` (its sub-lobe's shape):
+        when the amplitude is 0 they are undetermined. Default: every other parameter of the lobe."""
+        return tuple(spec.name for spec in self.param_specs() if spec.name != amplitude)
+
     def canonical(self, params: dict) -> dict:
         """The same lobe with its parameters in canonical order (e.g. sub-lobes sorted), so that equivalent
         solutions are reported one way. Default: unchanged."""
