@@ -91,7 +91,10 @@ NOTES = {
     "ashikhmin-shirley-aniso": "nu is the exponent along the tangent x, nv along the bitangent y; at h = n the "
                                "exponent is taken as (nu + nv)/2.",
     "lafortune": "cxy = −cz gives a specular lobe, cxy = cz a retro-reflective one, cxy = 0 an off-specular "
-                 "lobe towards the normal. Because of the normalisation only the direction of (cxy, cz) matters. "
+                 "lobe towards the normal. Because of the normalisation only the direction of (cxy, cz) matters, so cz_j "
+                 "is held at 1 unless freed (fits would otherwise have a free, meaningless scale) and cxy_j spans "
+                 "[−2, 2]. Fits start lobes apart, fit K lobes from K − 1 (brdffit.fit_lobes) and report them "
+                 "sorted by exponent. "
                  "With lobes=K the parameters are ks_j, cxy_j (or cx_j, cy_j), cz_j, n_j for j = 1..K.",
     "toon-diffuse": "Non-photorealistic two-tone shading. width is held fixed by fits unless it is freed. Not "
                     "reciprocal: it switches on ci alone.",

@@ -69,7 +69,7 @@ class Lafortune(Lobe):
                 specs.append(_coefficient(f"cy_{j}", -1.0, f"lobe {j}: weight of ωi.y ωo.y"))
             else:
                 specs.append(_coefficient(f"cxy_{j}", -1.0, f"lobe {j}: weight of ωi.x ωo.x + ωi.y ωo.y"))
-            specs.append(_cz(f"cz_{j}", f"lobe {j}: weight of ωi.z ωo.z (held at 1 unless freed)"))
+            specs.append(_cz(f"cz_{j}", f"lobe {j}: weight of ωi.z ωo.z"))
             specs.append(exponent(f"n_{j}", 10.0, doc=f"lobe {j}: exponent"))
         return tuple(specs)
 
