@@ -32,5 +32,6 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Model", "ParamSpec", "evaluate", "evaluate_dirs", "Measurements", "MeasurementError", "fit", "fit_many",
-    "FitResult", "FitError", "posterior", "Posterior", "select", "Selection", "fit_lobes", "Scene", "geometry", "io", "models", "params", "properties", "scene", "synth", "__version__",
+    "FitResult", "FitError", "posterior", "Posterior", "select", "Selection", "fit_lobes", "Scene",
+    "geometry", "io", "models", "params", "properties", "scene", "synth", "__version__",
 ]

@@ -253,19 +253,13 @@ def _use_coarse(coarse, measurements) -> bool:
     return bool(coarse) and measurements.n > COARSE_SAMPLES
 
 
-def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict, outcome: dict, *, starts: list,
-            times: dict, strategy: str = "full") -> FitResult:
-    """Build the `FitResult` of the kept solution ``y`` (one material, one start)."""
-    params = {k: np.asarray(v) for k, v in physical_params(problem, y, data.fixed).items()}
-    fitted = model.replace(**params)
-    n_valid = int(np.isfinite(measurements.values).sum())
-    labels = param_labels(params, problem.free)
-    status, hit = _status(problem, outcome, params)
+def _uncertainty(problem: Problem, y: dict, params: dict, data: FitData, outcome: dict, hit: list, n_valid: int):
+    """Laplace and sandwich standard errors, covariance, correlation, noise variance and undetermined flags."""
     if problem.free:
         if "normal_matrices" in outcome and not hit:
             matrices = _to_physical(problem, y, outcome["normal_matrices"])
         else:  # near a bound du/dp is ill-conditioned: linearise in the physical parameters directly
-            matrices = _physical_normal_matrices(problem, fitted.params, data)
+            matrices = _physical_normal_matrices(problem, params, data)
         cov, sandwich, variance, undetermined = _laplace(*matrices, float(outcome["cost"]), problem.loss, n_valid)
     else:
         cov, sandwich = np.zeros((0, 0)), np.zeros((0, 0))
@@ -274,8 +268,11 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
         std = np.sqrt(np.diag(cov))
         std_sandwich = np.sqrt(np.diag(sandwich))
         correlation = cov / np.outer(std, std)
-    stderr = _per_param(params, problem.free, std)
-    stderr_robust = _per_param(params, problem.free, std_sandwich)
+    return cov, correlation, std, std_sandwich, variance, undetermined
+
+
+def _fit_warnings(problem: Problem, labels: list, std, std_sandwich, correlation, undetermined, hit: list) -> list:
+    """The human-readable warnings of a fit: non-uniform noise, undetermined or correlated parameters, bounds."""
     warnings = []
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = std_sandwich / std
@@ -299,6 +296,20 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
                                                                     for c in range(problem.channels)):
             warnings.append(f"{name} went to 0 in every channel: its lobe contributes nothing, a model without "
                             "it suffices")
+    return warnings
+
+
+def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict, outcome: dict, *, starts: list,
+            times: dict, strategy: str = "full") -> FitResult:
+    """Build the `FitResult` of the kept solution ``y`` (one material, one start)."""
+    params = {k: np.asarray(v) for k, v in physical_params(problem, y, data.fixed).items()}
+    fitted = model.replace(**params)
+    n_valid = int(np.isfinite(measurements.values).sum())
+    labels = param_labels(params, problem.free)
+    status, hit = _status(problem, outcome, params)
+    cov, correlation, std, std_sandwich, variance, undetermined = _uncertainty(
+        problem, y, fitted.params, data, outcome, hit, n_valid)
+    warnings = _fit_warnings(problem, labels, std, std_sandwich, correlation, undetermined, hit)
     cost = float(outcome["cost"])
     k = len(labels)
     aic, bic = _information_criteria(problem.loss, cost, n_valid, k)
@@ -307,7 +318,8 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
     metrics = {"rmse_loss": np.sqrt(per_channel_cost / counts)}
     metrics.update(fit_metrics(fitted, measurements, pair=data.pair))
     return FitResult(
-        model=fitted, params=dict(fitted.params), stderr=stderr, stderr_robust=stderr_robust, covariance=cov, correlation=correlation,
+        model=fitted, params=dict(fitted.params), stderr=_per_param(params, problem.free, std),
+        stderr_robust=_per_param(params, problem.free, std_sandwich), covariance=cov, correlation=correlation,
         labels=labels, metrics=metrics, n_samples=n_valid, n_params=k, dof=n_valid - k, cost=cost, aic=aic,
         bic=bic, status=status, bounds_hit=hit, warnings=warnings, steps=int(outcome["steps"]),
         compile_time=times["compile"], run_time=times["run"], init_time=times["init"], loss=problem.loss,
