@@ -162,19 +162,96 @@ def _cmd_fit(args) -> int:
     (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "summary.txt").write_text(result.summary() + "\n")
     files = [str(h5), str(out / "result.json"), str(out / "summary.txt")]
+    posterior_summary = None
+    if args.posterior:
+        post = _run_posterior(result, measurements, h5, args)
+        posterior_summary = post.to_dict()
+        (out / "posterior.json").write_text(json.dumps(posterior_summary, indent=2) + "\n")
+        files.append(str(out / "posterior.json"))
     if selection is not None:
         (out / "selection.json").write_text(json.dumps(selection.to_dict(), indent=2) + "\n")
         files.append(str(out / "selection.json"))
     if args.json:
         print(json.dumps({"model": summary["model"], "params": summary["params"], "stderr": summary["stderr"],
-                          "posterior": None, "metrics": summary["metrics"], "status": summary["status"],
+                          "posterior": posterior_summary, "metrics": summary["metrics"], "status": summary["status"],
                           "files": files}))
     elif not args.quiet:
         if selection is not None:
             print(selection.summary())
         print(result.summary())
+        if posterior_summary is not None:
+            print(post.table())
         print(f"wrote {', '.join(files)}")
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+
+
+def _run_posterior(result, measurements, h5: Path, args):
+    """Sample the posterior of a fit into the results file (resumable) and save its summary there."""
+    from . import posterior
+
+    post = posterior(result, measurements, nwalkers=args.walkers, nsteps=args.steps, store=h5,
+                     max_samples=args.max_samples, progress=not (args.quiet or args.json), seed=args.seed)
+    post.save(h5)
+    return post
+
+
+def _cmd_posterior(args) -> int:
+    from . import FitResult, io
+
+    enable_compilation_cache()
+    h5 = Path(args.result)
+    measurements = io.load(h5)
+    result = FitResult.load(h5, args.name)
+    post = _run_posterior(result, measurements, h5, args)
+    if args.json:
+        print(json.dumps(post.to_dict()))
+    elif not args.quiet:
+        print(post.table())
+    return EXIT_OK
+
+
+def _cmd_synth(args) -> int:
+    from . import io, synth
+
+    values = _parse_fixed(args.param)
+    model = models.get(args.model, channels=args.channels, **values)
+    m = synth.generate(model, pattern=args.pattern, n=args.n, noise=args.noise, seed=args.seed)
+    io.save(m, args.out)
+    if not args.quiet:
+        print(f"wrote {args.out}: {m.n} samples of {model.spec} ({args.pattern}, noise {args.noise or 'none'})")
+    return EXIT_OK
+
+
+def _cmd_convert(args) -> int:
+    from . import FitResult, io
+
+    source, target = Path(args.input), Path(args.output)
+    if target.suffix.lower() in (".binary", ".merl"):
+        # A MERL table is a tabulation of a model: take the fit stored in a results file.
+        try:
+            result = FitResult.load(source, args.name)
+        except (OSError, io.FormatError) as exc:
+            raise UsageError(f"{source}: a MERL file is written by tabulating a model; give a results file with a "
+                             f"fit (from `brdffit fit`), not raw measurements ({exc})") from None
+        if result.model is None or result.model.channels != 3:
+            raise UsageError(f"{source}: MERL tables hold 3 channels; this fit has "
+                             f"{'independent channels' if result.model is None else result.model.channels}")
+        io.write_merl(result.model, target)
+        if not args.quiet:
+            print(f"wrote {target}: MERL tabulation of {result.spec}")
+        return EXIT_OK
+    m = io.load(source)
+    io.save(m, target)
+    if not args.quiet:
+        print(f"wrote {target}: {m.n} samples x {m.n_channels} channels")
+    return EXIT_OK
+
+
+def _add_posterior_options(p):
+    p.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
+    p.add_argument("--steps", type=int, default=5000, help="steps per walker in total (default 5000)")
+    p.add_argument("--max-samples", type=int, default=None, metavar="N",
+                   help="run the chain on a stratified subsample of N samples")
 
 
 def _cmd_select(args) -> int:
@@ -243,8 +320,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-lobes", type=int, default=3, metavar="K", help="largest K tried by --lobes auto")
     _add_fit_options(p)
     p.add_argument("--multistart", type=int, default=0, metavar="N", help="extra quasi-random starts")
+    p.add_argument("--posterior", action="store_true",
+                   help="also sample the parameter posterior with emcee (stored in result.h5, resumable)")
+    _add_posterior_options(p)
     p.add_argument("--out", help="output folder (default: next to the input, <name>.brdffit/)")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON summary to stdout")
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p = _add(sub, "posterior", "sample (or resume) the parameter posterior of a fit stored in a results file",
+             ["brdffit posterior data/synthetic/plastic.brdffit/result.h5",
+              "brdffit posterior out/result.h5 --steps 10000   # continues a stored chain"], _cmd_posterior)
+    p.add_argument("result", help="results file written by `brdffit fit` (result.h5)")
+    p.add_argument("--name", help="which fit in the file (default: the first)")
+    _add_posterior_options(p)
+    p.add_argument("--seed", type=int, default=0, help="seed of the walkers' start (default 0)")
+    p.add_argument("--json", action="store_true", help="print the posterior summary as JSON")
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p = _add(sub, "synth", "write synthetic measurements of a model",
+             ["brdffit synth lambert+ggx --param alpha=0.2 --pattern half-diff --n 2000 --noise relative:0.01 "
+              "--out ggx.h5"], _cmd_synth)
+    p.add_argument("model", help="model spec")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE", help="parameter value (repeatable)")
+    p.add_argument("--channels", type=int, default=3, help="number of channels (default 3)")
+    p.add_argument("--pattern", default="uniform", help="uniform, gonio-grid, in-plane, merl or half-diff")
+    p.add_argument("--n", type=int, default=None, help="number of samples")
+    p.add_argument("--noise", default=None, help="noise spec, e.g. relative:0.01 or gaussian:0.002")
+    p.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    p.add_argument("--out", required=True, help="output file (.h5 or .csv)")
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p = _add(sub, "convert", "convert measurements between CSV and HDF5, or tabulate a fit as a MERL file",
+             ["brdffit convert table.csv table.h5", "brdffit convert out/result.h5 fitted.binary"], _cmd_convert)
+    p.add_argument("input", help="input file")
+    p.add_argument("output", help="output file (.csv, .h5, or .binary for a MERL tabulation of a fit)")
+    p.add_argument("--name", help="which fit of a results file to tabulate (default: the first)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "select", "fit candidate models and choose the smallest that is good enough",
              ["brdffit select data/synthetic/plastic.h5",

@@ -248,8 +248,8 @@ class FitResult:
         with h5py.File(path, "r") as f:
             fits = f.get("fits")
             if fits is None or len(fits) == 0:
-                raise FormatError(f"{path}: no /fits group; write one with FitResult.save or `brdffit fit`")
+                raise FormatError(path, "no /fits group; write one with FitResult.save or `brdffit fit`")
             key = name if name is not None else sorted(fits)[0]
             if key not in fits:
-                raise FormatError(f"{path}: no fit named {key!r}; fits in the file: {', '.join(sorted(fits))}")
+                raise FormatError(path, f"no fit named {key!r}; fits in the file: {', '.join(sorted(fits))}")
             return cls.from_dict(json.loads(fits[key].attrs["result"]))

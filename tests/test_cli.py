@@ -122,3 +122,30 @@ def test_select_command_and_lobes_errors(tmp_path, capsys):
     assert main(["fit", str(clay), "--model", "lafortune", "--lobes", "two", "--out", str(tmp_path / "o")]) == \
         EXIT_BAD_INPUT
     assert "number of lobes" in capsys.readouterr().err
+
+
+def test_synth_convert_and_posterior_commands(tmp_path, capsys):
+    data = tmp_path / "ward.h5"
+    assert main(["synth", "lambert+ward", "--param", "alpha=0.2", "--param", "ks=0.5,0.4,0.3", "--pattern",
+                 "half-diff", "--n", "600", "--noise", "relative:0.01", "--seed", "3", "--out", str(data),
+                 "--quiet"]) == EXIT_OK
+    m = io.load(data)
+    assert m.n == 600 and synth.truth_model(m).params["alpha"] == pytest.approx(0.2)
+    # CSV round trip through convert keeps the numbers.
+    assert main(["convert", str(data), str(tmp_path / "ward.csv"), "--quiet"]) == EXIT_OK
+    np.testing.assert_allclose(io.load(tmp_path / "ward.csv").values, m.values, rtol=1e-12)
+    # Fit with a posterior stored in result.h5, then continue the chain with the posterior command.
+    out = tmp_path / "fit"
+    code = main(["fit", str(data), "--model", "lambert+ward", "--loss", "sigma", "--posterior", "--walkers", "24",
+                 "--steps", "150", "--out", str(out), "--json"])
+    printed = json.loads(capsys.readouterr().out)
+    assert code == EXIT_OK and printed["posterior"]["diagnostics"]["steps"] == 150
+    assert printed["posterior"]["params"]["alpha"]["median"] == pytest.approx(0.2, rel=0.02)
+    assert main(["posterior", str(out / "result.h5"), "--walkers", "24", "--steps", "200", "--json"]) == EXIT_OK
+    resumed = json.loads(capsys.readouterr().out)
+    assert resumed["diagnostics"]["steps"] == 200
+    # A MERL tabulation needs a fit, not raw measurements.
+    assert main(["convert", str(out / "result.h5"), str(tmp_path / "fit.binary"), "--quiet"]) == EXIT_OK
+    assert io.read_merl(tmp_path / "fit.binary").data.shape == (3, 90, 90, 180)
+    assert main(["convert", str(data), str(tmp_path / "raw.binary")]) == EXIT_BAD_INPUT
+    assert "tabulating a model" in capsys.readouterr().err

@@ -6,7 +6,7 @@ import numpy as np
 import optimistix as optx
 import pytest
 
-from brdffit import FitError, FitResult, Measurements, fit, fit_many, models, synth
+from brdffit import FitError, FitResult, Measurements, fit, fit_many, io, models, synth
 from brdffit.losses import residuals, robust_residuals
 
 PLASTIC = dict(rho_d=[0.5, 0.35, 0.2], ks=[0.9, 0.8, 0.7], m=0.15, f0=0.04)
@@ -260,3 +260,16 @@ def test_coarse_to_fine_gives_the_full_data_answer():
         np.testing.assert_allclose(staged.params[name], full.params[name], rtol=1e-6)
         np.testing.assert_allclose(staged.stderr[name], full.stderr[name], rtol=1e-3)
         np.testing.assert_allclose(staged.stderr_robust[name], full.stderr_robust[name], rtol=1e-3)
+
+
+def test_loading_a_missing_fit_names_the_file(tmp_path):
+    from brdffit.io import FormatError
+
+    data = synth.generate("lambert", n=50, seed=0)
+    path = tmp_path / "only-data.h5"
+    io.save(data, path)
+    with pytest.raises(FormatError, match="only-data.h5.*no /fits group"):
+        FitResult.load(path)
+    fit(data, "lambert").save(path)
+    with pytest.raises(FormatError, match="no fit named 'ggx'"):
+        FitResult.load(path, "ggx")
