@@ -141,7 +141,12 @@ def _cmd_fit(args) -> int:
     path = Path(args.file)
     measurements = _load(path)
     selection = None
-    if args.lobes is None:
+    if args.model == "auto":
+        from .select import DEFAULT_CANDIDATES
+
+        selection = select(measurements, DEFAULT_CANDIDATES, criterion="bic", **_fit_options(args))
+        result = selection.result
+    elif args.lobes is None:
         result = fit(measurements, args.model, multistart=args.multistart, **_fit_options(args))
     elif args.lobes == "auto":
         candidates = [_with_lobes(args.model, k) for k in range(1, args.max_lobes + 1)]
@@ -313,7 +318,8 @@ def build_parser() -> argparse.ArgumentParser:
               "brdffit fit data/synthetic/clay.h5 --model oren-nayar --json"], _cmd_fit)
     p.add_argument("file", help="measurement file (.h5, .csv/.tsv, MERL .binary)")
     p.add_argument("--model", default=DEFAULT_MODEL,
-                   help=f"model spec, lobes joined with '+' (default {DEFAULT_MODEL}; see `brdffit models`)")
+                   help=f"model spec, lobes joined with '+' (default {DEFAULT_MODEL}; see `brdffit models`), or "
+                        "'auto' to choose among the standard candidates by BIC (`brdffit select`)")
     p.add_argument("--lobes", metavar="K|auto",
                    help="number of Lafortune lobes in the model's Lafortune term, or 'auto' to choose 1.."
                         "--max-lobes by BIC")

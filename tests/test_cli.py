@@ -1,6 +1,7 @@
 """The command line: the Quick start job end to end, info, models, and exit codes on bad input."""
 
 import json
+import sys
 from pathlib import Path
 
 import h5py
@@ -149,3 +150,13 @@ def test_synth_convert_and_posterior_commands(tmp_path, capsys):
     assert io.read_merl(tmp_path / "fit.binary").data.shape == (3, 90, 90, 180)
     assert main(["convert", str(data), str(tmp_path / "raw.binary")]) == EXIT_BAD_INPUT
     assert "tabulating a model" in capsys.readouterr().err
+
+
+def test_fit_model_auto_selects_among_the_standard_candidates(tmp_path, capsys, monkeypatch):
+    # Three candidates keep the test short; the command passes brdffit.select.DEFAULT_CANDIDATES through.
+    # (brdffit.select is the function; the module is reached through sys.modules.)
+    monkeypatch.setattr(sys.modules["brdffit.select"], "DEFAULT_CANDIDATES", ("lambert", "oren-nayar", "lambert+ward"))
+    clay = ROOT / "data" / "synthetic" / "clay.h5"  # Oren-Nayar truth
+    assert main(["fit", str(clay), "--model", "auto", "--out", str(tmp_path / "o"), "--json"]) == EXIT_OK
+    assert json.loads(capsys.readouterr().out)["model"] == "oren-nayar"
+    assert json.loads((tmp_path / "o" / "selection.json").read_text())["chosen"] == "oren-nayar"
