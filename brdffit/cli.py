@@ -252,6 +252,23 @@ def _cmd_convert(args) -> int:
     return EXIT_OK
 
 
+def _cmd_export(args) -> int:
+    from . import FitResult
+    from .export import export
+
+    text = export(FitResult.load(args.result, args.name), to=args.to, name=args.material)
+    if args.out:
+        from .io._common import atomic_path
+
+        with atomic_path(args.out) as tmp:
+            Path(tmp).write_text(text if text.endswith("\n") else text + "\n")
+        if not args.quiet:
+            print(f"wrote {args.out}")
+    else:
+        print(text)
+    return EXIT_OK
+
+
 def _add_posterior_options(p):
     p.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
     p.add_argument("--steps", type=int, default=5000, help="steps per walker in total (default 5000)")
@@ -358,6 +375,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("input", help="input file")
     p.add_argument("output", help="output file (.csv, .h5, or .binary for a MERL tabulation of a fit)")
     p.add_argument("--name", help="which fit of a results file to tabulate (default: the first)")
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p = _add(sub, "export", "write a fitted material in the form a renderer takes (json, Mitsuba 3 XML, pbrt-v4)",
+             ["brdffit export data/synthetic/plastic.brdffit/result.h5 --to mitsuba",
+              "brdffit export out/result.h5 --to pbrt --out material.pbrt"], _cmd_export)
+    p.add_argument("result", help="results file written by `brdffit fit` (result.h5)")
+    p.add_argument("--to", required=True, choices=["json", "mitsuba", "pbrt"], help="target format")
+    p.add_argument("--name", help="which fit in the file (default: the first)")
+    p.add_argument("--material", default="material", help="material name in the output (default 'material')")
+    p.add_argument("--out", help="output file (default: print to stdout)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "select", "fit candidate models and choose the smallest that is good enough",
              ["brdffit select data/synthetic/plastic.h5",

@@ -160,3 +160,23 @@ def test_fit_model_auto_selects_among_the_standard_candidates(tmp_path, capsys, 
     assert main(["fit", str(clay), "--model", "auto", "--out", str(tmp_path / "o"), "--json"]) == EXIT_OK
     assert json.loads(capsys.readouterr().out)["model"] == "oren-nayar"
     assert json.loads((tmp_path / "o" / "selection.json").read_text())["chosen"] == "oren-nayar"
+
+
+def test_export_command_writes_renderer_materials(tmp_path, capsys):
+    out = tmp_path / "fit"
+    assert main(["fit", str(PLASTIC), "--model", "lambert+ggx", "--out", str(out), "--quiet"]) == EXIT_OK
+    xml_path = tmp_path / "plastic.xml"
+    assert main(["export", str(out / "result.h5"), "--to", "mitsuba", "--out", str(xml_path), "--quiet"]) == EXIT_OK
+    import xml.etree.ElementTree as ET
+
+    bsdf = ET.fromstring(xml_path.read_text().split("-->")[-1].strip())
+    assert bsdf.get("type") == "roughplastic"
+    alpha = next(e for e in bsdf.iter() if e.get("name") == "alpha")
+    fitted = FitResult.load(out / "result.h5")
+    assert float(alpha.get("value")) == pytest.approx(float(fitted.params["alpha"]), rel=1e-6)
+    assert main(["export", str(out / "result.h5"), "--to", "pbrt"]) == EXIT_OK
+    assert "coateddiffuse" in capsys.readouterr().out
+    ward = tmp_path / "ward"
+    assert main(["fit", str(PLASTIC), "--model", "lambert+ward", "--out", str(ward), "--quiet"]) == EXIT_OK
+    assert main(["export", str(ward / "result.h5"), "--to", "mitsuba"]) == EXIT_BAD_INPUT
+    assert "ward" in capsys.readouterr().err
