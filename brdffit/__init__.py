@@ -10,14 +10,15 @@ Public API:
 - fitting: `fit`, `fit_many`, `FitResult`, `FitError`;
 - uncertainty: `posterior`, `Posterior`;
 - model selection: `select`, `Selection`, `fit_lobes`, `Scene` (and `scene.interpolate`, `scene.scene_error`);
-- physical checks: `properties`.
+- physical checks: `properties`;
+- previews and renderer export: `render`, `export`.
 """
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from . import geometry, io, models, params, properties, scene, synth  # noqa: E402
+from . import geometry, io, models, params, properties, render, scene, synth  # noqa: E402
 from .fit import FitError, fit, fit_many  # noqa: E402
 from .fit_result import FitResult  # noqa: E402
 from .measurements import MeasurementError, Measurements  # noqa: E402
@@ -33,5 +34,5 @@ __version__ = "0.1.0"
 __all__ = [
     "Model", "ParamSpec", "evaluate", "evaluate_dirs", "Measurements", "MeasurementError", "fit", "fit_many",
     "FitResult", "FitError", "posterior", "Posterior", "select", "Selection", "fit_lobes", "Scene",
-    "geometry", "io", "models", "params", "properties", "scene", "synth", "__version__",
+    "geometry", "io", "models", "params", "properties", "render", "scene", "synth", "__version__",
 ]

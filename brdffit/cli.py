@@ -269,6 +269,49 @@ def _cmd_export(args) -> int:
     return EXIT_OK
 
 
+def _render_source(path: Path, use_data: bool, name):
+    """What `brdffit render` shades: a MERL table, the fit stored in a results file, or the measurements."""
+    import h5py
+
+    from . import FitResult, io
+
+    if io.detect_format(path) == "merl":
+        return io.read_merl(path), "MERL table"
+    if not use_data and io.detect_format(path) == "hdf5":
+        with h5py.File(path, "r") as f:
+            has_fit = "fits" in f and len(f["fits"]) > 0
+        if has_fit:
+            result = FitResult.load(path, name)
+            if result.model is None:
+                raise UsageError(f"{path}: the fit has independent channels; render one channel's model instead")
+            return result.model, f"fit {result.spec}"
+    return io.load(path), "measurements (interpolated)"
+
+
+def _cmd_render(args) -> int:
+    from . import render
+
+    path = Path(args.file)
+    source, what = _render_source(path, args.data, args.name)
+    lights = list(render.DEFAULT_LIGHTS)
+    if args.area_light:
+        key_theta, key_phi, key_intensity = lights[0]
+        lights = render.area_light(key_theta, key_phi, key_intensity, args.area_light, samples=16) + lights[1:]
+    if args.plane:
+        hdr = render.render_plane(source, lights, resolution=args.resolution, isotropic=not args.anisotropic)
+    else:
+        hdr = render.render_sphere(source, lights, resolution=args.resolution, isotropic=not args.anisotropic)
+    out = Path(args.out) if args.out else path.with_suffix(".png")
+    render.save_png(out, render.tonemap(hdr, args.tonemap, args.exposure))
+    written = [str(out)]
+    if args.npy:
+        render.save_npy(out.with_suffix(".npy"), hdr)
+        written.append(str(out.with_suffix(".npy")))
+    if not args.quiet:
+        print(f"rendered {what} from {path}: wrote {', '.join(written)}")
+    return EXIT_OK
+
+
 def _add_posterior_options(p):
     p.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
     p.add_argument("--steps", type=int, default=5000, help="steps per walker in total (default 5000)")
@@ -384,6 +427,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", help="which fit in the file (default: the first)")
     p.add_argument("--material", default="material", help="material name in the output (default 'material')")
     p.add_argument("--out", help="output file (default: print to stdout)")
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p = _add(sub, "render", "render a sphere (or plane) preview of a fit, a MERL table or measured data",
+             ["brdffit render data/synthetic/plastic.brdffit/result.h5 --out plastic.png",
+              "brdffit render data/synthetic/plastic.h5 --tonemap filmic --npy   # the measured data, interpolated",
+              "brdffit render material.binary --plane"], _cmd_render)
+    p.add_argument("file", help="a results file (renders its fit), measurements (.h5/.csv) or a MERL .binary")
+    p.add_argument("--data", action="store_true", help="render the measurements even if the file holds a fit")
+    p.add_argument("--name", help="which fit of a results file (default: the first)")
+    p.add_argument("--plane", action="store_true", help="a flat swatch instead of a sphere")
+    p.add_argument("--resolution", type=int, default=256, help="image size in pixels (default 256)")
+    p.add_argument("--tonemap", default="reinhard", choices=["reinhard", "filmic", "clamp"],
+                   help="tone curve before sRGB encoding (default reinhard)")
+    p.add_argument("--exposure", type=float, default=1.0, help="exposure multiplier (default 1)")
+    p.add_argument("--area-light", type=float, default=0.0, metavar="RADIUS",
+                   help="make the key light an area light of this angular radius (radians), 16 samples")
+    p.add_argument("--anisotropic", action="store_true", help="interpolate measured data as anisotropic")
+    p.add_argument("--npy", action="store_true", help="also write the HDR image as float32 .npy")
+    p.add_argument("--out", help="PNG path (default: the input with .png)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "select", "fit candidate models and choose the smallest that is good enough",
              ["brdffit select data/synthetic/plastic.h5",

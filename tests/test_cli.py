@@ -180,3 +180,24 @@ def test_export_command_writes_renderer_materials(tmp_path, capsys):
     assert main(["fit", str(PLASTIC), "--model", "lambert+ward", "--out", str(ward), "--quiet"]) == EXIT_OK
     assert main(["export", str(ward / "result.h5"), "--to", "mitsuba"]) == EXIT_BAD_INPUT
     assert "ward" in capsys.readouterr().err
+
+
+def test_render_command_previews_fit_and_data(tmp_path, capsys):
+    import matplotlib.image as mpimg
+
+    from brdffit import render
+
+    out = tmp_path / "fit"
+    assert main(["fit", str(PLASTIC), "--out", str(out), "--quiet"]) == EXIT_OK
+    fit_png, data_png = tmp_path / "fit.png", tmp_path / "data.png"
+    assert main(["render", str(out / "result.h5"), "--resolution", "48", "--out", str(fit_png), "--npy",
+                 "--quiet"]) == EXIT_OK
+    assert main(["render", str(PLASTIC), "--resolution", "48", "--out", str(data_png), "--quiet"]) == EXIT_OK
+    fitted = FitResult.load(out / "result.h5")
+    hdr = np.load(tmp_path / "fit.npy")
+    np.testing.assert_allclose(hdr, render.render_sphere(fitted.model, resolution=48), rtol=1e-5, atol=1e-7)
+    a, b = mpimg.imread(fit_png)[..., :3], mpimg.imread(data_png)[..., :3]
+    assert a.shape == (48, 48, 3)
+    # The fitted model and the interpolated measurement look alike (mean absolute 8-bit difference < 3 levels).
+    assert np.mean(np.abs(a - b)) < 3 / 255
+    assert main(["render", str(tmp_path / "missing.h5")]) == EXIT_BAD_INPUT
