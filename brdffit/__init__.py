@@ -1,7 +1,7 @@
 """brdffit: fit analytic BRDF models to measured reflectance.
 
 Importing brdffit enables JAX's 64-bit mode (``jax_enable_x64``): fitted parameters, covariances and the
-quadratures of `brdffit.properties` need double precision. Arrays passed in as float32 stay float32.
+quadratures of `brdffit.properties` need double precision; fits run in float64.
 
 Public API:
 

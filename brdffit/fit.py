@@ -90,9 +90,9 @@ def _subsample(measurements, limit: int, seed: int):
     return measurements.subsample(limit, seed=seed)
 
 
-def _unconstrained(problem: Problem, starts: list[dict], dtype) -> dict:
+def _unconstrained(problem: Problem, starts: list[dict]) -> dict:
     specs = problem.specs
-    return {name: jnp.stack([jnp.asarray(specs[name].to_unconstrained(s[name]), dtype=dtype) for s in starts])
+    return {name: jnp.stack([jnp.asarray(specs[name].to_unconstrained(s[name]), dtype=float) for s in starts])
             for name in problem.free}
 
 
@@ -328,7 +328,7 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
     )
 
 
-def _prepare(measurements, model, *, loss, solver, fixed, free, robust, max_steps, rtol, atol, dtype):
+def _prepare(measurements, model, *, loss, solver, fixed, free, robust, max_steps, rtol, atol):
     """Validate the arguments and build the `Problem`, the base model and the fixed values."""
     if loss not in LOSSES:
         raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
@@ -342,15 +342,14 @@ def _prepare(measurements, model, *, loss, solver, fixed, free, robust, max_step
         free=tuple(s.name for s in model.param_specs if s.name not in fixed_values),
         loss=loss, robust=robust_kind, solver=make_solver(solver, rtol, atol), max_steps=int(max_steps),
     )
-    dtype = jnp.dtype(dtype)
-    return problem, model, fixed_values, robust_scale, dtype
+    return problem, model, fixed_values, robust_scale
 
 
 def _starting_points(problem: Problem, model: Model, measurements, fixed_values: dict, init, multistart: int,
-                     seed: int, robust_scale, dtype):
+                     seed: int, robust_scale):
     """The starts (physical dicts) and the robust scale, from a subsample of the data."""
     eps = relative_epsilon(measurements.values)
-    sub = make_fit_data(_subsample(measurements, MAX_INIT_SAMPLES, seed), fixed_values, eps, 1.0, dtype)
+    sub = make_fit_data(_subsample(measurements, MAX_INIT_SAMPLES, seed), fixed_values, eps, 1.0)
     base = dict(model.params, **fixed_values)
     plain = Problem(problem.lobes, problem.channels, problem.free, problem.loss, None, problem.solver,
                     problem.max_steps)
@@ -376,7 +375,7 @@ def _starting_points(problem: Problem, model: Model, measurements, fixed_values:
 
 def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", fixed=None, free=None,
         multistart: int = 0, channel_mode: str = "shared-shape", robust=None, max_steps: int = 256,
-        rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0, dtype="float64", coarse="auto",
+        rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0, coarse="auto",
         strict: bool = False) -> FitResult:
     """Fit a model to measurements by nonlinear least squares.
 
@@ -400,7 +399,6 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
         max_steps: the solver's step limit.
         rtol, atol: the solver's convergence tolerances (optimistix's Cauchy termination).
         seed: seed of the subsample and of the quasi-random starts.
-        dtype: ``"float64"`` (default) or ``"float32"`` for the data and the solve.
         coarse: ``"auto"`` solves data with more than `COARSE_RESIDUALS` values on a seeded subsample of
             `COARSE_SAMPLES` samples first and then refines on all of it (`brdffit.refine`); True forces and
             False disables this. The answer is the full-data optimum either way; only the time differs.
@@ -412,26 +410,26 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
     if channel_mode not in CHANNEL_MODES:
         raise ValueError(f"channel_mode must be one of {', '.join(CHANNEL_MODES)}, got {channel_mode!r}")
     kwargs = dict(loss=loss, solver=solver, init=init, fixed=fixed, free=free, multistart=multistart,
-                  robust=robust, max_steps=max_steps, rtol=rtol, atol=atol, seed=seed, dtype=dtype, coarse=coarse,
+                  robust=robust, max_steps=max_steps, rtol=rtol, atol=atol, seed=seed, coarse=coarse,
                   strict=strict)
     if channel_mode == "independent":
         return _fit_independent(measurements, model, **kwargs)
-    problem, model, fixed_values, robust_scale, dt = _prepare(
+    problem, model, fixed_values, robust_scale = _prepare(
         measurements, model, loss=loss, solver=solver, fixed=fixed, free=free, robust=robust,
-        max_steps=max_steps, rtol=rtol, atol=atol, dtype=dtype)
+        max_steps=max_steps, rtol=rtol, atol=atol)
     t0 = time.perf_counter()
     starts, eps, robust_scale = _starting_points(problem, model, measurements, fixed_values, init, multistart,
-                                                 seed, robust_scale, dt)
+                                                 seed, robust_scale)
     init_time = time.perf_counter() - t0
-    data = make_fit_data(measurements, fixed_values, eps, robust_scale, dt)
-    y0 = _unconstrained(problem, starts, dt)
+    data = make_fit_data(measurements, fixed_values, eps, robust_scale)
+    y0 = _unconstrained(problem, starts)
     two_stage = bool(problem.free) and _use_coarse(coarse, measurements)
     strategy = f"coarse ({COARSE_SAMPLES} samples) + refine" if two_stage else "full"
     if problem.free:
         solve_data, solve_problem = data, problem
         if two_stage:
             solve_data = make_fit_data(measurements.subsample(COARSE_SAMPLES, seed=seed), fixed_values, eps,
-                                       robust_scale, dt)
+                                       robust_scale)
             solve_problem = _coarse_problem(problem, solver)
         executable, compile_time = compiled_solve(solve_problem, y0, solve_data, data_batched=False)
         t0 = time.perf_counter()
@@ -578,7 +576,7 @@ def _fit_independent(measurements, model, **kwargs) -> FitResult:
 
 def fit_many(measurements_list, model, *, loss: str = "cosine", solver="lm", init="auto", fixed=None,
              free=None, robust=None, max_steps: int = 256, rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0,
-             dtype="float64") -> list[FitResult]:
+             ) -> list[FitResult]:
     """Fit one model to many equally shaped data sets in one vmapped, jitted solve.
 
     This is the path for databases and spatially varying materials: every data set must have the same number of
@@ -586,7 +584,7 @@ def fit_many(measurements_list, model, *, loss: str = "cosine", solver="lm", ini
 
     Arguments:
         measurements_list: a sequence of `brdffit.Measurements` of equal shape.
-        model, loss, solver, init, fixed, free, robust, max_steps, rtol, atol, seed, dtype: as for `fit`.
+        model, loss, solver, init, fixed, free, robust, max_steps, rtol, atol, seed: as for `fit`.
 
     Returns:
         One `FitResult` per data set, in order; each has the same answer as `fit` on that data set alone.
@@ -600,17 +598,16 @@ def fit_many(measurements_list, model, *, loss: str = "cosine", solver="lm", ini
             raise ValueError(f"fit_many needs equally shaped data sets: item 0 has values of shape {shape}, "
                              f"item {i} has {np.shape(m.values)}; fit them separately with fit()")
     prepared = [_prepare(m, model, loss=loss, solver=solver, fixed=fixed, free=free, robust=robust,
-                         max_steps=max_steps, rtol=rtol, atol=atol, dtype=dtype) for m in items]
+                         max_steps=max_steps, rtol=rtol, atol=atol) for m in items]
     problem = prepared[0][0]
     t0 = time.perf_counter()
     datas, firsts = [], []
-    for m, (_, base_model, fixed_values, robust_scale, dt) in zip(items, prepared):
-        starts, eps, scale = _starting_points(problem, base_model, m, fixed_values, init, 0, seed, robust_scale, dt)
-        datas.append(make_fit_data(m, fixed_values, eps, scale, dt))
+    for m, (_, base_model, fixed_values, robust_scale) in zip(items, prepared):
+        starts, eps, scale = _starting_points(problem, base_model, m, fixed_values, init, 0, seed, robust_scale)
+        datas.append(make_fit_data(m, fixed_values, eps, scale))
         firsts.append(starts[0])
     init_time = (time.perf_counter() - t0) / len(items)
-    dt = prepared[0][4]
-    y0 = _unconstrained(problem, firsts, dt)
+    y0 = _unconstrained(problem, firsts)
     data = stack_data(datas)
     executable, compile_time = compiled_solve(problem, y0, data, data_batched=True)
     t0 = time.perf_counter()

@@ -105,7 +105,7 @@ class FitData(NamedTuple):
     fixed: dict
 
 
-def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, dtype=jnp.float64) -> FitData:
+def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0) -> FitData:
     """Build `FitData` from `brdffit.Measurements`.
 
     Arguments:
@@ -113,7 +113,6 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, dty
         fixed: name -> value of the parameters held fixed.
         eps: ``(C,)`` the relative loss's ε.
         robust_scale: scale of the robust loss.
-        dtype: floating dtype of the arrays (float64 by default; float32 for speed studies).
 
     Returns:
         The `FitData`.
@@ -125,9 +124,8 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, dty
     weights = measurements.weights
     weights = np.ones(len(values)) if weights is None else np.asarray(weights, dtype=float)
     wi = np.asarray(measurements.wi(), dtype=float)
-    as_array = lambda a: jnp.asarray(a, dtype=dtype)  # noqa: E731
-    pair = jax.tree_util.tree_map(lambda a: a.astype(dtype) if a.dtype != bool else a,
-                                  _local_pair(jnp.asarray(wi), jnp.asarray(measurements.wo(), dtype=float)))
+    as_array = lambda a: jnp.asarray(a, dtype=float)  # noqa: E731
+    pair = _local_pair(jnp.asarray(wi), jnp.asarray(measurements.wo(), dtype=float))
     return FitData(
         pair=pair,
         values=as_array(np.where(mask, values, 0.0)),
