@@ -1,0 +1,298 @@
+"""Assemble a fit report: the figures, ``report.md`` and a self-contained ``report.html``.
+
+The report's content is built once as a list of blocks (headings, paragraphs, tables, figures, lists) and then
+written twice: as Markdown (figures as relative links to the PNGs) and as one HTML file with inline CSS and the
+PNGs embedded as base64 ``data:`` URIs, so that it can be mailed or archived alone. docs/report.md describes it.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime
+import html
+import math
+import os
+import platform
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..io._common import atomic_path
+from . import figures as F
+
+__all__ = ["write_report", "format_value"]
+
+
+def format_value(x, digits: int = 6) -> str:
+    """How the report writes a number: ``digits`` significant digits (``%g``), "–" for None/NaN."""
+    if x is None:
+        return "–"
+    x = float(x)
+    return "–" if not math.isfinite(x) and not math.isinf(x) else f"{x:.{digits}g}"
+
+
+def _flat(params: dict) -> list[tuple[str, str, float]]:
+    rows = []
+    for name, value in params.items():
+        value = np.asarray(value, dtype=float)
+        if value.ndim == 0:
+            rows.append((name, name, float(value)))
+        else:
+            rows.extend((f"{name}[{i}]", name, float(v)) for i, v in enumerate(value.ravel()))
+    return rows
+
+
+def _flat_stderr(fit_result) -> dict:
+    return {label: v for label, _, v in _flat(fit_result.stderr)}
+
+
+# --------------------------------------------------------------------------------------------- content
+def _parameter_table(fit_result, posterior):
+    specs = fit_result.models[0].param_specs
+    errors = _flat_stderr(fit_result)
+    headers = ["parameter", "least squares", "Laplace ±"]
+    if posterior is not None:
+        headers += ["posterior median", "68 % interval", "95 % interval"]
+    headers += ["unit", "bounds", "note"]
+    rows = []
+    for label, name, value in _flat(fit_result.params):
+        spec = specs[name]
+        row = [label, format_value(value), format_value(errors.get(label), 3)]
+        if posterior is not None:
+            s = posterior.summary.get(label)
+            if s is None:
+                row += ["–", "–", "–"]
+            else:
+                row += [format_value(s["median"]), f"[{format_value(s['q16'])}, {format_value(s['q84'])}]",
+                        f"[{format_value(s['q2.5'])}, {format_value(s['q97.5'])}]"]
+        note = "fixed" if name in fit_result.fixed else ("AT BOUND" if label in fit_result.bounds_hit else "")
+        row += [spec.unit, f"[{spec.lower:g}, {spec.upper:g}]", note]
+        rows.append(row)
+    if posterior is not None:  # the sampled noise scales have no least-squares value
+        for label in posterior.names:
+            if label.startswith("noise_sigma"):
+                s = posterior.summary[label]
+                rows.append([label, "–", "–", format_value(s["median"]),
+                             f"[{format_value(s['q16'])}, {format_value(s['q84'])}]",
+                             f"[{format_value(s['q2.5'])}, {format_value(s['q97.5'])}]",
+                             f"{fit_result.loss}-loss residual units", "(0, inf)", "noise scale"])
+    return headers, rows
+
+
+def _metrics_table(fit_result, channels):
+    headers = ["metric"] + [f"channel {c}" for c in channels]
+    rows = []
+    for name, values in fit_result.metrics.items():
+        values = np.atleast_1d(np.asarray(values, dtype=float))
+        rows.append([name] + [format_value(v, 4) for v in values] + ["–"] * (len(channels) - len(values)))
+    return headers, rows
+
+
+def _selection_table(selection):
+    keys = ["spec", "n_params", "train_error", "heldout_error", "heldout_se", "aic", "bic", "cost_ns", "status"]
+    if any("scene_error" in row for row in selection.table):
+        keys.insert(-1, "scene_error")
+    rows = []
+    for row in selection.table:
+        cells = []
+        for k in keys:
+            v = row.get(k)
+            cells.append(format_value(v, 5) if isinstance(v, (float, np.floating)) else str(v))
+        cells[0] = ("**" if row["spec"] == selection.chosen else "") + cells[0] + \
+            (" (chosen)" if row["spec"] == selection.chosen else "")
+        rows.append(cells)
+    return ["candidate"] + keys[1:], rows
+
+
+def _run_info(run_info) -> list[str]:
+    import jax
+
+    from .. import __version__
+
+    info = {"brdffit": __version__, "jax": jax.__version__, "numpy": np.__version__,
+            "python": platform.python_version(), "platform": platform.platform(),
+            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            "command": " ".join(sys.argv) if sys.argv and sys.argv[0] else "–", "seed": "–"}
+    info.update({k: v for k, v in (run_info or {}).items() if v is not None})
+    return [f"{k}: {v}" for k, v in info.items()]
+
+
+def _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths):
+    b = [("h1", f"BRDF fit report: {fit_result.spec}")]
+    b.append(("p", f"{measurements.n} samples × {measurements.n_channels} channels "
+                   f"({', '.join(map(str, measurements.channels))}); loss {fit_result.loss}, solver "
+                   f"{fit_result.solver}, channel mode {fit_result.channel_mode}; status **{fit_result.status}** "
+                   f"after {fit_result.steps} steps."))
+    b.append(("h2", "Parameters"))
+    b.append(("p", "Least-squares values with their Laplace (Gauss-Newton) standard errors"
+                   + ("; posterior medians and central 68 % / 95 % credible intervals from the MCMC samples"
+                      if posterior is not None else "") + ". f_r is in 1/sr; unit 1 means dimensionless."))
+    b.append(("table",) + _parameter_table(fit_result, posterior))
+    if fit_result.bounds_hit:
+        b.append(("p", "Parameters on a bound: " + ", ".join(fit_result.bounds_hit) + "."))
+    b.append(("h2", "Fit metrics"))
+    b.append(("table",) + _metrics_table(fit_result, measurements.channels))
+    b.append(("p", f"samples {fit_result.n_samples}, free parameters {fit_result.n_params}, dof {fit_result.dof}, "
+                   f"cost {format_value(fit_result.cost)}, AIC {format_value(fit_result.aic)}, "
+                   f"BIC {format_value(fit_result.bic)}; compile {fit_result.compile_time:.2f} s, run "
+                   f"{fit_result.run_time:.2f} s."))
+    if posterior is not None:
+        d = posterior.diagnostics
+        b.append(("h2", "Posterior sampling"))
+        b.append(("p", f"{d.get('walkers')} walkers × {d.get('steps')} steps, burn-in {posterior.burn}, thin "
+                       f"{posterior.thin}, {len(posterior.samples)} samples kept; likelihood {posterior.likelihood}, "
+                       f"noise {posterior.noise}; acceptance fraction {format_value(d.get('acceptance_fraction'), 3)}, "
+                       f"max autocorrelation time {format_value(d.get('tau_max'), 3)} steps, min effective sample "
+                       f"size {format_value(d.get('ess_min'), 3)}, max split R-hat "
+                       f"{format_value(d.get('r_hat_max'), 4)}."))
+    if selection is not None:
+        b.append(("h2", "Model selection"))
+        b.append(("p", f"criterion {selection.criterion}; best {selection.best}; chosen **{selection.chosen}**."))
+        b.append(("table",) + _selection_table(selection))
+    warnings = list(fit_result.warnings) + [f"posterior: {w}" for w in (posterior.warnings if posterior else [])] \
+        + [f"selection: {w}" for w in (selection.warnings if selection else [])]
+    b.append(("h2", "Warnings"))
+    b.append(("list", warnings) if warnings else ("p", "None."))
+    b.append(("h2", "Figures"))
+    for path, caption in figure_paths:
+        b.append(("figure", path, caption))
+    b.append(("h2", "Run information"))
+    b.append(("list", _run_info(run_info)))
+    return b
+
+
+_CAPTIONS = {
+    "slices": "In-plane slices: measured samples near the plane of incidence (circles) and the fitted model "
+              "(lines) against the signed outgoing angle, log scale; shaded: posterior 68 % / 95 % bands.",
+    "hemisphere": "The fitted model times cosθo over the outgoing hemisphere (orthographic projection).",
+    "residuals": "Relative residual (model − data)/data averaged in bins of the half and difference angles.",
+    "corner": "Corner plot of the posterior samples.",
+    "traces": "Walker traces with the integrated autocorrelation time of each parameter.",
+    "albedo": "Directional albedo of the fitted model against the incidence angle; it must stay below 1.",
+    "spheres": "Sphere previews: the measurement (interpolated), the fit and their relative difference. Rings and "
+               "speckle in the difference come from interpolating scattered samples (k nearest neighbours), not "
+               "necessarily from the fit.",
+}
+
+
+# ---------------------------------------------------------------------------------------------- writers
+def _markdown_table(headers, rows) -> list[str]:
+    def cell(x):
+        return str(x).replace("|", "\\|")
+
+    lines = ["| " + " | ".join(cell(h) for h in headers) + " |", "|" + "---|" * len(headers)]
+    lines += ["| " + " | ".join(cell(x) for x in row) + " |" for row in rows]
+    return lines
+
+
+def _to_markdown(blocks, out_dir: Path) -> str:
+    lines = []
+    for block in blocks:
+        kind = block[0]
+        if kind == "h1":
+            lines += [f"# {block[1]}", ""]
+        elif kind == "h2":
+            lines += [f"## {block[1]}", ""]
+        elif kind == "p":
+            lines += [block[1], ""]
+        elif kind == "list":
+            lines += [f"- {item}" for item in block[1]] + [""]
+        elif kind == "table":
+            lines += _markdown_table(block[1], block[2]) + [""]
+        elif kind == "figure":
+            rel = os.path.relpath(block[1], out_dir)
+            lines += [f"![{block[2]}]({rel})", "", f"*{block[2]}*", ""]
+    return "\n".join(lines)
+
+
+def _inline(text: str) -> str:
+    """HTML for a paragraph: escaped, with ``**bold**`` kept."""
+    parts = html.escape(text).split("**")
+    return "".join(f"<b>{p}</b>" if i % 2 else p for i, p in enumerate(parts))
+
+
+_CSS = """
+body{font-family:system-ui,Helvetica,Arial,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
+h1{border-bottom:2px solid #444}h2{border-bottom:1px solid #bbb;margin-top:1.6em}
+table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
+th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#f0f0f0}
+td:first-child,th:first-child{text-align:left}tr:nth-child(even){background:#fafafa}
+figure{margin:1.2em 0}figure img{max-width:100%;border:1px solid #ddd}figcaption{font-size:.9em;color:#555}
+"""
+
+
+def _to_html(blocks) -> str:
+    body = []
+    title = "BRDF fit report"
+    for block in blocks:
+        kind = block[0]
+        if kind == "h1":
+            title = block[1]
+            body.append(f"<h1>{html.escape(block[1])}</h1>")
+        elif kind == "h2":
+            body.append(f"<h2>{html.escape(block[1])}</h2>")
+        elif kind == "p":
+            body.append(f"<p>{_inline(block[1])}</p>")
+        elif kind == "list":
+            body.append("<ul>" + "".join(f"<li>{_inline(str(i))}</li>" for i in block[1]) + "</ul>")
+        elif kind == "table":
+            head = "".join(f"<th>{html.escape(str(h))}</th>" for h in block[1])
+            rows = "".join("<tr>" + "".join(f"<td>{_inline(str(x))}</td>" for x in row) + "</tr>"
+                           for row in block[2])
+            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
+        elif kind == "figure":
+            data = base64.b64encode(Path(block[1]).read_bytes()).decode("ascii")
+            caption = html.escape(block[2])
+            body.append(f'<figure><img alt="{caption}" src="data:image/png;base64,{data}">'
+                        f"<figcaption>{caption}</figcaption></figure>")
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body>\n"
+            + "\n".join(body) + "\n</body></html>\n")
+
+
+def _write_text(path: Path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")
+
+
+# ------------------------------------------------------------------------------------------------- API
+def write_report(out_dir, measurements, fit_result, *, posterior=None, selection=None, run_info=None) -> dict:
+    """Write a fit report into ``out_dir``: the figures (PNG), ``report.md`` and a self-contained ``report.html``.
+
+    Arguments:
+        out_dir: the folder (created when missing); existing files of the same names are replaced atomically.
+        measurements: the `Measurements` that were fitted.
+        fit_result: the `FitResult`.
+        posterior: an optional `Posterior` of that fit: adds the posterior columns of the parameter table, the
+            bands of the slices, the corner and the trace plots.
+        selection: an optional `Selection`: adds the model-selection table.
+        run_info: optional dict of run information (``command``, ``seed``, ``date``, anything else); versions of
+            brdffit, JAX, NumPy and Python, the date and the command line are filled in when not given.
+
+    Returns:
+        ``{"html": path, "md": path, "figures": [paths]}`` (strings).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    channels = measurements.channels
+    jobs = [
+        ("slices", lambda p: F.plot_slices(p, measurements, fit_result, posterior)),
+        ("hemisphere", lambda p: F.plot_hemisphere(p, fit_result, channels=channels)),
+        ("residuals", lambda p: F.plot_residual_map(p, measurements, fit_result)),
+    ]
+    if posterior is not None:
+        jobs += [("corner", lambda p: F.plot_corner(p, posterior, fit_result)),
+                 ("traces", lambda p: F.plot_traces(p, posterior, fit_result))]
+    jobs += [("albedo", lambda p: F.plot_albedo(p, fit_result, channels=channels)),
+             ("spheres", lambda p: F.plot_spheres(p, measurements, fit_result))]
+    figure_paths = []
+    for name, draw in jobs:
+        path = out / f"{name}.png"
+        draw(path)
+        figure_paths.append((str(path), _CAPTIONS[name]))
+    blocks = _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths)
+    md_path, html_path = out / "report.md", out / "report.html"
+    _write_text(md_path, _to_markdown(blocks, out))
+    _write_text(html_path, _to_html(blocks))
+    return {"html": str(html_path), "md": str(md_path), "figures": [p for p, _ in figure_paths]}

@@ -1,0 +1,123 @@
+"""The fit report: figures, report.md and a self-contained report.html (brdffit.report)."""
+
+import base64
+import re
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit.report import format_value, write_report
+from brdffit.report import figures as F
+
+ALL_FIGURES = ("slices", "hemisphere", "residuals", "corner", "traces", "albedo", "spheres")
+POSTERIOR_FIGURES = ("corner", "traces")
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    meas = brdffit.synth.generate("lambert+ward", pattern="half-diff", n=800, noise="relative:0.01", seed=0)
+    result = brdffit.fit(meas, "lambert+ward", loss="sigma")
+    post = brdffit.posterior(result, meas, nwalkers=24, nsteps=200, progress=False, seed=0)
+    return meas, result, post
+
+
+@pytest.fixture(scope="module")
+def full_report(fitted, tmp_path_factory):
+    meas, result, post = fitted
+    out = tmp_path_factory.mktemp("report")
+    paths = write_report(out, meas, result, posterior=post, run_info={"seed": 0, "command": "pytest"})
+    return out, paths
+
+
+def _png(path):
+    import matplotlib.image
+
+    return matplotlib.image.imread(path)
+
+
+def test_returns_paths_of_written_files(full_report):
+    out, paths = full_report
+    assert paths["html"] == str(out / "report.html") and paths["md"] == str(out / "report.md")
+    assert [p.rsplit("/", 1)[-1] for p in paths["figures"]] == [f"{n}.png" for n in ALL_FIGURES]
+    # atomic writes leave no temporary files behind
+    assert sorted(p.name for p in out.iterdir()) == sorted(["report.html", "report.md"]
+                                                           + [f"{n}.png" for n in ALL_FIGURES])
+
+
+def test_figures_have_their_size_and_are_not_blank(full_report):
+    _, paths = full_report
+    for path in paths["figures"]:
+        name = path.rsplit("/", 1)[-1][:-4]
+        image = _png(path)
+        w, h = F.FIGSIZE[name]
+        assert image.shape[:2] == (round(h * F.DPI), round(w * F.DPI)), name
+        assert float(np.std(image[..., :3])) > 0.01, name
+
+
+def test_html_is_self_contained_with_values_and_figures(fitted, full_report):
+    _, result, post = fitted
+    _, paths = full_report
+    text = open(paths["html"], encoding="utf-8").read()
+    assert text.startswith("<!DOCTYPE html>")
+    assert format_value(result.params["alpha"]) in text
+    assert format_value(post.summary["alpha"]["median"]) in text
+    uris = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', text)
+    assert len(uris) == len(ALL_FIGURES)
+    for uri, path in zip(uris, paths["figures"]):  # the embedded images are the PNGs, byte for byte
+        assert base64.b64decode(uri) == open(path, "rb").read()
+    # no external references: every src/href is a data URI, no stylesheet or script is linked
+    for ref in re.findall(r'(?:src|href)="([^"]*)"', text):
+        assert ref.startswith("data:"), ref
+    assert "<link" not in text and "<script" not in text and ".png\"" not in text
+
+
+def test_markdown_has_parameter_table_and_run_info(fitted, full_report):
+    meas, result, post = fitted
+    _, paths = full_report
+    md = open(paths["md"], encoding="utf-8").read()
+    rows = [line for line in md.splitlines() if line.startswith("| alpha |")]
+    assert len(rows) == 1
+    cells = [c.strip() for c in rows[0].strip("|").split("|")]
+    assert cells[1] == format_value(result.params["alpha"])
+    assert cells[2] == format_value(result.stderr["alpha"], 3)
+    assert cells[3] == format_value(post.summary["alpha"]["median"])
+    s = post.summary["alpha"]
+    assert cells[4] == f"[{format_value(s['q16'])}, {format_value(s['q84'])}]"
+    assert cells[5] == f"[{format_value(s['q2.5'])}, {format_value(s['q97.5'])}]"
+    # every parameter of the model has a row, and the noise scales of the posterior too
+    for label in post.names:
+        assert f"| {label} |" in md
+    for name in ("## Fit metrics", "rmse_rel", "## Warnings", "## Run information", "brdffit: ", "jax: ",
+                 "python: ", "seed: 0", "command: pytest", "date: "):
+        assert name in md
+    # the chain is short, so the posterior warns, and the warning is in the report
+    assert any(w in md for w in post.warnings)
+    for name in ALL_FIGURES:
+        assert f"({name}.png)" in md
+
+
+def test_without_posterior_the_posterior_figures_are_absent(fitted, tmp_path):
+    meas, result, _ = fitted
+    paths = write_report(tmp_path, meas, result)
+    names = [p.rsplit("/", 1)[-1][:-4] for p in paths["figures"]]
+    assert names == [n for n in ALL_FIGURES if n not in POSTERIOR_FIGURES]
+    assert not (tmp_path / "corner.png").exists() and not (tmp_path / "traces.png").exists()
+    text = open(paths["html"], encoding="utf-8").read()
+    assert text.count("data:image/png;base64,") == len(names)
+    assert format_value(result.params["alpha"]) in text
+    md = open(paths["md"], encoding="utf-8").read()
+    assert "posterior median" not in md and "| alpha |" in md
+
+
+def test_residual_map_of_the_truth_is_the_noise(fitted):
+    meas, result, _ = fitted
+    _, _, mean, count = F.residual_map(meas, result)
+    assert count.sum() == np.isfinite(meas.values).sum()
+    assert np.nanmax(np.abs(mean)) < 0.05  # 1 % relative noise, a few samples per bin
+
+
+def test_format_value():
+    assert format_value(0.123456789) == "0.123457"
+    assert format_value(float("nan")) == "–" and format_value(None) == "–"
+    assert format_value(float("inf")) == "inf"
