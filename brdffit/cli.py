@@ -176,6 +176,9 @@ def _cmd_fit(args) -> int:
     if selection is not None:
         (out / "selection.json").write_text(json.dumps(selection.to_dict(), indent=2) + "\n")
         files.append(str(out / "selection.json"))
+    if args.report:
+        written = _write_report(out, measurements, result, post if args.posterior else None, selection, args)
+        files.extend([written["html"], written["md"]])
     if args.json:
         print(json.dumps({"model": summary["model"], "params": summary["params"], "stderr": summary["stderr"],
                           "posterior": posterior_summary, "metrics": summary["metrics"], "status": summary["status"],
@@ -188,6 +191,36 @@ def _cmd_fit(args) -> int:
             print(post.table())
         print(f"wrote {', '.join(files)}")
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+
+
+def _write_report(out: Path, measurements, result, post, selection, args) -> dict:
+    """The report (report.html, report.md and figures) of a fit in ``out``."""
+    from .report import write_report
+
+    run_info = {"command": "brdffit " + " ".join(sys.argv[1:]) if sys.argv[1:] else "brdffit", "seed": args.seed}
+    return write_report(out, measurements, result, posterior=post, selection=selection, run_info=run_info)
+
+
+def _cmd_report(args) -> int:
+    import h5py
+
+    from . import FitResult, io
+    from .posterior import load_posterior
+
+    h5 = Path(args.result)
+    measurements = io.load(h5)
+    result = FitResult.load(h5, args.name)
+    post = None
+    with h5py.File(h5, "r") as f:
+        chain_group = f"posteriors/{(args.name or result.spec).replace('/', '_')}/chain"
+        has_chain = chain_group in f
+    if has_chain:
+        post = load_posterior(result, measurements, h5, name=args.name)
+    out = Path(args.out) if args.out else h5.parent
+    written = _write_report(out, measurements, result, post, None, args)
+    if not args.quiet:
+        print(f"wrote {written['html']}, {written['md']} and {len(written['figures'])} figures")
+    return EXIT_OK
 
 
 def _run_posterior(result, measurements, h5: Path, args):
@@ -388,6 +421,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--multistart", type=int, default=0, metavar="N", help="extra quasi-random starts")
     p.add_argument("--posterior", action="store_true",
                    help="also sample the parameter posterior with emcee (stored in result.h5, resumable)")
+    p.add_argument("--no-report", dest="report", action="store_false",
+                   help="skip report.html / report.md and their figures")
     _add_posterior_options(p)
     p.add_argument("--out", help="output folder (default: next to the input, <name>.brdffit/)")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON summary to stdout")
@@ -400,6 +435,14 @@ def build_parser() -> argparse.ArgumentParser:
     _add_posterior_options(p)
     p.add_argument("--seed", type=int, default=0, help="seed of the walkers' start (default 0)")
     p.add_argument("--json", action="store_true", help="print the posterior summary as JSON")
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p = _add(sub, "report", "write report.html and report.md (with figures) for a fit stored in a results file",
+             ["brdffit report data/synthetic/plastic.brdffit/result.h5",
+              "brdffit report out/result.h5 --out report-folder/"], _cmd_report)
+    p.add_argument("result", help="results file written by `brdffit fit` (result.h5)")
+    p.add_argument("--name", help="which fit in the file (default: the first)")
+    p.add_argument("--out", help="output folder (default: the results file's folder)")
+    p.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "synth", "write synthetic measurements of a model",
              ["brdffit synth lambert+ggx --param alpha=0.2 --pattern half-diff --n 2000 --noise relative:0.01 "

@@ -28,7 +28,7 @@ from .models.model import evaluate
 from .params import ParamSpec
 from .problem import Problem, flatten_free, make_fit_data, physical_params, residual_fn
 
-__all__ = ["posterior", "Posterior", "LIKELIHOODS", "PRIOR_FAMILIES"]
+__all__ = ["posterior", "load_posterior", "Posterior", "LIKELIHOODS", "PRIOR_FAMILIES"]
 
 LIKELIHOODS = ("gaussian", "student-t")
 PRIOR_FAMILIES = ("uniform", "loguniform", "normal", "lognormal")
@@ -520,3 +520,31 @@ def _initial_ball(fit_result, free, labels, flat0, lowers, uppers, nwalkers, ndi
     rms = np.sqrt(np.sum(np.where(mask, r * r, 0.0), axis=0) / np.maximum(mask.sum(axis=0), 1))
     log_sigma = np.log(np.maximum(rms, 1e-12))
     return np.concatenate([ball, log_sigma + 0.01 * rng.standard_normal((nwalkers, ndim - p))], axis=1)
+
+
+def load_posterior(fit_result: FitResult, measurements, store, *, name: str | None = None, **options) -> Posterior:
+    """Rebuild the `Posterior` of a chain stored by ``posterior(..., store=...)`` without sampling more.
+
+    Arguments:
+        fit_result: the fit the chain belongs to.
+        measurements: the data it was sampled on.
+        store: the HDF5 file.
+        name: the run's group name (default: the model spec).
+        **options: the ``likelihood``, ``noise``, ``prior`` and ``max_samples`` the chain was run with (defaults as
+            in `posterior`; the CLI uses the defaults).
+
+    Returns:
+        The `Posterior` of the stored steps.
+
+    Raises:
+        ValueError: the file holds no chain for that fit.
+    """
+    run_name = (name or fit_result.spec).replace("/", "_")
+    backend = emcee.backends.HDFBackend(str(store), name=f"posteriors/{run_name}/chain", read_only=True)
+    try:
+        steps = backend.iteration
+        nwalkers = backend.shape[0]
+    except (KeyError, OSError):
+        raise ValueError(f"{store}: no stored chain for {run_name!r}; run `brdffit posterior` first") from None
+    return posterior(fit_result, measurements, nwalkers=nwalkers, nsteps=steps, store=store, name=name,
+                     resume=True, progress=False, **options)

@@ -201,3 +201,21 @@ def test_render_command_previews_fit_and_data(tmp_path, capsys):
     # The fitted model and the interpolated measurement look alike (mean absolute 8-bit difference < 3 levels).
     assert np.mean(np.abs(a - b)) < 3 / 255
     assert main(["render", str(tmp_path / "missing.h5")]) == EXIT_BAD_INPUT
+
+
+def test_fit_writes_a_report_and_the_report_command_rebuilds_it(tmp_path, capsys):
+    out = tmp_path / "fit"
+    assert main(["fit", str(PLASTIC), "--posterior", "--walkers", "24", "--steps", "120", "--out", str(out),
+                 "--quiet"]) == EXIT_OK
+    html = (out / "report.html").read_text()
+    fitted = FitResult.load(out / "result.h5")
+    assert f"{float(fitted.params['m']):.6g}" in html
+    assert html.count("data:image/png;base64,") == 7  # five fit figures + corner + traces
+    (out / "report.html").unlink()
+    assert main(["report", str(out / "result.h5"), "--quiet"]) == EXIT_OK
+    rebuilt = (out / "report.html").read_text()
+    assert rebuilt.count("data:image/png;base64,") == 7
+    assert "posterior median" in (out / "report.md").read_text().lower()
+    bare = tmp_path / "bare"
+    assert main(["fit", str(PLASTIC), "--no-report", "--out", str(bare), "--quiet"]) == EXIT_OK
+    assert not (bare / "report.html").exists()
