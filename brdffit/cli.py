@@ -12,7 +12,7 @@ from pathlib import Path
 from . import __version__, models
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
-DEFAULT_MODEL = "lambert+cook-torrance"
+DEFAULT_MODEL = "auto"
 
 
 class UsageError(Exception):
@@ -411,8 +411,8 @@ def build_parser() -> argparse.ArgumentParser:
               "brdffit fit data/synthetic/clay.h5 --model oren-nayar --json"], _cmd_fit)
     p.add_argument("file", help="measurement file (.h5, .csv/.tsv, MERL .binary)")
     p.add_argument("--model", default=DEFAULT_MODEL,
-                   help=f"model spec, lobes joined with '+' (default {DEFAULT_MODEL}; see `brdffit models`), or "
-                        "'auto' to choose among the standard candidates by BIC (`brdffit select`)")
+                   help="model spec, lobes joined with '+' (see `brdffit models`), or 'auto' (the default): "
+                        "choose among the standard candidates by BIC (`brdffit select`)")
     p.add_argument("--lobes", metavar="K|auto",
                    help="number of Lafortune lobes in the model's Lafortune term, or 'auto' to choose 1.."
                         "--max-lobes by BIC")

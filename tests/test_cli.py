@@ -22,10 +22,13 @@ def private_cache(tmp_path, monkeypatch):
 
 def test_quick_start_fit_recovers_the_shipped_plastic(tmp_path, capsys):
     out = tmp_path / "plastic"
+    # The README's main job: with no options, model selection over the standard candidates picks the truth.
     assert main(["fit", str(PLASTIC), "--out", str(out), "--json"]) == EXIT_OK
     printed = json.loads(capsys.readouterr().out)
     assert set(printed) == {"model", "params", "stderr", "posterior", "metrics", "status", "files"}
+    assert printed["model"] == "lambert+cook-torrance"
     assert printed["status"] == "converged"
+    assert json.loads((out / "selection.json").read_text())["chosen"] == "lambert+cook-torrance"
     truth = synth.truth_model(io.load(PLASTIC)).params
     assert printed["params"]["m"] == pytest.approx(float(truth["m"]), rel=0.01)
     np.testing.assert_allclose(printed["params"]["rho_d"], truth["rho_d"], rtol=0.01)
@@ -54,7 +57,8 @@ def test_fit_with_fixed_parameter_and_solver(tmp_path, capsys):
 
 
 def test_not_converged_fit_exits_1(tmp_path, capsys):
-    code = main(["fit", str(PLASTIC), "--max-steps", "1", "--out", str(tmp_path / "o"), "--json"])
+    code = main(["fit", str(PLASTIC), "--model", "lambert+cook-torrance", "--max-steps", "1", "--out",
+                 str(tmp_path / "o"), "--json"])
     assert code == EXIT_NOT_CONVERGED
     assert json.loads(capsys.readouterr().out)["status"] == "max-steps"
 
@@ -188,7 +192,7 @@ def test_render_command_previews_fit_and_data(tmp_path, capsys):
     from brdffit import render
 
     out = tmp_path / "fit"
-    assert main(["fit", str(PLASTIC), "--out", str(out), "--quiet"]) == EXIT_OK
+    assert main(["fit", str(PLASTIC), "--model", "lambert+cook-torrance", "--out", str(out), "--quiet"]) == EXIT_OK
     fit_png, data_png = tmp_path / "fit.png", tmp_path / "data.png"
     assert main(["render", str(out / "result.h5"), "--resolution", "48", "--out", str(fit_png), "--npy",
                  "--quiet"]) == EXIT_OK
@@ -205,8 +209,8 @@ def test_render_command_previews_fit_and_data(tmp_path, capsys):
 
 def test_fit_writes_a_report_and_the_report_command_rebuilds_it(tmp_path, capsys):
     out = tmp_path / "fit"
-    assert main(["fit", str(PLASTIC), "--posterior", "--walkers", "24", "--steps", "120", "--out", str(out),
-                 "--quiet"]) == EXIT_OK
+    assert main(["fit", str(PLASTIC), "--model", "lambert+cook-torrance", "--posterior", "--walkers", "24",
+                 "--steps", "120", "--out", str(out), "--quiet"]) == EXIT_OK
     html = (out / "report.html").read_text()
     fitted = FitResult.load(out / "result.h5")
     assert f"{float(fitted.params['m']):.6g}" in html
@@ -217,5 +221,6 @@ def test_fit_writes_a_report_and_the_report_command_rebuilds_it(tmp_path, capsys
     assert rebuilt.count("data:image/png;base64,") == 7
     assert "posterior median" in (out / "report.md").read_text().lower()
     bare = tmp_path / "bare"
-    assert main(["fit", str(PLASTIC), "--no-report", "--out", str(bare), "--quiet"]) == EXIT_OK
+    assert main(["fit", str(PLASTIC), "--model", "lambert+cook-torrance", "--no-report", "--out", str(bare),
+                 "--quiet"]) == EXIT_OK
     assert not (bare / "report.html").exists()
