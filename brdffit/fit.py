@@ -22,9 +22,11 @@ from .losses import LOSSES, ROBUST, relative_epsilon
 from .metrics import fit_metrics
 from .models.model import Model, global_names
 from .models.registry import get as get_model
+from .normal_equations import accumulate, chunks
 from .params import at_bound
-from .problem import (FitData, Problem, chunk_data, compiled_solve, flatten_free, make_fit_data, physical_params,
-                      residual_fn, stack_data)
+from .problem import (FitData, Problem, compiled_solve, make_fit_data, physical_params, residual_fn,
+                      stack_data)
+from .progress import Progress
 from .refine import refine
 from .solvers import make_solver, solver_name
 
@@ -34,10 +36,9 @@ CHANNEL_MODES = ("shared-shape", "independent")
 # Data with more (sample, channel) values than this is first solved on a subsample of COARSE_SAMPLES samples and
 # then refined on all of it (`brdffit.refine`).
 COARSE_RESIDUALS = 300_000
-COARSE_SAMPLES = 100_000
+COARSE_SAMPLES = 10_000
 COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
 _CORRELATION_WARNING = 0.99
-_JACOBIAN_BYTES = 256 * 2**20
 
 
 class FitError(RuntimeError):
@@ -96,37 +97,10 @@ def _unconstrained(problem: Problem, starts: list[dict]) -> dict:
             for name in problem.free}
 
 
-@functools.lru_cache(maxsize=32)
-def _jtj_fn(problem: Problem):
-    """Jitted (JᵀJ, Jᵀ diag(r²) J, None) of one chunk of data, J the residual Jacobian w.r.t. the free physical
-    parameters."""
-
-    def jtj(free_params: dict, data: FitData):
-        flat, unravel = flatten_free(problem, free_params)  # model order, matching `param_labels`
-
-        def r(theta):
-            params = physical_params(problem, {}, dict(data.fixed, **unravel(theta)))
-            return residual_fn(problem, params, data).ravel()
-
-        jac = jax.jacfwd(r)(flat)
-        scaled = jac * r(flat)[:, None]
-        return jac.T @ jac, scaled.T @ scaled, None
-
-    return jax.jit(jtj)
-
-
 def _physical_normal_matrices(problem: Problem, params: dict, data: FitData):
     """JᵀJ and Jᵀ diag(r²) J with J the residual Jacobian w.r.t. the free physical parameters (chunked)."""
-    free = {k: params[k] for k in problem.free}
-    p = sum(int(np.size(v)) for v in free.values())
-    chunk = int(max(1024, min(data.values.shape[0], _JACOBIAN_BYTES // (8 * problem.channels * max(p, 1)))))
     data = data._replace(fixed={k: v for k, v in params.items() if k not in problem.free})
-    jtj, meat = np.zeros((p, p)), np.zeros((p, p))
-    fn = _jtj_fn(problem)
-    for piece in chunk_data(data, chunk):
-        a, b, _ = fn(free, piece)
-        jtj += np.asarray(a, dtype=float)
-        meat += np.asarray(b, dtype=float)
+    jtj, _, _, meat = accumulate(problem, {k: params[k] for k in problem.free}, chunks(data), physical=True)
     return jtj, meat
 
 
@@ -176,6 +150,7 @@ def _per_param(params: dict, free, flat_std) -> dict:
     return out
 
 
+@functools.lru_cache(maxsize=32)
 @functools.lru_cache(maxsize=32)
 def _channel_cost(problem: Problem):
     """Jitted Σr² per channel."""
@@ -353,16 +328,19 @@ def _starting_points(problem: Problem, model: Model, measurements, fixed_values:
     base = dict(model.params, **fixed_values)
     plain = Problem(problem.lobes, problem.channels, problem.free, problem.loss, None, problem.solver,
                     problem.max_steps)
+
+    def extra_starts():  # the multistart starts that follow a given first start
+        return initial_guesses(plain, base, sub, multistart, seed)[1:] if multistart else []
+
     if isinstance(init, str) and init == "auto":
         starts = initial_guesses(plain, base, sub, multistart, seed)
     elif isinstance(init, str) and init == "model":
-        starts = [base] + initial_guesses(plain, base, sub, multistart, seed)[1:]
+        starts = [base] + extra_starts()
     elif isinstance(init, list):
         starts = initial_guesses(plain, base, sub, multistart, seed, candidates=init)
     elif isinstance(init, (dict, Model)):
         given = init.params if isinstance(init, Model) else model.replace(**init).params
-        starts = [dict(base, **{k: v for k, v in given.items() if k not in fixed_values})]
-        starts += initial_guesses(plain, base, sub, multistart, seed)[1:]
+        starts = [dict(base, **{k: v for k, v in given.items() if k not in fixed_values})] + extra_starts()
     else:
         raise ValueError(f"init must be 'auto', 'model', a Model, a dict of values or a list of candidate "
                          f"shape settings, got {init!r}")
@@ -376,7 +354,7 @@ def _starting_points(problem: Problem, model: Model, measurements, fixed_values:
 def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", fixed=None, free=None,
         multistart: int = 0, channel_mode: str = "shared-shape", robust=None, max_steps: int = 256,
         rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0, coarse="auto",
-        strict: bool = False) -> FitResult:
+        strict: bool = False, progress: bool = False) -> FitResult:
     """Fit a model to measurements by nonlinear least squares.
 
     Arguments:
@@ -403,6 +381,8 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
             `COARSE_SAMPLES` samples first and then refines on all of it (`brdffit.refine`); True forces and
             False disables this. The answer is the full-data optimum either way; only the time differs.
         strict: raise `FitError` instead of returning a non-converged result.
+        progress: report the stages (initial guess, the batched solve of all starts, refinement, uncertainty) on
+            a progress line on stderr (`brdffit.progress.Progress`).
 
     Returns:
         A `FitResult`.
@@ -417,6 +397,8 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
     problem, model, fixed_values, robust_scale = _prepare(
         measurements, model, loss=loss, solver=solver, fixed=fixed, free=free, robust=robust,
         max_steps=max_steps, rtol=rtol, atol=atol)
+    bar = Progress(f"fit {model.spec}", 4, enabled=progress, unit="stages")
+    bar.update(0, "initial guess")
     t0 = time.perf_counter()
     starts, eps, robust_scale = _starting_points(problem, model, measurements, fixed_values, init, multistart,
                                                  seed, robust_scale)
@@ -425,6 +407,8 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
     y0 = _unconstrained(problem, starts)
     two_stage = bool(problem.free) and _use_coarse(coarse, measurements)
     strategy = f"coarse ({COARSE_SAMPLES} samples) + refine" if two_stage else "full"
+    bar.update(1, f"solving {len(starts)} start{'s' if len(starts) > 1 else ''} in one batch"
+                  f"{f' on {COARSE_SAMPLES} samples' if two_stage else ''}")
     if problem.free:
         solve_data, solve_problem = data, problem
         if two_stage:
@@ -448,18 +432,21 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
     y = {k: v[best] for k, v in out["y"].items()}
     outcome = {k: v[best] for k, v in out.items() if k != "y"}
     if two_stage:
+        bar.update(2, f"refining on all {measurements.n} samples")
         t0 = time.perf_counter()
         coarse_steps = int(outcome["steps"])
         y, outcome = refine(problem, y, data, rtol=rtol, atol=atol)
         outcome["steps"] = coarse_steps + int(outcome["steps"])
         run_time += time.perf_counter() - t0
     y, outcome = _canonical(problem, y, data.fixed, outcome)
+    bar.update(3, "uncertainty and metrics")
     result = _finish(problem, model, measurements, data, y, outcome, starts=records, strategy=strategy,
                      times={"compile": compile_time, "run": run_time, "init": init_time})
     if not result.converged:
         dead = _dead_amplitudes(problem, result.model.params, data, result.cost, result.dof)
         if dead:
             result = _refit_without(measurements, result, problem, dead, fixed_values, kwargs)
+    bar.close(f"{result.status}, cost {result.cost:.6g}")
     if strict and not result.converged:
         raise FitError(f"fit of {result.spec} did not converge: {result.status}", result)
     return result

@@ -95,7 +95,7 @@ def robust_residuals(kind: str | None, r, scale: float):
     raise ValueError(f"unknown robust loss {kind!r}; choose None, 'huber' or 'cauchy'")
 
 
-def residual_scale(loss: str, data) -> "np.ndarray":
+def residual_scale(loss: str, data) -> jnp.ndarray:
     """|∂r/∂f_model| at f_model = f_data for each (sample, channel), 0 for missing samples.
 
     It linearises a loss at the data: an error δ in f becomes a residual of about ``residual_scale · δ``. The

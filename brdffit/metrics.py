@@ -14,26 +14,44 @@ __all__ = ["fit_metrics", "METRICS"]
 METRICS = ("rmse_abs", "rmse_rel", "ngan", "low")
 
 
-@jax.jit
-def _metrics(model: Model, pair: LocalPair, values, cos_i, weights):
+_CHUNK = 65_536
+
+
+def _metric_sums(model: Model, pair: LocalPair, values, cos_i, weights):
+    """Numerators and denominators of the metrics over one chunk: ``(8, C)``."""
     f_model = evaluate_pair(model, pair)
     valid = jnp.isfinite(values)
     f_data = jnp.where(valid, values, 0.0)
     c = cos_i[:, None]
     w = jnp.where(valid, weights[:, None], 0.0)
-    diff = f_model - f_data
+    diff = jnp.where(valid, f_model - f_data, 0.0)
     positive = valid & (f_data > 0)
+    relative = jnp.where(positive, diff / jnp.where(positive, f_data, 1.0), 0.0)
+    low = jnp.where(valid, jnp.log1p(jnp.maximum(f_model * c, -0.999)) - jnp.log1p(f_data * c), 0.0)
+    terms = (diff * diff, valid, relative * relative, positive, w * (diff * c) ** 2, w, w * low * low, w)
+    return jnp.stack([jnp.sum(t, axis=0, dtype=diff.dtype) for t in terms])
 
-    def weighted_rms(x, weights):
-        return jnp.sqrt(jnp.sum(weights * x * x, axis=0) / jnp.maximum(jnp.sum(weights, axis=0), 1e-300))
 
-    return {
-        "rmse_abs": weighted_rms(diff, valid.astype(diff.dtype)),
-        "rmse_rel": weighted_rms(jnp.where(positive, diff / jnp.where(positive, f_data, 1.0), 0.0),
-                                 positive.astype(diff.dtype)),
-        "ngan": weighted_rms(diff * c, w),
-        "low": weighted_rms(jnp.log1p(jnp.maximum(f_model * c, -0.999)) - jnp.log1p(f_data * c), w),
-    }
+@jax.jit
+def _metrics(model: Model, pair: LocalPair, values, cos_i, weights):
+    # Chunks of _CHUNK samples in one compiled loop: on the CPU this ran twice as fast as the same sums over a
+    # MERL-size table at once (the working set stays in cache). Padding repeats the last sample with a NaN value,
+    # which no sum counts.
+    n = values.shape[0]
+    chunks = max(-(-n // _CHUNK), 1)
+    size = -(-n // chunks)
+    pad = chunks * size - n
+
+    def blocks(a, fill=None):
+        if pad:
+            tail = jnp.repeat(a[-1:], pad, axis=0) if fill is None else jnp.full((pad,) + a.shape[1:], fill, a.dtype)
+            a = jnp.concatenate([a, tail])
+        return a.reshape((chunks, size) + a.shape[1:])
+
+    batched = (jax.tree_util.tree_map(blocks, pair), blocks(values, jnp.nan), blocks(cos_i), blocks(weights))
+    sums = jnp.sum(jax.lax.map(lambda xs: _metric_sums(model, *xs), batched), axis=0)
+    rms = jnp.sqrt(sums[0::2] / jnp.maximum(sums[1::2], 1e-300))
+    return dict(zip(METRICS, rms))
 
 
 def fit_metrics(model: Model, measurements, pair: LocalPair | None = None) -> dict:

@@ -17,29 +17,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .problem import FitData, Problem, chunk_data, flatten_free, physical_params, residual_fn
+from .normal_equations import accumulate, chunks
+from .problem import FitData, Problem, flatten_free, physical_params, residual_fn
 
-__all__ = ["refine", "CHUNK_SAMPLES"]
-
-CHUNK_SAMPLES = 262_144
-
-
-@functools.lru_cache(maxsize=32)
-def _normal_equations(problem: Problem):
-    """Jitted (JᵀJ, Jᵀr, rᵀr, Jᵀ diag(r²) J) of one chunk, J the Jacobian w.r.t. the unconstrained variables."""
-
-    def fn(y: dict, data: FitData):
-        flat, unravel = flatten_free(problem, y)
-
-        def r(theta):
-            return residual_fn(problem, physical_params(problem, unravel(theta), data.fixed), data).ravel()
-
-        jac = jax.jacfwd(r)(flat)
-        res = r(flat)
-        scaled = jac * res[:, None]
-        return jac.T @ jac, jac.T @ res, jnp.sum(res * res), scaled.T @ scaled
-
-    return jax.jit(fn)
+__all__ = ["refine"]
 
 
 @functools.lru_cache(maxsize=32)
@@ -66,24 +47,18 @@ def refine(problem: Problem, y: dict, data: FitData, *, rtol: float, atol: float
         (the same as the optimistix solve's) and ``normal_matrices`` (JᵀJ, Jᵀ diag(r²) J) in the unconstrained
         variables.
     """
-    chunk = CHUNK_SAMPLES
-    pieces = list(chunk_data(data, chunk))
-    normal = _normal_equations(problem)
+    pieces = chunks(data)
     cost_fn = _cost(problem)
 
-    def system(y):
-        h, g, c, meat = 0.0, 0.0, 0.0, 0.0
-        for piece in pieces:
-            a, b, s, t = normal(y, piece)
-            h, g, c, meat = h + np.asarray(a), g + np.asarray(b), c + float(s), meat + np.asarray(t)
-        return h, g, c, meat
+    def system(flat):
+        return accumulate(problem, unravel(jnp.asarray(flat)), pieces, physical=False)
 
-    def cost(y):
-        return sum(float(cost_fn(y, piece)) for piece in pieces)
+    def cost(flat):
+        return sum(float(cost_fn(unravel(jnp.asarray(flat)), piece)) for piece in pieces)
 
     flat, unravel = flatten_free(problem, y)
     flat = np.asarray(flat, dtype=float)
-    h, g, c, meat = system(unravel(jnp.asarray(flat)))
+    h, g, c, meat = system(flat)
     damping = 1e-6
     steps, converged = 0, False
     while steps < max_steps and np.isfinite(c):
@@ -95,7 +70,7 @@ def refine(problem: Problem, y: dict, data: FitData, *, rtol: float, atol: float
             damping *= 10.0
             continue
         trial = flat + delta
-        trial_cost = cost(unravel(jnp.asarray(trial)))
+        trial_cost = cost(trial)
         small = np.linalg.norm(delta) <= rtol * np.linalg.norm(flat) + atol
         if np.isfinite(trial_cost) and trial_cost <= c:
             flat = trial
@@ -104,15 +79,16 @@ def refine(problem: Problem, y: dict, data: FitData, *, rtol: float, atol: float
                 c = trial_cost
                 converged = True
                 break
-            h, g, c, meat = system(unravel(jnp.asarray(flat)))
+            h, g, c, meat = system(flat)
         else:
             if small:
                 converged = True
                 break
             damping *= 10.0
     outcome = {"cost": np.asarray(c), "steps": np.asarray(steps), "successful": np.asarray(converged),
-               "max_steps": np.asarray(not converged and np.isfinite(c)), "nonfinite": np.asarray(not np.isfinite(c)),
-               # JᵀJ and Jᵀ diag(r²) J at the last linearisation point (within rtol of the answer when converged),
-               # in the unconstrained variables: `fit` turns them into the covariance without another pass.
-               "normal_matrices": (h, meat)}
+               "max_steps": np.asarray(not converged and np.isfinite(c)), "nonfinite": np.asarray(not np.isfinite(c))}
+    if np.isfinite(c):
+        # JᵀJ and Jᵀ diag(r²) J in the unconstrained variables at the last linearisation point (within rtol of
+        # the answer when converged): `fit` turns them into the covariance without another pass.
+        outcome["normal_matrices"] = (h, meat)
     return unravel(jnp.asarray(flat)), outcome

@@ -1,0 +1,116 @@
+"""Normal matrices of a fit's residual Jacobian: JᵀJ, Jᵀr, rᵀr and Jᵀ diag(r²) J, accumulated over chunks.
+
+Used by the full-data refinement (`brdffit.refine`, J with respect to the solver's unconstrained variables) and by
+the covariance of a fit (`brdffit.fit`, J with respect to the physical parameters).
+
+Colour parameters hold one value per channel, and channel c of the residuals depends on channel c of a colour
+parameter only (a model evaluates its channels independently; only shape parameters are shared). One
+forward-mode tangent per parameter *name*, seeded with ones in every channel, therefore yields all of that
+parameter's Jacobian columns at once: the tangent's channel c is ∂r[:, c]/∂p[c]. A fit with Q free names and
+P free scalars needs Q Jacobian-vector products instead of P (Lambert + Cook-Torrance in RGB: 3 instead of 7).
+`accumulate` forms the per-channel sums S[q, s, c] = Σ_n t_q[n, c] t_s[n, c] chunk by chunk and expands them
+into the P × P matrices. `tests/test_normal_equations.py` checks the result against
+``jax.jacfwd`` for every lobe.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .problem import FitData, Problem, chunk_data, physical_params, residual_fn
+
+__all__ = ["chunk_tangents", "chunks", "accumulate", "CHUNK_SAMPLES"]
+
+CHUNK_SAMPLES = 65536
+
+
+@functools.lru_cache(maxsize=64)
+def chunk_tangents(problem: Problem, physical: bool):
+    """The jitted tangents and residuals of one chunk, laid out for the per-channel Gram matrices.
+
+    Arguments:
+        problem: the `Problem`.
+        physical: True to differentiate with respect to the free physical parameters (the other parameters come
+            from ``data.fixed``), False for the solver's unconstrained variables.
+
+    Returns:
+        ``fn(tree, data) -> A`` with ``tree`` the free name -> value dict and ``A`` of shape ``(C, Q + 1, N)``:
+        ``A[c, q]`` the tangent of free name q (in ``problem.free`` order) in channel c, ``A[c, Q]`` the
+        residuals.
+    """
+
+    def fn(tree: dict, data: FitData):
+        def r(values):
+            if physical:
+                return residual_fn(problem, physical_params(problem, {}, dict(data.fixed, **values)), data)
+            return residual_fn(problem, physical_params(problem, values, data.fixed), data)
+
+        rows = []
+        for name in problem.free:
+            seed = {k: (jnp.ones_like(v) if k == name else jnp.zeros_like(v)) for k, v in tree.items()}
+            rows.append(jax.jvp(r, (tree,), (seed,))[1])
+        rows.append(r(tree))
+        return jnp.transpose(jnp.stack(rows), (2, 0, 1))
+
+    return jax.jit(fn)
+
+
+def _channel_incidence(problem: Problem, tree: dict):
+    """For each free scalar in `flatten_free` order: its name's index, and the channels it acts on ``(P, C)``."""
+    index, incidence = [], []
+    for q, name in enumerate(problem.free):
+        size = int(np.size(tree[name]))
+        if size == 1 and np.ndim(tree[name]) == 0:  # shared: every channel
+            index.append(q)
+            incidence.append(np.ones(problem.channels))
+        elif size == problem.channels:  # one value per channel
+            index.extend([q] * size)
+            incidence.extend(np.eye(problem.channels))
+        else:
+            raise ValueError(f"parameter {name!r} has shape {np.shape(tree[name])}; expected () or "
+                             f"({problem.channels},)")
+    return np.asarray(index), np.asarray(incidence)
+
+
+def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
+    """``data`` in equally shaped chunks of ``size`` samples (bounds the memory of the tangents); split once and
+    reuse the list when accumulating repeatedly."""
+    return chunk_data(data, size)
+
+
+def accumulate(problem: Problem, tree: dict, pieces: list[FitData], *, physical: bool):
+    """JᵀJ, Jᵀr, rᵀr and Jᵀ diag(r²) J over all of the data, in `brdffit.problem.flatten_free` order.
+
+    Arguments:
+        problem: the `Problem`.
+        tree: free name -> value (physical or unconstrained, see ``physical``), no batch axis.
+        pieces: the `FitData` in chunks (`chunks`).
+        physical: differentiate with respect to physical parameters (True) or unconstrained variables (False).
+
+    Returns:
+        ``(jtj (P, P), jtr (P,), cost, meat (P, P))`` as NumPy float64.
+    """
+    index, incidence = _channel_incidence(problem, tree)
+    fn = chunk_tangents(problem, physical)
+    q = len(problem.free)
+    gram, meat = 0.0, 0.0
+    for piece in pieces:
+        # The per-channel Gram matrices with BLAS on the host: measured 3x faster on the CPU than the same
+        # reductions in XLA, and a (C, Q + 1, N) transfer per chunk on a GPU.
+        a = np.asarray(fn(tree, piece))
+        gram = gram + a @ a.transpose(0, 2, 1)  # (C, Q+1, Q+1): tangents and residuals
+        weighted = a[:, :q] * a[:, q:]
+        meat = meat + weighted @ weighted.transpose(0, 2, 1)
+    both = incidence[:, None, :] * incidence[None, :, :]  # (P, P, C): channels shared by scalars i and j
+    gram = np.moveaxis(np.asarray(gram), 0, -1)  # (Q+1, Q+1, C)
+    meat = np.moveaxis(np.asarray(meat), 0, -1)
+
+    def expand(sums):
+        return np.sum(both * sums[index][:, index], axis=-1)
+
+    jtr = np.sum(incidence * gram[index, q], axis=-1)
+    return expand(gram[:q, :q]), jtr, float(np.sum(gram[q, q])), expand(meat)
