@@ -134,6 +134,11 @@ def _fit_options(args) -> dict:
                 max_steps=args.max_steps)
 
 
+def _progress(args) -> bool:
+    """Progress lines go to stderr unless the user asked for quiet or machine-readable output."""
+    return not (getattr(args, "quiet", False) or getattr(args, "json", False))
+
+
 def _cmd_fit(args) -> int:
     from . import fit, io, select
 
@@ -144,20 +149,24 @@ def _cmd_fit(args) -> int:
     if args.model == "auto":
         from .select import DEFAULT_CANDIDATES
 
-        selection = select(measurements, DEFAULT_CANDIDATES, criterion="bic", **_fit_options(args))
+        selection = select(measurements, DEFAULT_CANDIDATES, criterion="bic", progress=_progress(args),
+                           **_fit_options(args))
         result = selection.result
     elif args.lobes is None:
-        result = fit(measurements, args.model, multistart=args.multistart, **_fit_options(args))
+        result = fit(measurements, args.model, multistart=args.multistart, progress=_progress(args),
+                     **_fit_options(args))
     elif args.lobes == "auto":
         candidates = [_with_lobes(args.model, k) for k in range(1, args.max_lobes + 1)]
-        selection = select(measurements, candidates, criterion="bic", **_fit_options(args))
+        selection = select(measurements, candidates, criterion="bic", progress=_progress(args),
+                           **_fit_options(args))
         result = selection.result
     else:
         try:
             k = int(args.lobes)
         except ValueError:
             raise UsageError(f"--lobes {args.lobes!r}: give a number of lobes or 'auto'") from None
-        result = fit(measurements, _with_lobes(args.model, k), multistart=args.multistart, **_fit_options(args))
+        result = fit(measurements, _with_lobes(args.model, k), multistart=args.multistart, progress=_progress(args),
+                     **_fit_options(args))
     out = Path(args.out) if args.out else _default_out(path)
     out.mkdir(parents=True, exist_ok=True)
     h5 = out / "result.h5"
@@ -228,7 +237,7 @@ def _run_posterior(result, measurements, h5: Path, args):
     from . import posterior
 
     post = posterior(result, measurements, nwalkers=args.walkers, nsteps=args.steps, store=h5,
-                     max_samples=args.max_samples, progress=not (args.quiet or args.json), seed=args.seed)
+                     max_samples=args.max_samples, progress=_progress(args), seed=args.seed)
     post.save(h5)
     return post
 
@@ -360,7 +369,7 @@ def _cmd_select(args) -> int:
     measurements = _load(args.file)
     candidates = [c.strip() for c in args.candidates.split(";")] if args.candidates else list(DEFAULT_CANDIDATES)
     selection = select(measurements, candidates, criterion=args.criterion, folds=args.folds,
-                       **_fit_options(args))
+                       progress=_progress(args), **_fit_options(args))
     if args.json:
         print(json.dumps(selection.to_dict()))
     else:

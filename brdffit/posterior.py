@@ -13,7 +13,6 @@ import functools
 import json
 import logging
 import math
-import sys
 import time
 
 import emcee
@@ -27,6 +26,7 @@ from .losses import relative_epsilon, residual_scale
 from .models.model import evaluate
 from .params import ParamSpec
 from .problem import Problem, flatten_free, make_fit_data, physical_params, residual_fn
+from .progress import Progress
 
 __all__ = ["posterior", "load_posterior", "Posterior", "LIKELIHOODS", "PRIOR_FAMILIES"]
 
@@ -282,26 +282,6 @@ def _log_prob_fn(problem: Problem, estimate: bool, likelihood: str, nu: float, p
     return jax.jit(jax.vmap(one, in_axes=(0, None)))
 
 
-def _progress_printer(total: int, enabled: bool):
-    """A minimal progress line on stderr (no extra dependency); returns update(step) and close()."""
-    state = {"last": -1, "start": time.perf_counter()}
-
-    def update(step):
-        if not enabled:
-            return
-        percent = int(100 * step / max(total, 1))
-        if percent != state["last"]:
-            state["last"] = percent
-            elapsed = time.perf_counter() - state["start"]
-            print(f"\rMCMC {step}/{total} steps ({percent}%) {elapsed:.0f} s", end="", file=sys.stderr)
-
-    def close():
-        if enabled:
-            print(file=sys.stderr)
-
-    return update, close
-
-
 def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps: int = 5000, burn="auto",
               thin="auto", likelihood: str = "gaussian", noise="estimate", prior="bounds", nu: float = 4.0,
               max_samples: int | None = None, store=None, name: str | None = None, resume: bool = True,
@@ -425,12 +405,12 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
             raise ValueError(f"walker {bad} starts where the posterior is zero (outside a prior's support): "
                              "the least-squares optimum lies outside the priors given")
     remaining = max(nsteps - already, 0)
-    update, close = _progress_printer(remaining, progress)
+    bar = Progress("MCMC", remaining, enabled=progress and remaining > 0, unit="steps")
     t0 = time.perf_counter()
     if remaining:
         for step, _ in enumerate(sampler.sample(start, iterations=remaining), start=1):
-            update(step)
-    close()
+            bar.update(step)
+    bar.close(f"({nwalkers} walkers)")
     wall = time.perf_counter() - t0
 
     chain = sampler.get_chain()

@@ -24,6 +24,7 @@ from .losses import relative_epsilon
 from .models.model import evaluate_dirs
 from .multilobe import new_lobe_candidates
 from .problem import Problem, make_fit_data, residual_fn
+from .progress import Progress
 
 __all__ = ["select", "Selection", "DEFAULT_CANDIDATES", "CRITERIA", "DEFAULT_MARGIN"]
 
@@ -184,7 +185,7 @@ def _simplest(rows: list[dict], eligible) -> dict:
 def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", *, loss: str = "cosine",
            margin: float | None = None, folds: int = 5, holdout: float = 0.2, scene=None,
            tolerance: float | None = None, scene_metric: str = "relative", reference: str = "data", seed: int = 0,
-           **fit_options) -> Selection:
+           progress: bool = False, **fit_options) -> Selection:
     """Fit candidate models and choose the smallest one that is good enough.
 
     Arguments:
@@ -207,6 +208,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
         reference: what a candidate's scene radiance is compared with: ``"data"`` (the measurements interpolated
             at the scene's directions, `brdffit.scene.interpolate`) or ``"best"`` (the best-scoring candidate).
         seed: seed of the held-out split, folds and cost measurement.
+        progress: show a progress line on stderr, one update per candidate (and per scene refit).
         **fit_options: passed to every `brdffit.fit` (solver, fixed, max_steps, ...).
 
     Returns:
@@ -229,7 +231,9 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
     options = dict(loss=loss, seed=seed, **fit_options)
     done: dict[str, FitResult] = {}
     rows, warnings = [], []
-    for spec in candidates:
+    bar = Progress("select", len(candidates) * (2 if scene is not None else 1), enabled=progress, unit="fits")
+    for i, spec in enumerate(candidates):
+        bar.update(i, f"fitting {spec}")
         result, init = _fit_candidate(spec, measurements, done, options)
         done[spec] = result
         errors = []
@@ -269,7 +273,8 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
             seen = np.asarray(evaluate_dirs(done[best["spec"]].model, scene.wi, scene.wo))
         ref = scene.radiance(seen)
         scene_data = _scene_measurements(scene, seen, measurements.channels)
-        for row in rows:
+        for i, row in enumerate(rows):
+            bar.update(len(candidates) + i, f"fitting {row['spec']} to the scene")
             # Each candidate at its best for what the scene sees: fitted to the reference at the scene's
             # directions (cosine loss with the light intensity as weight, i.e. the error in radiance), starting
             # from its full-data fit.
@@ -285,6 +290,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
             by_scene = closest["spec"]
             warnings.append(f"no candidate stays within the scene tolerance {tolerance:g} ({scene_metric}); "
                             f"the closest is {by_scene} ({closest['scene_error']:.4g})")
+    bar.close(f"chose {by_scene or chosen['spec']}")
     return Selection(table=rows, chosen=by_scene or chosen["spec"], criterion=criterion, margin=margin,
                      best=best["spec"], chosen_by_criterion=chosen["spec"], chosen_by_scene=by_scene,
                      results=done, warnings=warnings, scene_results=scene_results)
