@@ -14,7 +14,7 @@ from .models.registry import model_from_dict, model_to_dict
 __all__ = ["FitResult", "STATUSES", "param_labels"]
 
 # Every status a fit can end with (docs/fitting.md explains each).
-STATUSES = ("converged", "converged-at-bound", "max-steps", "nonfinite")
+STATUSES = ("converged", "converged-at-bound", "max-steps", "stalled", "nonfinite")
 
 
 def param_labels(params: dict, names) -> list[str]:

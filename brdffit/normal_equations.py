@@ -98,19 +98,22 @@ def accumulate(problem: Problem, tree: dict, pieces: list[FitData], *, physical:
     fn = chunk_tangents(problem, physical)
     q = len(problem.free)
     gram, meat = 0.0, 0.0
-    for piece in pieces:
-        # The per-channel Gram matrices with BLAS on the host: measured 3x faster on the CPU than the same
-        # reductions in XLA, and a (C, Q + 1, N) transfer per chunk on a GPU.
-        a = np.asarray(fn(tree, piece))
-        gram = gram + a @ a.transpose(0, 2, 1)  # (C, Q+1, Q+1): tangents and residuals
-        weighted = a[:, :q] * a[:, q:]
-        meat = meat + weighted @ weighted.transpose(0, 2, 1)
-    both = incidence[:, None, :] * incidence[None, :, :]  # (P, P, C): channels shared by scalars i and j
-    gram = np.moveaxis(np.asarray(gram), 0, -1)  # (Q+1, Q+1, C)
-    meat = np.moveaxis(np.asarray(meat), 0, -1)
+    # A diverged solver (undamped Gauss-Newton far away) can overflow the products: inf/NaN then reach the
+    # covariance as infinite standard errors, which is what they mean, without a warning per chunk.
+    with np.errstate(over="ignore", invalid="ignore"):
+        for piece in pieces:
+            # The per-channel Gram matrices with BLAS on the host: measured 3x faster on the CPU than the same
+            # reductions in XLA, and a (C, Q + 1, N) transfer per chunk on a GPU.
+            a = np.asarray(fn(tree, piece))
+            gram = gram + a @ a.transpose(0, 2, 1)  # (C, Q+1, Q+1): tangents and residuals
+            weighted = a[:, :q] * a[:, q:]
+            meat = meat + weighted @ weighted.transpose(0, 2, 1)
+        both = incidence[:, None, :] * incidence[None, :, :]  # (P, P, C): channels shared by scalars i and j
+        gram = np.moveaxis(np.asarray(gram), 0, -1)  # (Q+1, Q+1, C)
+        meat = np.moveaxis(np.asarray(meat), 0, -1)
 
-    def expand(sums):
-        return np.sum(both * sums[index][:, index], axis=-1)
+        def expand(sums):
+            return np.sum(both * sums[index][:, index], axis=-1)
 
-    jtr = np.sum(incidence * gram[index, q], axis=-1)
-    return expand(gram[:q, :q]), jtr, float(np.sum(gram[q, q])), expand(meat)
+        jtr = np.sum(incidence * gram[index, q], axis=-1)
+        return expand(gram[:q, :q]), jtr, float(np.sum(gram[q, q])), expand(meat)
