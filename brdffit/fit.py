@@ -28,7 +28,7 @@ from .problem import (FitData, Problem, compiled_solve, make_fit_data, physical_
                       stack_data)
 from .progress import Progress
 from .refine import refine
-from .solvers import make_solver, solver_name
+from .solvers import make_solver, solver_name, working_tolerances
 
 __all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
 
@@ -418,7 +418,8 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
         robust: None, ``"huber"``, ``"cauchy"`` or ``(kind, scale)``; without a scale it is 1.4826 times the
             median absolute residual of the initial guess.
         max_steps: the solver's step limit.
-        rtol, atol: the solver's convergence tolerances (optimistix's Cauchy termination).
+        rtol, atol: the solver's convergence tolerances (optimistix's Cauchy termination), raised to what the
+            working precision can meet (`brdffit.solvers.working_tolerances`; changes nothing in float64).
         seed: seed of the subsample and of the quasi-random starts.
         coarse: ``"auto"`` solves data with more than `COARSE_RESIDUALS` values on a seeded subsample of
             `COARSE_SAMPLES` samples first and then refines on all of it (`brdffit.refine`); True forces and
@@ -432,6 +433,7 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
     """
     if channel_mode not in CHANNEL_MODES:
         raise ValueError(f"channel_mode must be one of {', '.join(CHANNEL_MODES)}, got {channel_mode!r}")
+    rtol, atol = working_tolerances(rtol, atol)
     kwargs = dict(loss=loss, solver=solver, init=init, fixed=fixed, free=free, multistart=multistart,
                   robust=robust, max_steps=max_steps, rtol=rtol, atol=atol, seed=seed, coarse=coarse,
                   strict=strict)
@@ -659,6 +661,7 @@ def fit_many(measurements_list, model, *, loss: str = "cosine", solver="lm", ini
         if np.shape(m.values) != shape:
             raise ValueError(f"fit_many needs equally shaped data sets: item 0 has values of shape {shape}, "
                              f"item {i} has {np.shape(m.values)}; fit them separately with fit()")
+    rtol, atol = working_tolerances(rtol, atol)
     prepared = [_prepare(m, model, loss=loss, solver=solver, fixed=fixed, free=free, robust=robust,
                          max_steps=max_steps, rtol=rtol, atol=atol) for m in items]
     problem = prepared[0][0]

@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import optimistix as optx
 
-__all__ = ["SOLVERS", "make_solver", "solver_name"]
+__all__ = ["SOLVERS", "make_solver", "solver_name", "working_tolerances"]
+
+# Floors of the convergence tolerances in units of the working precision's machine epsilon: rounding makes
+# successive float32 steps differ by a few ulps of the cost and of the parameters, so a float32 fit (run under
+# `jax.enable_x64(False)`) with the float64 defaults would never meet them and end at max_steps. In float64 the
+# floors (2.2e-14 and 2.2e-16) lie below the defaults and change nothing.
+RTOL_FLOOR_EPS = 100.0
+ATOL_FLOOR_EPS = 1.0
 
 # name -> (constructor, description). Every constructor takes rtol and atol.
 SOLVERS = {
@@ -40,6 +48,20 @@ def make_solver(solver, rtol: float, atol: float):
         return solver
     raise ValueError(f"solver must be a name ({', '.join(SOLVERS)}) or an optimistix least-squares solver or "
                      f"minimiser, got {type(solver).__name__}")
+
+
+def working_tolerances(rtol: float, atol: float) -> tuple[float, float]:
+    """The tolerances raised to what the working precision can meet.
+
+    Arguments:
+        rtol, atol: the requested relative and absolute tolerances.
+
+    Returns:
+        ``(max(rtol, RTOL_FLOOR_EPS·eps), max(atol, ATOL_FLOOR_EPS·eps))`` with eps the machine epsilon of JAX's
+        default float type (float64 when brdffit is imported, float32 inside ``jax.enable_x64(False)``).
+    """
+    eps = float(jnp.finfo(jnp.result_type(float)).eps)
+    return max(rtol, RTOL_FLOOR_EPS * eps), max(atol, ATOL_FLOOR_EPS * eps)
 
 
 def solver_name(solver) -> str:

@@ -313,3 +313,32 @@ def test_auto_init_restarts_a_stall_at_a_bound():
     # m = 0.02 the diffuse level is seen through few samples).
     for name in ("rho_d", "ks", "m"):
         np.testing.assert_allclose(result.params[name], oracle.params[name], rtol=1e-4)
+
+
+def test_a_fit_inside_jax_float32_mode_runs_in_float32_and_finds_the_same_optimum(plastic):
+    # docs/conventions.md: `with jax.enable_x64(False)` runs a whole fit in float32.
+    import warnings
+
+    import jax
+
+    truth, data = plastic
+    double = fit(data, "lambert+cook-torrance", fixed={"f0": 0.04}, init=truth)
+    with jax.enable_x64(False), warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Explicitly requested dtype")
+        single = fit(data, "lambert+cook-torrance", fixed={"f0": 0.04}, init=truth)
+    assert np.asarray(single.params["m"]).dtype == np.float32
+    assert single.converged
+    for name in ("rho_d", "ks", "m"):  # float32 carries ~7 digits; the noise-limited stderr is ~1e-3 relative
+        np.testing.assert_allclose(single.params[name], double.params[name], rtol=1e-4)
+
+
+def test_tolerances_are_raised_to_what_float32_can_meet_and_unchanged_in_float64():
+    import jax
+
+    from brdffit.solvers import working_tolerances
+
+    assert working_tolerances(1e-8, 1e-12) == (1e-8, 1e-12)
+    with jax.enable_x64(False):
+        rtol, atol = working_tolerances(1e-8, 1e-12)
+    eps32 = float(np.finfo(np.float32).eps)
+    assert rtol == pytest.approx(100 * eps32) and atol == pytest.approx(eps32)
