@@ -141,7 +141,7 @@ def _eval_cost_ns(result: FitResult, seed: int) -> float:
     u = rng.random((4, _COST_SAMPLES))
     wi = spherical_to_vector(np.arccos(u[0]), 2 * np.pi * u[1])
     wo = spherical_to_vector(np.arccos(u[2]), 2 * np.pi * u[3])
-    fn = jax.jit(evaluate_dirs)
+    fn = evaluate_dirs  # jitted
     jax.block_until_ready(fn(result.model, wi, wo))
     best = math.inf
     for _ in range(5):

@@ -388,7 +388,6 @@ def _padded_call(fn, arrays):
 
 
 _from_half_diff_jit = jax.jit(geometry.from_half_diff)
-_evaluate_jit = jax.jit(evaluate)
 
 
 def _from_half_diff(theta_h, phi_h, theta_d, phi_d):
@@ -544,7 +543,7 @@ PATTERNS = {
 def _evaluate(model: Model, angles) -> np.ndarray:
     if angles[0].shape[0] == 0:
         return np.zeros((0, model.channels))
-    return _padded_call(lambda *a: _evaluate_jit(model, *a), angles)[0]
+    return _padded_call(lambda *a: evaluate(model, *a), angles)[0]
 
 
 def _default_channels(count: int) -> tuple[str, ...]:

@@ -181,12 +181,11 @@ class MerlTable:
         theta_i, phi_i, theta_o, phi_o = (a.reshape(-1) for a in cell_angles(0.0))
         above = np.flatnonzero(_above_horizon(theta_i, theta_o))
         out = np.full((N_CELLS, 3), np.nan)
-        run = _jit(evaluate)
         chunk = min(int(chunk), len(above))
         for start in range(0, len(above), chunk):
             rows = above[start:start + chunk]
             padded = np.pad(rows, (0, chunk - len(rows)), mode="edge")  # one compiled shape for every chunk
-            f = np.asarray(run(model, theta_i[padded], phi_i[padded], theta_o[padded], phi_o[padded]),
+            f = np.asarray(evaluate(model, theta_i[padded], phi_i[padded], theta_o[padded], phi_o[padded]),
                            dtype=np.float64)[:len(rows)]
             out[rows] = f if channels == 3 else np.repeat(f, 3, axis=1)
         return cls(out.T.reshape(3, *DIMS))

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections import Counter
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from ..geometry import LocalPair, spherical_to_vector
@@ -133,6 +134,10 @@ def coerce_value(spec: ParamSpec, value, channels: int):
     return value
 
 
+# `evaluate_dirs` and `evaluate` are jitted: one compilation per model structure and input shape, instead of one
+# per primitive as JAX does when it runs them eagerly (dozens per lobe, which made reports and selection spend
+# most of their time compiling). Inside a traced function they inline as before.
+@jax.jit
 def evaluate_dirs(model: Model, wi, wo):
     """Evaluate a model for pairs of unit direction vectors.
 
@@ -166,6 +171,7 @@ def evaluate_pair(model: Model, pair: LocalPair):
     return jnp.where(pair.above[..., None], total, 0.0)
 
 
+@jax.jit
 def evaluate(model: Model, theta_i, phi_i, theta_o, phi_o):
     """Evaluate a model at spherical angles.
 
