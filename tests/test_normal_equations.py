@@ -39,8 +39,8 @@ def _dense(problem, tree, data, physical):
                   else physical_params(problem, values, data.fixed))
         return residual_fn(problem, params, data).ravel()
 
-    jac = np.asarray(jax.jacfwd(r)(flat))
-    res = np.asarray(r(flat))
+    # Jitted: run eagerly, every primitive of a many-lobe model would compile on its own (minutes of CI time).
+    jac, res = (np.asarray(a) for a in jax.jit(lambda theta: (jax.jacfwd(r)(theta), r(theta)))(flat))
     scaled = jac * res[:, None]
     return jac.T @ jac, jac.T @ res, float(res @ res), scaled.T @ scaled
 
@@ -53,9 +53,14 @@ def _check(problem, tree, data, physical, chunk=None):
         np.testing.assert_allclose(g, w, rtol=1e-9, atol=1e-12 * np.max(np.abs(w)))
 
 
-@pytest.mark.parametrize("lobe", models.names())
-def test_matches_dense_jacobian_for_every_lobe(lobe):
-    problem, y, physical, data = _setup(f"lambert+{lobe}")
+def test_matches_dense_jacobian_for_a_sum_of_lobes():
+    # The assembly is lobe-agnostic (one tangent per parameter name), so one sum covers what differs between
+    # lobes: per-channel colour and shared shape parameters, an anisotropic pair, numbered Lafortune sub-lobes
+    # and a declared-fixed parameter (toon width). A sum of every registered lobe tested the same in 60 s of CI.
+    problem, y, physical, data = _setup("oren-nayar+cook-torrance+ashikhmin-shirley-aniso+lafortune(lobes=2)"
+                                        "+toon-specular")
+    assert {"rho_d", "sigma", "m", "nu", "nv", "cxy_2", "n_2"}.issubset(problem.free)
+    assert "width" not in problem.free
     _check(problem, y, data, physical=False)
     _check(problem, physical, data, physical=True)
 
@@ -67,8 +72,8 @@ def test_matches_dense_jacobian_for_losses(loss, robust):
     _check(problem, y, data, physical=False)
 
 
-def test_chunking_and_block_padding_give_the_same_sums():
-    # 2,500 samples in chunks of 1,100 (last one padded) with blocked column sums over 1,024 rows (padded too).
+def test_chunking_gives_the_same_sums():
+    # 2,500 samples in chunks of 1,100: the last chunk is padded with masked samples.
     problem, y, _, data = _setup("lambert+ward-aniso", n=2500)
     _check(problem, y, data, physical=False, chunk=1100)
 

@@ -17,13 +17,15 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_blinn_phong_data_select_blinn_phong_not_bigger_models():
     truth = models.get("lambert+blinn-phong", rho_d=[0.3, 0.2, 0.1], ks=[0.6, 0.5, 0.4], n=60.0)
     data = synth.generate(truth, pattern="half-diff", n=800, noise="relative:0.01", seed=0)
+    # Up to two Lafortune lobes (8 more parameters than the truth); a third lobe doubled the test's time and is
+    # covered by test_two_lobe_lafortune_data_select_two_lobes.
     candidates = ["lambert", "lambert+blinn-phong", "lambert+cook-torrance", "lambert+lafortune",
-                  "lambert+lafortune(lobes=2)", "lambert+lafortune(lobes=3)"]
+                  "lambert+lafortune(lobes=2)"]
     selection = select(data, candidates, criterion="bic", loss="sigma")
     assert selection.chosen == "lambert+blinn-phong", selection.summary()
     rows = {r["spec"]: r for r in selection.table}
     assert rows["lambert+blinn-phong"]["bic"] < rows["lambert+cook-torrance"]["bic"] - 10
-    assert rows["lambert+blinn-phong"]["bic"] < rows["lambert+lafortune(lobes=3)"]["bic"] - 10
+    assert rows["lambert+blinn-phong"]["bic"] < rows["lambert+lafortune(lobes=2)"]["bic"] - 10
     assert all(r["cost_ns"] > 0 and np.isfinite(r["heldout_error"]) for r in selection.table)
     # Held-out error of the true model is at the noise level (loss="sigma": 1 per residual).
     assert rows["lambert+blinn-phong"]["heldout_error"] == pytest.approx(1.0, rel=0.15)
