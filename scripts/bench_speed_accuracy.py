@@ -12,7 +12,7 @@ Configurations of the full grid (``--quick`` runs a handful at 1e3-1e4 samples, 
 - size: lambert+cook-torrance with lm and scipy from 1e3 to 1,458,000 samples (the MERL table size), and
   lambert+ggx with the same up to 1e5;
 - multistart: multistart=8 (9 starts in one vmapped solve) against 0, with lm and dogleg, for four models;
-- float32: the scipy baseline with float32 residuals against the same with float64, every model.
+- float32: brdffit's lm and the scipy baseline in float32 against float64, every model.
 
 Measured per configuration:
 - time to result, warm: a first fit on data of the same shape (another seed) compiles, the next fits are timed.
@@ -30,11 +30,11 @@ bench_fit.py) on the residuals of brdffit's cosine loss, (f_model - f_data) cos(
 from brdffit's own model evaluation (`brdffit.models.evaluate`, jitted) handed to scipy as a NumPy array, bounds
 from the model's ParamSpecs and the start the brdffit solvers get.
 
-Precision: brdffit fits run in float64 only (importing brdffit turns on jax_enable_x64; `fit` has no dtype).
-The float32 rows are the scipy baseline with the model evaluated under ``jax.enable_x64(False)`` and the
-residuals in float32 (scipy then takes its finite-difference step for float32); the fitted parameters are
-scored in float64 like every other row. A second table gives the error of a float32 evaluation of each truth
-against float64 on the held-out directions.
+Precision: importing brdffit turns on jax_enable_x64 and `fit` has no dtype option. The float32 rows run the
+whole `brdffit.fit` inside ``jax.enable_x64(False)``, so that data, model, solver and covariance are float32,
+and the scipy baseline with the model evaluated the same way and the residuals in float32 (scipy then takes its
+finite-difference step for float32); the fitted parameters are scored in float64 like every other row. A
+second table gives the error of a float32 evaluation of each truth against float64 on the held-out directions.
 
 Timing on a shared machine: other processes on the CPUs slow JAX's short solves of many small operations far
 more than their share of the CPU; on the shared 2-core benchmark machine the same warm fit of 1e3 samples took
@@ -149,7 +149,7 @@ CASES = {case.spec: case for case in (
 @dataclasses.dataclass(frozen=True)
 class Config:
     """One configuration: model spec, solver (a brdffit solver name or "scipy"), training samples, extra
-    starts of the multistart, and the dtype of the residuals (float32 only for the scipy baseline)."""
+    starts of the multistart, and the precision of the fit."""
 
     spec: str
     solver: str
@@ -178,7 +178,7 @@ def full_grid() -> dict[Config, list[str]]:
                 + [Config("lambert+ggx", solver, n) for solver in ("lm", BASELINE) for n in ggx_sizes],
         "multistart": [Config(spec, solver, 10_000, starts) for spec in multistart_specs
                        for solver in ("lm", "dogleg") for starts in (0, 8)],
-        "float32": [Config(spec, BASELINE, 10_000, dtype=dtype) for spec in CASES
+        "float32": [Config(spec, solver, 10_000, dtype=dtype) for spec in CASES for solver in ("lm", BASELINE)
                     for dtype in ("float64", "float32")],
     })
 
@@ -191,7 +191,8 @@ def quick_grid() -> dict[Config, list[str]]:
                  + [Config(lafortune, solver, 1_000) for solver in ("lm", BASELINE)],
         "size": [Config(ct, solver, n) for solver in ("lm", BASELINE) for n in (1_000, 10_000)],
         "multistart": [Config(ct, "lm", 1_000, starts) for starts in (0, 8)],
-        "float32": [Config(ct, BASELINE, 1_000, dtype=dtype) for dtype in ("float64", "float32")],
+        "float32": [Config(ct, solver, 1_000, dtype=dtype) for solver in ("lm", BASELINE)
+                    for dtype in ("float64", "float32")],
     })
 
 
@@ -289,13 +290,16 @@ def fastest_run(run):
 
 
 def run_brdffit(config: Config, case: ModelCase, data, warmup_data) -> tuple[dict, models.Model]:
-    """A warm `brdffit.fit`: a first fit on ``warmup_data`` compiles, the fits on ``data`` are timed."""
+    """A warm `brdffit.fit`: a first fit on ``warmup_data`` compiles, the fits on ``data`` are timed; a float32
+    configuration runs under `float32_jax`. The fitted model comes back in float64 for scoring."""
     start = case.start_model()
     options = dict(init="model", fixed=list(case.fixed), solver=config.solver, multistart=config.multistart)
-    first = brdffit.fit(warmup_data, start, **options)
-    elapsed, result, repeats = fastest_run(lambda: brdffit.fit(data, start, **options))
+    with float32_jax() if config.dtype == "float32" else contextlib.nullcontext():
+        first = brdffit.fit(warmup_data, start, **options)
+        elapsed, result, repeats = fastest_run(lambda: brdffit.fit(data, start, **options))
+    fitted = jax.tree_util.tree_map(lambda value: np.asarray(value, dtype=np.float64), result.model)
     return dict(compile_s=first.compile_time, time_s=elapsed, solve_s=result.run_time, repeats=repeats,
-                steps=result.steps, status=result.status, cost=result.cost, strategy=result.strategy), result.model
+                steps=result.steps, status=result.status, cost=result.cost, strategy=result.strategy), fitted
 
 
 def baseline_status(solution, fitted: models.Model, free: list[str]) -> str:
@@ -447,7 +451,7 @@ def machine_info(args, heldout_samples: int) -> dict:
         matplotlib=matplotlib.__version__, backend=jax.default_backend(), grid="quick" if args.quick else "full",
         pattern=args.pattern, noise=NOISE,
         heldout=f"{heldout_samples} uniform samples, no noise, seed {HELDOUT_SEED}",
-        precision="brdffit fits run in float64 only; float32 rows are the scipy baseline with float32 residuals",
+        precision="float32 rows run brdffit.fit (and the scipy baseline's model) under jax.enable_x64(False)",
     )
 
 
@@ -509,7 +513,7 @@ def pareto_front(points: list[tuple[float, float]], tolerance: float = 1e-3) -> 
 
 
 def series(row: dict) -> str:
-    """The colour series of a row: its solver, with the float32 baseline apart."""
+    """The colour series of a row: its solver, with the float32 rows apart."""
     return f"{row['solver']} (float32)" if row["dtype"] == "float32" else row["solver"]
 
 
@@ -524,7 +528,7 @@ def plot_pareto(rows: list[dict], info: dict, path: Path) -> None:
     from matplotlib.lines import Line2D
 
     colours = {"lm": "tab:blue", "gauss-newton": "tab:orange", "dogleg": "tab:green", "bfgs": "tab:red",
-               BASELINE: "tab:gray", f"{BASELINE} (float32)": "tab:purple"}
+               BASELINE: "tab:gray", f"{BASELINE} (float32)": "tab:purple", "lm (float32)": "tab:cyan"}
     markers = dict(zip(CASES, "os^vDPX*h"))
     shown = [row for row in rows if all(isinstance(row.get(key), float) and math.isfinite(row[key]) and row[key] > 0
                                         for key in ("time_s", "ngan"))]
