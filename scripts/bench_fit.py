@@ -105,7 +105,7 @@ def main():
     args = parser.parse_args()
 
     import brdffit
-    from brdffit import models, synth
+    from brdffit import models
     from brdffit.io.merl import MerlTable
 
     truth = models.get(SPEC, **TRUTH)
