@@ -1,7 +1,9 @@
 """Behaviour of the fitting engine: constraints, missing data, failure reporting, uncertainty, batching, I/O."""
 
 import json
+import warnings
 
+import jax
 import numpy as np
 import optimistix as optx
 import pytest
@@ -317,10 +319,6 @@ def test_auto_init_restarts_a_stall_at_a_bound():
 
 def test_a_fit_inside_jax_float32_mode_runs_in_float32_and_finds_the_same_optimum(plastic):
     # docs/conventions.md: `with jax.enable_x64(False)` runs a whole fit in float32.
-    import warnings
-
-    import jax
-
     truth, data = plastic
     double = fit(data, "lambert+cook-torrance", fixed={"f0": 0.04}, init=truth)
     with jax.enable_x64(False), warnings.catch_warnings():
@@ -333,8 +331,6 @@ def test_a_fit_inside_jax_float32_mode_runs_in_float32_and_finds_the_same_optimu
 
 
 def test_tolerances_are_raised_to_what_float32_can_meet_and_unchanged_in_float64():
-    import jax
-
     from brdffit.solvers import working_tolerances
 
     assert working_tolerances(1e-8, 1e-12) == (1e-8, 1e-12)
