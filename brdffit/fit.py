@@ -18,7 +18,7 @@ import numpy as np
 
 from .fit_result import FitResult, param_labels
 from .initial_guess import MAX_INIT_SAMPLES, initial_guesses
-from .losses import LOSSES, ROBUST, relative_epsilon
+from .losses import LOSSES, ROBUST, loss_epsilon
 from .metrics import fit_metrics
 from .models.model import Model, global_names
 from .models.registry import get as get_model
@@ -28,7 +28,7 @@ from .problem import (FitData, Problem, compiled_solve, make_fit_data, physical_
                       stack_data)
 from .progress import Progress
 from .refine import refine
-from .solvers import make_solver, solver_name, working_tolerances
+from .solvers import coarse_solver, make_solver, solver_name, working_tolerances
 
 __all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
 
@@ -104,8 +104,8 @@ def _unconstrained(problem: Problem, starts: list[dict]) -> dict:
 def _physical_normal_matrices(problem: Problem, params: dict, data: FitData):
     """JᵀJ, Jᵀ diag(r²) J and Jᵀr with J the residual Jacobian w.r.t. the free physical parameters (chunked)."""
     data = data._replace(fixed={k: v for k, v in params.items() if k not in problem.free})
-    jtj, jtr, _, meat = accumulate(problem, {k: params[k] for k in problem.free}, chunks(data), physical=True)
-    return jtj, meat, jtr
+    sums = accumulate(problem, {k: params[k] for k in problem.free}, chunks(data), physical=True)
+    return sums.jtj, sums.meat, sums.jtr
 
 
 def _predicted_decrease(problem: Problem, params: dict, jtj, jtr) -> float:
@@ -243,12 +243,13 @@ def _canonical(problem: Problem, y: dict, fixed: dict, outcome: dict):
 
 
 def _coarse_problem(problem: Problem, solver) -> Problem:
-    """The coarse stage's problem: a named solver gets the looser `COARSE_RTOL`; its answer only has to land
-    within the subsample's statistical error of the optimum (about 1/√COARSE_SAMPLES), which the refinement
-    then removes. A solver object is used as given."""
+    """The coarse stage's problem: a named solver gets the looser `COARSE_RTOL` (and, for "lm", normal
+    equations: `brdffit.solvers.coarse_solver`); its answer only has to land within the subsample's statistical
+    error of the optimum (about 1/√COARSE_SAMPLES), which the refinement then removes. A solver object is used as
+    given."""
     if not isinstance(solver, str):
         return problem
-    loose = make_solver(solver, max(COARSE_RTOL, problem.solver.rtol), max(COARSE_ATOL, problem.solver.atol))
+    loose = coarse_solver(solver, max(COARSE_RTOL, problem.solver.rtol), max(COARSE_ATOL, problem.solver.atol))
     return dataclasses.replace(problem, solver=loose)
 
 
@@ -331,7 +332,9 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
                         "(try solver='lm', init='auto' or multistart)")
     k = len(labels)
     aic, bic = _information_criteria(problem.loss, cost, n_valid, k)
-    per_channel_cost = np.asarray(_channel_cost(problem)(fitted.params, data))
+    per_channel_cost = outcome.get("channel_cost")  # a refinement's last pass has it
+    if per_channel_cost is None:
+        per_channel_cost = np.asarray(_channel_cost(problem)(fitted.params, data))
     counts = np.maximum(np.isfinite(measurements.values).sum(axis=0), 1)
     metrics = {"rmse_loss": np.sqrt(per_channel_cost / counts)}
     metrics.update(fit_metrics(fitted, measurements, pair=data.pair))
@@ -366,7 +369,7 @@ def _prepare(measurements, model, *, loss, solver, fixed, free, robust, max_step
 def _starting_points(problem: Problem, model: Model, measurements, fixed_values: dict, init, multistart: int,
                      seed: int, robust_scale):
     """The starts (physical dicts) and the robust scale, from a subsample of the data."""
-    eps = relative_epsilon(measurements.values)
+    eps = loss_epsilon(problem.loss, measurements.values)
     sub = make_fit_data(_subsample(measurements, MAX_INIT_SAMPLES, seed), fixed_values, eps, 1.0)
     base = dict(model.params, **fixed_values)
     plain = Problem(problem.lobes, problem.channels, problem.free, problem.loss, None, problem.solver,

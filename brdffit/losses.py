@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-__all__ = ["LOSSES", "ROBUST", "residuals", "robust_residuals", "relative_epsilon", "residual_scale"]
+__all__ = ["LOSSES", "ROBUST", "residuals", "robust_residuals", "relative_epsilon", "loss_epsilon", "residual_scale"]
 
 LOSSES = ("cosine", "log", "relative", "absolute", "sigma")
 ROBUST = (None, "huber", "cauchy")
@@ -27,6 +27,22 @@ def relative_epsilon(values):
 
     scale = np.nanmean(np.abs(values), axis=0)
     return np.maximum(1e-3 * np.nan_to_num(scale, nan=1.0), 1e-12)
+
+
+def loss_epsilon(loss: str, values):
+    """The ε that `residuals` reads for ``loss``: `relative_epsilon` for the relative loss, the only one that
+    reads it; ones for the others, which spares them a pass over the data (0.06 s on a MERL-size table).
+
+    Arguments:
+        loss: one of `LOSSES`.
+        values: data ``(N, C)`` with NaN for missing samples.
+
+    Returns:
+        Array ``(C,)``.
+    """
+    import numpy as np
+
+    return relative_epsilon(values) if loss == "relative" else np.ones(np.shape(values)[1])
 
 
 def residuals(loss: str, f_model, f_data, cos_i, sqrt_weight, sigma, eps):

@@ -16,6 +16,7 @@ into the P × P matrices. `tests/test_normal_equations.py` checks the result aga
 from __future__ import annotations
 
 import functools
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -23,9 +24,27 @@ import numpy as np
 
 from .problem import FitData, Problem, chunk_data, physical_params, residual_fn
 
-__all__ = ["chunk_tangents", "chunks", "accumulate", "CHUNK_SAMPLES"]
+__all__ = ["NormalEquations", "chunk_tangents", "chunks", "accumulate", "CHUNK_SAMPLES"]
 
 CHUNK_SAMPLES = 65536
+
+
+class NormalEquations(NamedTuple):
+    """The sums `accumulate` returns, as NumPy float64, in `brdffit.problem.flatten_free` order.
+
+    Fields:
+        jtj: JᵀJ ``(P, P)``.
+        jtr: Jᵀr ``(P,)``.
+        cost: rᵀr.
+        meat: Jᵀ diag(r²) J ``(P, P)`` (the sandwich covariance's middle).
+        channel_cost: rᵀr of each channel ``(C,)``.
+    """
+
+    jtj: np.ndarray
+    jtr: np.ndarray
+    cost: float
+    meat: np.ndarray
+    channel_cost: np.ndarray
 
 
 @functools.lru_cache(maxsize=64)
@@ -82,8 +101,8 @@ def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
     return chunk_data(data, size)
 
 
-def accumulate(problem: Problem, tree: dict, pieces: list[FitData], *, physical: bool):
-    """JᵀJ, Jᵀr, rᵀr and Jᵀ diag(r²) J over all of the data, in `brdffit.problem.flatten_free` order.
+def accumulate(problem: Problem, tree: dict, pieces: list[FitData], *, physical: bool) -> NormalEquations:
+    """JᵀJ, Jᵀr, rᵀr, Jᵀ diag(r²) J and the per-channel rᵀr over all of the data.
 
     Arguments:
         problem: the `Problem`.
@@ -92,7 +111,7 @@ def accumulate(problem: Problem, tree: dict, pieces: list[FitData], *, physical:
         physical: differentiate with respect to physical parameters (True) or unconstrained variables (False).
 
     Returns:
-        ``(jtj (P, P), jtr (P,), cost, meat (P, P))`` as NumPy float64.
+        The `NormalEquations`.
     """
     index, incidence = _channel_incidence(problem, tree)
     fn = chunk_tangents(problem, physical)
@@ -116,4 +135,5 @@ def accumulate(problem: Problem, tree: dict, pieces: list[FitData], *, physical:
             return np.sum(both * sums[index][:, index], axis=-1)
 
         jtr = np.sum(incidence * gram[index, q], axis=-1)
-        return expand(gram[:q, :q]), jtr, float(np.sum(gram[q, q])), expand(meat)
+        return NormalEquations(jtj=expand(gram[:q, :q]), jtr=jtr, cost=float(np.sum(gram[q, q])),
+                               meat=expand(meat), channel_cost=np.array(gram[q, q], dtype=float))

@@ -22,7 +22,7 @@ import numpy as np
 from jax.scipy.special import gammaln
 
 from .fit_result import FitResult, param_labels
-from .losses import relative_epsilon, residual_scale
+from .losses import loss_epsilon, residual_scale
 from .models.model import evaluate
 from .params import ParamSpec
 from .problem import Problem, flatten_free, make_fit_data, physical_params, residual_fn
@@ -335,7 +335,7 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
         measurements = measurements.subsample(max_samples, seed=seed, stratified=True)
         subsample = (measurements.n, total)
     fixed = {k: jnp.asarray(v) for k, v in model.params.items() if k in fit_result.fixed}
-    data = make_fit_data(measurements, fixed, relative_epsilon(measurements.values))
+    data = make_fit_data(measurements, fixed, loss_epsilon(fit_result.loss, measurements.values))
     channels = model.channels
 
     if noise == "estimate":

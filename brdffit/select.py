@@ -20,7 +20,7 @@ import numpy as np
 from .fit import fit
 from .fit_result import FitResult
 from .geometry import spherical_to_vector
-from .losses import relative_epsilon
+from .losses import loss_epsilon
 from .models.model import evaluate_dirs
 from .multilobe import new_lobe_candidates
 from .problem import Problem, make_fit_data, residual_fn
@@ -122,7 +122,7 @@ def _loss_rmse(result: FitResult, measurements, rows: np.ndarray) -> float:
     held = measurements.take(rows)
     problem = Problem(lobes=model.lobes, channels=model.channels, free=(), loss=result.loss, robust=None,
                       solver=None, max_steps=0)
-    data = make_fit_data(held, {}, relative_epsilon(measurements.values))
+    data = make_fit_data(held, {}, loss_epsilon(result.loss, measurements.values))
     r = np.asarray(residual_fn(problem, dict(model.params), data))
     mask = np.asarray(data.mask)
     return float(np.sqrt(np.sum(r[mask] ** 2) / max(mask.sum(), 1)))

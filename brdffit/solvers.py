@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import jax.numpy as jnp
+import lineax as lx
 import optimistix as optx
 
-__all__ = ["SOLVERS", "make_solver", "solver_name", "working_tolerances"]
+__all__ = ["SOLVERS", "make_solver", "coarse_solver", "solver_name", "working_tolerances"]
 
 # Floors of the convergence tolerances in units of the working precision's machine epsilon: rounding makes
 # successive float32 steps differ by a few ulps of the cost and of the parameters, so a float32 fit (run under
@@ -48,6 +49,28 @@ def make_solver(solver, rtol: float, atol: float):
         return solver
     raise ValueError(f"solver must be a name ({', '.join(SOLVERS)}) or an optimistix least-squares solver or "
                      f"minimiser, got {type(solver).__name__}")
+
+
+def coarse_solver(solver, rtol: float, atol: float):
+    """The solver of a two-stage fit's coarse stage (`brdffit.fit.COARSE_SAMPLES` samples) for a named solver.
+
+    For ``"lm"`` in float64 it is Levenberg-Marquardt whose damped step solves the normal equations
+    (JᵀJ + λI) δ = −Jᵀr by Cholesky (lineax's ``Normal(Cholesky())``) instead of a QR factorisation of the
+    stacked [J; √λ I] (optimistix's default): the same steps, 1.5× faster on 30,000 residuals, where the QR of the
+    tall matrix is most of a step. Normal equations square the condition number, which float64 absorbs; the
+    refinement that follows solves normal equations too. In float32, and for the other names, it is
+    `make_solver`'s.
+
+    Arguments:
+        solver: a name from `SOLVERS`.
+        rtol, atol: the coarse stage's tolerances.
+
+    Returns:
+        The solver object.
+    """
+    if solver == "lm" and jnp.finfo(jnp.result_type(float)).bits == 64:
+        return optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
+    return make_solver(solver, rtol, atol)
 
 
 def working_tolerances(rtol: float, atol: float) -> tuple[float, float]:

@@ -9,7 +9,9 @@ import optimistix as optx
 import pytest
 
 from brdffit import FitError, FitResult, Measurements, fit, fit_many, io, models, synth
-from brdffit.losses import residuals, robust_residuals
+from brdffit.losses import loss_epsilon, relative_epsilon, residuals, robust_residuals
+from brdffit.problem import make_fit_data
+from brdffit.solvers import coarse_solver
 
 PLASTIC = dict(rho_d=[0.5, 0.35, 0.2], ks=[0.9, 0.8, 0.7], m=0.15, f0=0.04)
 
@@ -248,6 +250,56 @@ def test_measurements_without_sigma_fit_with_cosine_loss():
     np.testing.assert_allclose(result.params["rho_d"], [0.2, 0.4, 0.6], rtol=1e-6)
 
 
+def test_only_the_relative_loss_reads_epsilon():
+    values = np.array([[1.0, np.nan], [3.0, 4.0]])
+    np.testing.assert_allclose(loss_epsilon("relative", values), relative_epsilon(values))
+    np.testing.assert_allclose(relative_epsilon(values), [2e-3, 4e-3])  # 1e-3 × mean |valid value| per channel
+    for loss in ("cosine", "log", "absolute", "sigma"):
+        np.testing.assert_array_equal(loss_epsilon(loss, values), [1.0, 1.0])
+
+
+def test_fit_data_holds_the_per_sample_arrays_written_out_in_numpy():
+    rng = np.random.default_rng(4)
+    n = 40
+    theta_i, theta_o = rng.uniform(0, 1.5, n), rng.uniform(0, 1.5, n)
+    phi_i, phi_o = rng.uniform(0, 6.28, n), rng.uniform(0, 6.28, n)
+    values = rng.uniform(0.1, 1.0, (n, 3))
+    values[3, 1] = np.nan
+    sigma = rng.uniform(0.01, 0.1, (n, 3))
+    sigma[3, 1] = np.nan  # no sigma where the value is missing
+    weights = rng.uniform(0.5, 2.0, n)
+    data = Measurements(theta_i, phi_i, theta_o, phi_o, values, sigma=sigma, weights=weights)
+    got = make_fit_data(data, {"m": 0.2}, np.full(3, 1e-3), 0.5)
+    mask = np.isfinite(values)
+    np.testing.assert_array_equal(got.mask, mask)
+    np.testing.assert_array_equal(got.values, np.where(mask, values, 0.0))
+    np.testing.assert_allclose(got.cos_i, np.cos(theta_i), rtol=1e-15)
+    np.testing.assert_allclose(got.sqrt_weight, np.sqrt(weights), rtol=1e-15)
+    np.testing.assert_array_equal(got.sigma, np.where(mask, sigma, 1.0))
+    wi = np.stack([np.sin(theta_i) * np.cos(phi_i), np.sin(theta_i) * np.sin(phi_i), np.cos(theta_i)], -1)
+    wo = np.stack([np.sin(theta_o) * np.cos(phi_o), np.sin(theta_o) * np.sin(phi_o), np.cos(theta_o)], -1)
+    h = (wi + wo) / np.linalg.norm(wi + wo, axis=-1, keepdims=True)
+    np.testing.assert_allclose(got.pair.wi, wi, atol=1e-15)
+    np.testing.assert_allclose(got.pair.h, h, atol=1e-15)
+    np.testing.assert_allclose(got.pair.cos_d, np.sum(wi * h, -1), rtol=1e-14)
+    assert float(got.fixed["m"]) == 0.2 and float(got.robust_scale) == 0.5
+    plain = make_fit_data(Measurements(theta_i, phi_i, theta_o, phi_o, values), {}, np.ones(3))
+    np.testing.assert_array_equal(plain.sigma, np.ones((n, 3)))  # no sigma, no weights: ones
+    np.testing.assert_array_equal(plain.sqrt_weight, np.ones(n))
+
+
+def test_coarse_stage_of_lm_solves_normal_equations_in_float64_only():
+    import lineax as lx
+
+    solver = coarse_solver("lm", 1e-5, 1e-8)
+    assert isinstance(solver, optx.LevenbergMarquardt) and isinstance(solver.descent.linear_solver, lx.Normal)
+    assert (solver.rtol, solver.atol) == (1e-5, 1e-8)
+    with jax.enable_x64(False):
+        single = coarse_solver("lm", 1e-5, 1e-8)
+    assert isinstance(single.descent.linear_solver, lx.QR)  # float32 cannot afford the squared condition number
+    assert isinstance(coarse_solver("dogleg", 1e-5, 1e-8), optx.Dogleg)
+
+
 def test_coarse_to_fine_gives_the_full_data_answer():
     # Above COARSE_SAMPLES samples a fit may solve on a subsample and refine on all data (brdffit.refine); the
     # optimum, its cost and its covariance must be those of the plain full-data solve.
@@ -262,6 +314,9 @@ def test_coarse_to_fine_gives_the_full_data_answer():
         np.testing.assert_allclose(staged.params[name], full.params[name], rtol=1e-6)
         np.testing.assert_allclose(staged.stderr[name], full.stderr[name], rtol=1e-3)
         np.testing.assert_allclose(staged.stderr_robust[name], full.stderr_robust[name], rtol=1e-3)
+    # The refinement's last pass supplies the per-channel loss RMSE; the other metrics come from their own pass.
+    for metric in full.metrics:
+        np.testing.assert_allclose(staged.metrics[metric], full.metrics[metric], rtol=1e-6)
 
 
 def test_loading_a_missing_fit_names_the_file(tmp_path):

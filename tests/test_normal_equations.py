@@ -30,7 +30,7 @@ def _setup(spec, loss="cosine", robust=None, n=700, seed=3):
 
 
 def _dense(problem, tree, data, physical):
-    """JᵀJ, Jᵀr, rᵀr, Jᵀdiag(r²)J from the full Jacobian."""
+    """JᵀJ, Jᵀr, rᵀr, Jᵀdiag(r²)J and the per-channel rᵀr from the full Jacobian."""
     flat, unravel = flatten_free(problem, tree)
 
     def r(theta):
@@ -42,7 +42,8 @@ def _dense(problem, tree, data, physical):
     # Jitted: run eagerly, every primitive of a many-lobe model would compile on its own (minutes of CI time).
     jac, res = (np.asarray(a) for a in jax.jit(lambda theta: (jax.jacfwd(r)(theta), r(theta)))(flat))
     scaled = jac * res[:, None]
-    return jac.T @ jac, jac.T @ res, float(res @ res), scaled.T @ scaled
+    per_channel = np.sum(res.reshape(-1, problem.channels) ** 2, axis=0)
+    return jac.T @ jac, jac.T @ res, float(res @ res), scaled.T @ scaled, per_channel
 
 
 def _check(problem, tree, data, physical, chunk=None):
