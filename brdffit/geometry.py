@@ -181,15 +181,20 @@ class LocalPair(NamedTuple):
     def from_dirs(cls, wi, wo) -> "LocalPair":
         """Build the shared quantities from unit vectors ``wi`` and ``wo`` (broadcastable, last axis 3)."""
         wi, wo = jnp.broadcast_arrays(jnp.asarray(wi, dtype=float), jnp.asarray(wo, dtype=float))
-        h = half_vector(wi, wo)
-        above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        # Component by component (the same arithmetic as `half_vector`): XLA on the CPU runs reductions over a
+        # last axis of length 3 slowly; this form took half the time on a MERL-size table.
+        sx, sy, sz = (wi[..., k] + wo[..., k] for k in range(3))
+        norm2 = sx * sx + sy * sy + sz * sz
+        ok = norm2 > TINY * TINY
+        norm = jnp.sqrt(jnp.where(ok, norm2, 1.0))
+        hx, hy, hz = jnp.where(ok, sx / norm, 0.0), jnp.where(ok, sy / norm, 0.0), jnp.where(ok, sz / norm, 1.0)
         return cls(
             wi=wi,
             wo=wo,
             cos_i=jnp.maximum(wi[..., 2], TINY),
             cos_o=jnp.maximum(wo[..., 2], TINY),
-            h=h,
-            cos_h=jnp.maximum(h[..., 2], TINY),
-            cos_d=jnp.maximum(0.5 * jnp.sum((wi + wo) * h, axis=-1), TINY),
-            above=above,
+            h=jnp.stack([hx, hy, hz], axis=-1),
+            cos_h=jnp.maximum(hz, TINY),
+            cos_d=jnp.maximum(0.5 * (sx * hx + sy * hy + sz * hz), TINY),
+            above=(wi[..., 2] > 0) & (wo[..., 2] > 0),
         )

@@ -335,13 +335,15 @@ def test_loading_a_missing_fit_names_the_file(tmp_path):
 @pytest.mark.parametrize("solver", ["gauss-newton", "bfgs"])
 def test_a_solver_that_stalls_far_from_the_minimum_is_not_reported_converged(solver):
     # Found by scripts/stability.py: from a far start, undamped Gauss-Newton ends ~1e4x the optimal cost and
-    # BFGS saturates rho_d's bound transform at 0 (cost 18x the optimum), both passing their own step tests.
+    # BFGS saturates rho_d's bound transform at 0 in some channels, both passing their own step tests. Where BFGS
+    # ends depends on the last bits of its path: 18x the optimal cost before the half vector was computed component
+    # by component (a 1-ulp change), 3.3x after; either is far from the minimum, which is what 2x asserts.
     truth = models.get("lambert+cook-torrance", rho_d=[0.3, 0.2, 0.1], ks=[0.8, 0.7, 0.6], m=0.15, f0=0.04)
     data = synth.generate(truth, pattern="half-diff", n=2000, noise="relative:0.01", seed=0)
     far = dict(rho_d=[0.9] * 3, ks=[0.001] * 3, m=0.9)
     stalled = fit(data, "lambert+cook-torrance", solver=solver, init=far, fixed={"f0": 0.04})
     good = fit(data, "lambert+cook-torrance", init=far, fixed={"f0": 0.04})
-    assert good.converged and stalled.cost > 10 * good.cost
+    assert good.converged and stalled.cost > 2 * good.cost
     assert stalled.status == "stalled" and not stalled.converged
     assert any("not a minimum" in w for w in stalled.warnings)
 

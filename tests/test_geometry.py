@@ -308,6 +308,11 @@ def test_local_pair_quantities(rng):
     np.testing.assert_allclose(pair.cos_o, wo[:, 2], rtol=RTOL)
     np.testing.assert_allclose(pair.cos_h, h[:, 2], rtol=RTOL)
     np.testing.assert_allclose(pair.cos_d, np.sum(wi * h, -1), rtol=RTOL)
+    np.testing.assert_allclose(pair.h, h, rtol=RTOL, atol=1e-15)
+    # half_vector's arithmetic, component by component: equal up to the order of rounding in |ωi + ωo| (1 ulp).
+    np.testing.assert_allclose(pair.h, geo.half_vector(wi, wo), rtol=3e-16, atol=2e-16)
     assert np.all(pair.above)
+    opposite = geo.LocalPair.from_dirs(wi, -wi)  # ωi + ωo = 0: h falls back to the normal, as half_vector does
+    np.testing.assert_array_equal(opposite.h, np.broadcast_to([0.0, 0.0, 1.0], wi.shape))
     below = geo.LocalPair.from_dirs(np.array([0.0, 0.6, -0.8]), np.array([0.0, 0.0, 1.0]))
     assert not bool(below.above) and float(below.cos_i) > 0  # clamped so lobes may divide by it
