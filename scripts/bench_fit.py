@@ -104,6 +104,8 @@ def main():
     parser.add_argument("--quick", action="store_true", help="use a 200k-cell subsample")
     parser.add_argument("--repeats", type=int, default=10, help="warm in-process fits to time (default 10)")
     args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error(f"--repeats must be at least 1, got {args.repeats}")
 
     import brdffit
     from brdffit import models
