@@ -317,7 +317,8 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
     """Build the `FitResult` of the kept solution ``y`` (one material, one start)."""
     params = {k: np.asarray(v) for k, v in physical_params(problem, y, data.fixed).items()}
     fitted = model.replace(**params)
-    n_valid = int(np.isfinite(measurements.values).sum())
+    valid = np.isfinite(measurements.values)
+    n_valid = int(valid.sum())
     labels = param_labels(params, problem.free)
     status, hit = _status(problem, outcome, params)
     cov, correlation, std, std_sandwich, variance, undetermined, decrease = _uncertainty(
@@ -335,7 +336,7 @@ def _finish(problem: Problem, model: Model, measurements, data: FitData, y: dict
     per_channel_cost = outcome.get("channel_cost")  # a refinement's last pass has it
     if per_channel_cost is None:
         per_channel_cost = np.asarray(_channel_cost(problem)(fitted.params, data))
-    counts = np.maximum(np.isfinite(measurements.values).sum(axis=0), 1)
+    counts = np.maximum(valid.sum(axis=0), 1)
     metrics = {"rmse_loss": np.sqrt(per_channel_cost / counts)}
     metrics.update(fit_metrics(fitted, measurements, pair=data.pair))
     return FitResult(

@@ -7,6 +7,7 @@ Samples with missing data (NaN) are masked to a zero residual before the solver 
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
 __all__ = ["LOSSES", "ROBUST", "residuals", "robust_residuals", "relative_epsilon", "loss_epsilon", "residual_scale"]
 
@@ -23,8 +24,6 @@ def relative_epsilon(values):
     Returns:
         Array ``(C,)``, strictly positive.
     """
-    import numpy as np
-
     scale = np.nanmean(np.abs(values), axis=0)
     return np.maximum(1e-3 * np.nan_to_num(scale, nan=1.0), 1e-12)
 
@@ -40,8 +39,6 @@ def loss_epsilon(loss: str, values):
     Returns:
         Array ``(C,)``.
     """
-    import numpy as np
-
     return relative_epsilon(values) if loss == "relative" else np.ones(np.shape(values)[1])
 
 
@@ -125,8 +122,6 @@ def residual_scale(loss: str, data) -> jnp.ndarray:
     Returns:
         NumPy array ``(N, C)``.
     """
-    import numpy as np
-
     values = np.asarray(data.values)
     cos_i = np.asarray(data.cos_i)[:, None]
     sqrt_w = np.asarray(data.sqrt_weight)[:, None]

@@ -61,9 +61,10 @@ def refine(problem: Problem, y: dict, data: FitData, *, rtol: float, atol: float
             # The next step is below the tolerance: this point is the answer, and its matrices are at hand.
             converged = True
             break
-        trial = system(flat + delta)
+        point = flat + delta
+        trial = system(point)
         if np.isfinite(trial.cost) and trial.cost <= current.cost:
-            flat, current = flat + delta, trial
+            flat, current = point, trial
             damping = max(damping / 10.0, 1e-12)
         else:
             damping *= 10.0

@@ -51,6 +51,12 @@ def make_solver(solver, rtol: float, atol: float):
                      f"minimiser, got {type(solver).__name__}")
 
 
+def _working_float():
+    """`jnp.finfo` of JAX's default float type: float64 once brdffit is imported, float32 inside
+    ``jax.enable_x64(False)``."""
+    return jnp.finfo(jnp.result_type(float))
+
+
 def coarse_solver(solver, rtol: float, atol: float):
     """The solver of a two-stage fit's coarse stage (`brdffit.fit.COARSE_SAMPLES` samples) for a named solver.
 
@@ -68,7 +74,7 @@ def coarse_solver(solver, rtol: float, atol: float):
     Returns:
         The solver object.
     """
-    if solver == "lm" and jnp.finfo(jnp.result_type(float)).bits == 64:
+    if solver == "lm" and _working_float().bits == 64:
         return optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
     return make_solver(solver, rtol, atol)
 
@@ -83,7 +89,7 @@ def working_tolerances(rtol: float, atol: float) -> tuple[float, float]:
         ``(max(rtol, RTOL_FLOOR_EPS·eps), max(atol, ATOL_FLOOR_EPS·eps))`` with eps the machine epsilon of JAX's
         default float type (float64 when brdffit is imported, float32 inside ``jax.enable_x64(False)``).
     """
-    eps = float(jnp.finfo(jnp.result_type(float)).eps)
+    eps = float(_working_float().eps)
     return max(rtol, RTOL_FLOOR_EPS * eps), max(atol, ATOL_FLOOR_EPS * eps)
 
 
