@@ -19,10 +19,8 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 from . import geometry, io, models, params, properties, render, scene, synth  # noqa: E402
-from .fit import FitError, fit, fit_many  # noqa: E402
-from .fit_result import FitResult  # noqa: E402
+from .fitting import FitError, FitResult, fit, fit_lobes, fit_many  # noqa: E402
 from .measurements import MeasurementError, Measurements  # noqa: E402
-from .multilobe import fit_lobes  # noqa: E402
 from .posterior import Posterior, posterior  # noqa: E402
 from .scene import Scene  # noqa: E402
 from .select import Selection, select  # noqa: E402

@@ -378,10 +378,12 @@ def _cmd_select(args) -> int:
 
 
 def _add_fit_options(p):
-    from .losses import LOSSES
-    from .solvers import SOLVERS
+    from .fitting.losses import LOSSES
+    from .fitting.solvers import SOLVERS
 
-    p.add_argument("--loss", default="cosine", choices=LOSSES, help="residual definition (default cosine)")
+    p.add_argument("--loss", default="cosine", choices=list(LOSSES),
+                   help="residual definition (default cosine): " + "; ".join(f"{name}: {loss.formula}"
+                                                                          for name, loss in LOSSES.items()))
     p.add_argument("--solver", default="lm", choices=list(SOLVERS), help="least-squares solver (default lm)")
     p.add_argument("--fixed", action="append", metavar="NAME=VALUE",
                    help="hold a parameter at a value (repeatable; a colour takes R,G,B)")

@@ -71,7 +71,7 @@ class _Material:
 
 def _unwrap(model_or_result):
     """(model or None, FitResult or None) from a Model, FitResult or spec string."""
-    from .fit_result import FitResult
+    from .fitting.result import FitResult
     from .models import Model, get
 
     if isinstance(model_or_result, FitResult):

@@ -5,12 +5,19 @@ A model declares each parameter once, as a `ParamSpec`. Everything else that nee
 documentation tables, report labels) is derived from that declaration.
 
 optimistix has no box constraints for least squares, so a bounded parameter p is fitted through an unconstrained
-variable u (the STYLE guide's "bounds through transforms"):
+variable u (the STYLE guide's "bounds through transforms"). The transforms are MINUIT's (James & Roos, MINUIT
+User's Guide, CERN D506, section 1.3.1; also lmfit's bounds):
 
-- lower and upper finite:  p = lower + (upper - lower) * sigmoid(u)
-- lower finite only:       p = lower + softplus(u)
-- upper finite only:       p = upper - softplus(-u)
+- lower and upper finite:  p = lower + (upper − lower) (1 + sin u)/2
+- lower finite only:       p = lower − 1 + √(u² + 1)
+- upper finite only:       p = upper + 1 − √(u² + 1)
 - neither:                 p = u
+
+Each reaches its bound at a finite u, where dp/du = 0: an optimum on a bound is then an ordinary stationary point
+of the solver's problem, which it converges to, instead of a limit at u -> ±∞ that a logistic or softplus
+transform approaches without end (the step test never passes, and the fit ends at ``max-steps``). A solve must
+therefore not *start* on a bound (dp/du = 0 there): starts are moved inside first
+(`brdffit.fitting.search.interior`).
 """
 
 from __future__ import annotations
@@ -21,13 +28,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from .geometry import logistic
-
 __all__ = ["ParamSpec", "ParamTable", "to_unconstrained", "from_unconstrained", "at_bound", "bound_margin"]
-
-# Distance kept from a bound when a value sitting exactly on it is mapped to the unconstrained space.
-_BOUND_MARGIN = 1e-9
-
 
 @dataclasses.dataclass(frozen=True)
 class ParamSpec:
@@ -44,6 +45,11 @@ class ParamSpec:
         doc: one-line meaning.
         scale: True for a scale parameter (roughness, exponent, amplitude): priors are log-uniform.
         fixed: True if the parameter is held at its value unless a fit frees it explicitly.
+        linear: True for an amplitude that the BRDF is affine in, channel by channel (f = f₀ + p·B with f₀ and B
+            independent of p): a fit solves it exactly by bounded linear least squares for each value of the
+            other parameters (variable projection, `brdffit.fitting.separable`). Only colour parameters can be
+            linear (each channel's amplitude acts on that channel alone); `tests/test_models.py` checks every
+            declaration numerically.
     """
 
     name: str
@@ -55,6 +61,7 @@ class ParamSpec:
     doc: str = ""
     scale: bool = False
     fixed: bool = False
+    linear: bool = False
 
     def __post_init__(self):
         if not self.lower < self.upper:
@@ -63,11 +70,18 @@ class ParamSpec:
             raise ValueError(
                 f"parameter {self.name!r}: default {self.default} outside [{self.lower}, {self.upper}]"
             )
+        if self.linear and not self.colour:
+            raise ValueError(f"parameter {self.name!r}: only a colour parameter can be a linear amplitude")
 
     @property
     def kind(self) -> str:
         """``"colour"`` or ``"shape"``."""
         return "colour" if self.colour else "shape"
+
+    @property
+    def role(self) -> str:
+        """``"linear"`` (an amplitude solved exactly for given other parameters) or ``"nonlinear"``."""
+        return "linear" if self.linear else "nonlinear"
 
     def renamed(self, name: str) -> "ParamSpec":
         """Return the same declaration under another name (used when lobes of a sum share a name)."""
@@ -80,11 +94,11 @@ class ParamSpec:
         return jnp.asarray(self.default, dtype=float)
 
     def to_unconstrained(self, value):
-        """Map a value inside the bounds to the unconstrained fitting variable (inverse of `from_unconstrained`)."""
+        """Map a value within the bounds to the unconstrained fitting variable (inverse of `from_unconstrained`)."""
         return to_unconstrained(value, self.lower, self.upper)
 
     def from_unconstrained(self, u):
-        """Map the unconstrained fitting variable to a value strictly inside the bounds."""
+        """Map the unconstrained fitting variable to a value within the bounds."""
         return from_unconstrained(u, self.lower, self.upper)
 
 
@@ -105,17 +119,8 @@ class ParamTable(tuple):
         return tuple(spec.name for spec in self)
 
 
-def _softplus(u):
-    return jnp.logaddexp(u, 0.0)
-
-
-def _softplus_inverse(y):
-    # log(exp(y) - 1), written to stay accurate for small and for large y.
-    return y + jnp.log(-jnp.expm1(-y))
-
-
 def from_unconstrained(u, lower: float, upper: float):
-    """Map an unconstrained value to the open interval (lower, upper).
+    """Map an unconstrained value to the closed interval [lower, upper] (the module doc's transforms).
 
     Arguments:
         u: unconstrained value(s), any shape.
@@ -127,16 +132,17 @@ def from_unconstrained(u, lower: float, upper: float):
     """
     lo_finite, up_finite = math.isfinite(lower), math.isfinite(upper)
     if lo_finite and up_finite:
-        return lower + (upper - lower) * logistic(u)
+        return lower + (upper - lower) * 0.5 * (1.0 + jnp.sin(u))
     if lo_finite:
-        return lower + _softplus(u)
+        return lower - 1.0 + jnp.sqrt(u * u + 1.0)
     if up_finite:
-        return upper - _softplus(-u)
+        return upper + 1.0 - jnp.sqrt(u * u + 1.0)
     return u
 
 
 def to_unconstrained(value, lower: float, upper: float):
-    """Inverse of `from_unconstrained`; values on or beyond a bound are first moved just inside it.
+    """An inverse of `from_unconstrained` (the branch with u >= 0 for a one-sided bound, |u| <= π/2 for two);
+    values beyond a bound map to the bound.
 
     Arguments:
         value: constrained value(s).
@@ -149,13 +155,11 @@ def to_unconstrained(value, lower: float, upper: float):
     value = jnp.asarray(value, dtype=float)
     lo_finite, up_finite = math.isfinite(lower), math.isfinite(upper)
     if lo_finite and up_finite:
-        width = upper - lower
-        t = jnp.clip((value - lower) / width, _BOUND_MARGIN, 1 - _BOUND_MARGIN)
-        return jnp.log(t) - jnp.log1p(-t)
+        return jnp.arcsin(jnp.clip(2.0 * (value - lower) / (upper - lower) - 1.0, -1.0, 1.0))
     if lo_finite:
-        return _softplus_inverse(jnp.maximum(value - lower, _BOUND_MARGIN * max(1.0, abs(lower))))
+        return jnp.sqrt(jnp.square(jnp.maximum(value - lower, 0.0) + 1.0) - 1.0)
     if up_finite:
-        return -_softplus_inverse(jnp.maximum(upper - value, _BOUND_MARGIN * max(1.0, abs(upper))))
+        return jnp.sqrt(jnp.square(jnp.maximum(upper - value, 0.0) + 1.0) - 1.0)
     return value
 
 

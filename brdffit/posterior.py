@@ -21,11 +21,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaln
 
-from .fit_result import FitResult, param_labels
-from .losses import loss_epsilon, residual_scale
+from .fitting.result import FitResult
+from .fitting.losses import loss_epsilon, residual_scale
 from .models.model import evaluate
 from .params import ParamSpec
-from .problem import Problem, flatten_free, make_fit_data, physical_params, residual_fn
+from .fitting.problem import Problem, flatten_free, make_fit_data, physical_params, residual_fn
 from .progress import Progress
 
 __all__ = ["posterior", "load_posterior", "Posterior", "LIKELIHOODS", "PRIOR_FAMILIES"]
@@ -358,7 +358,7 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
     fit_values = {k: jnp.asarray(model.params[k]) for k in free}
     flat0, _ = flatten_free(problem, fit_values)
     p = int(flat0.size)
-    labels = param_labels(model.params, free)
+    labels = model.layout.labels(free)
     estimate = noise == "estimate"
     ndim = p + (channels if estimate else 0)
     if nwalkers < 2 * ndim or nwalkers % 2:

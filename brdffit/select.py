@@ -17,13 +17,13 @@ import time
 import jax
 import numpy as np
 
-from .fit import fit
-from .fit_result import FitResult
+from .fitting.api import fit
+from .fitting.result import FitResult
 from .geometry import spherical_to_vector
-from .losses import loss_epsilon
+from .fitting.losses import loss_epsilon
 from .models.model import evaluate_dirs
-from .multilobe import new_lobe_candidates
-from .problem import Problem, make_fit_data, residual_fn
+from .fitting.progressive import new_lobe_candidates
+from .fitting.problem import Problem, make_fit_data, residual_fn
 from .progress import Progress
 
 __all__ = ["select", "Selection", "DEFAULT_CANDIDATES", "CRITERIA", "DEFAULT_MARGIN"]

@@ -9,9 +9,9 @@ import optimistix as optx
 import pytest
 
 from brdffit import FitError, FitResult, Measurements, fit, fit_many, io, models, synth
-from brdffit.losses import loss_epsilon, relative_epsilon, residuals, robust_residuals
-from brdffit.problem import make_fit_data
-from brdffit.solvers import coarse_solver
+from brdffit.fitting.losses import loss_epsilon, relative_epsilon, residuals, robust_residuals
+from brdffit.fitting.problem import make_fit_data
+from brdffit.fitting.solvers import coarse_solver
 
 PLASTIC = dict(rho_d=[0.5, 0.35, 0.2], ks=[0.9, 0.8, 0.7], m=0.15, f0=0.04)
 
@@ -138,7 +138,9 @@ def test_second_fit_of_same_shapes_does_not_recompile(plastic):
 def test_multistart_records_every_start_and_keeps_the_best(plastic):
     truth, data = plastic
     result = fit(data, "lambert+cook-torrance", fixed=["f0"], multistart=4, loss="sigma")
-    assert len(result.starts) == 5
+    # init="auto" polishes the search's best separated candidates (brdffit.fitting.search); multistart adds 4.
+    searched = fit(data, "lambert+cook-torrance", fixed=["f0"], loss="sigma")
+    assert len(result.starts) == len(searched.starts) + 4
     costs = [s["cost"] for s in result.starts]
     assert result.cost == pytest.approx(min(costs), rel=1e-12)
 
@@ -301,7 +303,7 @@ def test_coarse_stage_of_lm_solves_normal_equations_in_float64_only():
 
 
 def test_coarse_to_fine_gives_the_full_data_answer():
-    # Above COARSE_SAMPLES samples a fit may solve on a subsample and refine on all data (brdffit.refine); the
+    # Above COARSE_SAMPLES samples a fit may solve on a subsample and refine on all data (brdffit.fitting.refine); the
     # optimum, its cost and its covariance must be those of the plain full-data solve.
     truth = models.get("lambert+ward", rho_d=[0.4, 0.3, 0.2], ks=[0.5, 0.4, 0.3], alpha=0.2)
     data = synth.generate(truth, pattern="half-diff", n=120_000, noise="relative:0.01", seed=9)
@@ -333,17 +335,30 @@ def test_loading_a_missing_fit_names_the_file(tmp_path):
 
 
 @pytest.mark.parametrize("solver", ["gauss-newton", "bfgs"])
-def test_a_solver_that_stalls_far_from_the_minimum_is_not_reported_converged(solver):
-    # Found by scripts/stability.py: from a far start, undamped Gauss-Newton ends ~1e4x the optimal cost and
-    # BFGS saturates rho_d's bound transform at 0 in some channels, both passing their own step tests. Where BFGS
-    # ends depends on the last bits of its path: 18x the optimal cost before the half vector was computed component
-    # by component (a 1-ulp change), 3.3x after; either is far from the minimum, which is what 2x asserts.
+def test_fragile_solvers_reach_the_optimum_from_a_far_start(solver):
+    # Found by scripts/stability.py on the joint solve: from a far start, undamped Gauss-Newton ended ~1e4x the
+    # optimal cost and BFGS saturated rho_d's bound transform at 0. With the amplitudes projected out
+    # (brdffit.fitting.separable) both solve a one-parameter problem in m and reach the optimum.
     truth = models.get("lambert+cook-torrance", rho_d=[0.3, 0.2, 0.1], ks=[0.8, 0.7, 0.6], m=0.15, f0=0.04)
     data = synth.generate(truth, pattern="half-diff", n=2000, noise="relative:0.01", seed=0)
     far = dict(rho_d=[0.9] * 3, ks=[0.001] * 3, m=0.9)
-    stalled = fit(data, "lambert+cook-torrance", solver=solver, init=far, fixed={"f0": 0.04})
+    fragile = fit(data, "lambert+cook-torrance", solver=solver, init=far, fixed={"f0": 0.04})
     good = fit(data, "lambert+cook-torrance", init=far, fixed={"f0": 0.04})
-    assert good.converged and stalled.cost > 2 * good.cost
+    assert good.converged and fragile.converged
+    assert fragile.cost == pytest.approx(good.cost, rel=1e-8)
+
+
+def test_a_solver_that_stops_far_from_the_minimum_is_not_reported_converged():
+    # A solver whose own termination test passes far from the optimum (here BFGS with tolerances of 0.5: it
+    # stops after its first steps) must be reported stalled by the Gauss-Newton decrease test
+    # (brdffit.fitting.status), not converged.
+    truth = models.get("lambert+cook-torrance", rho_d=[0.3, 0.2, 0.1], ks=[0.8, 0.7, 0.6], m=0.15, f0=0.04)
+    data = synth.generate(truth, pattern="half-diff", n=2000, noise="relative:0.01", seed=0)
+    far = dict(rho_d=[0.9] * 3, ks=[0.001] * 3, m=0.9)
+    careless = optx.BFGS(rtol=0.5, atol=0.5)
+    stalled = fit(data, "lambert+cook-torrance", solver=careless, init=far, fixed={"f0": 0.04})
+    good = fit(data, "lambert+cook-torrance", init=far, fixed={"f0": 0.04})
+    assert good.converged and stalled.cost > good.cost * (1 + 1e-3)
     assert stalled.status == "stalled" and not stalled.converged
     assert any("not a minimum" in w for w in stalled.warnings)
 
@@ -357,17 +372,18 @@ def test_an_active_bound_is_still_converged_at_bound(plastic):
     assert result.status == "converged-at-bound"
 
 
-def test_auto_init_restarts_a_stall_at_a_bound():
-    # scripts/stability.py, near-mirror seed 3: LM from the automatic start saturated rho_d's bound transform in
-    # two channels (rho_d -> 0, status "stalled"). The init="auto" safeguard restarts with those scalars back at
-    # their starting values and reaches the optimum that a start at the truth finds.
+def test_auto_init_reaches_the_optimum_of_a_near_mirror():
+    # scripts/stability.py, near-mirror seed 3: the joint LM solve from the automatic start saturated rho_d's
+    # bound transform in two channels (rho_d -> 0, "stalled") and needed a restart. With the amplitudes solved
+    # exactly and the roughness searched over its bounds, the automatic fit reaches the optimum that a start at
+    # the truth finds, directly.
     truth = models.get("lambert+cook-torrance", rho_d=[0.3, 0.2, 0.1], ks=[0.8, 0.7, 0.6], m=0.02, f0=0.04)
     data = synth.generate(truth, pattern="half-diff", n=2000, noise="relative:0.01", seed=3)
     oracle = fit(data, "lambert+cook-torrance", init=truth, fixed={"f0": 0.04})
     result = fit(data, "lambert+cook-torrance", fixed={"f0": 0.04})
     assert result.converged and not result.bounds_hit
     assert result.cost == pytest.approx(oracle.cost, rel=1e-6)
-    assert any(w.startswith("restarted from a stall") for w in result.warnings)
+    assert not any("held" in w for w in result.warnings)
     # The same optimum as the oracle (which itself sits ~1 standard error, 0.06, off the true rho_d here: with
     # m = 0.02 the diffuse level is seen through few samples).
     for name in ("rho_d", "ks", "m"):
@@ -388,7 +404,7 @@ def test_a_fit_inside_jax_float32_mode_runs_in_float32_and_finds_the_same_optimu
 
 
 def test_tolerances_are_raised_to_what_float32_can_meet_and_unchanged_in_float64():
-    from brdffit.solvers import working_tolerances
+    from brdffit.fitting.solvers import working_tolerances
 
     assert working_tolerances(1e-8, 1e-12) == (1e-8, 1e-12)
     with jax.enable_x64(False):

@@ -1,6 +1,5 @@
-"""The channel-compressed normal matrices (`brdffit.normal_equations`) against a dense ``jax.jacfwd`` Jacobian."""
-
-import sys
+"""The channel-compressed normal matrices (`brdffit.fitting.normal_equations`) against a dense ``jax.jacfwd``
+Jacobian."""
 
 import jax
 import jax.numpy as jnp
@@ -8,35 +7,33 @@ import numpy as np
 import pytest
 
 from brdffit import models, synth
-from brdffit.normal_equations import accumulate, chunks
-from brdffit.problem import flatten_free, make_fit_data, physical_params, residual_fn
-
-fit_module = sys.modules["brdffit.fit"]
+from brdffit.fitting import api
+from brdffit.fitting.normal_equations import accumulate, chunks
+from brdffit.fitting.problem import flatten_free, make_fit_data, physical_params, residual_fn
 
 
 def _setup(spec, loss="cosine", robust=None, n=700, seed=3):
     truth = models.get(spec, channels=3)
     data = synth.generate(truth, pattern="uniform", n=n, noise="relative:0.05", seed=seed)
-    problem, model, fixed, _ = fit_module._prepare(data, truth, loss=loss, solver="lm", fixed=None, free=None,
-                                                   robust=robust, max_steps=10, rtol=1e-8, atol=1e-12)
+    problem, model, fixed, _ = api._prepare(data, truth, loss=loss, solver="lm", fixed=None, free=None,
+                                            robust=robust, max_steps=10, rtol=1e-8, atol=1e-12)
     # Move every parameter off its default (and channels off each other) so no derivative vanishes by symmetry.
     rng = np.random.default_rng(seed)
-    y = {k: v[0] for k, v in fit_module._unconstrained(problem, [model.params]).items()}
-    y = {k: v + 0.1 * rng.standard_normal(np.shape(v)) for k, v in y.items()}
+    specs = problem.specs
+    y = {k: specs[k].to_unconstrained(model.params[k]) + 0.1 * rng.standard_normal(np.shape(model.params[k]))
+         for k in problem.free}
     fit_data = make_fit_data(data, fixed, np.full(3, 1e-3), 0.5)
     params = physical_params(problem, y, fit_data.fixed)
     fit_data = fit_data._replace(fixed={k: v for k, v in params.items() if k not in problem.free})
-    return problem, y, {k: params[k] for k in problem.free}, fit_data
+    return problem, {k: params[k] for k in problem.free}, fit_data
 
 
-def _dense(problem, tree, data, physical):
-    """JᵀJ, Jᵀr, rᵀr, Jᵀdiag(r²)J and the per-channel rᵀr from the full Jacobian."""
+def _dense(problem, tree, data):
+    """JᵀJ, Jᵀr, rᵀr, Jᵀdiag(r²)J and the per-channel rᵀr from the full Jacobian in the physical parameters."""
     flat, unravel = flatten_free(problem, tree)
 
     def r(theta):
-        values = unravel(theta)
-        params = (physical_params(problem, {}, dict(data.fixed, **values)) if physical
-                  else physical_params(problem, values, data.fixed))
+        params = physical_params(problem, {}, dict(data.fixed, **unravel(theta)))
         return residual_fn(problem, params, data).ravel()
 
     # Jitted: run eagerly, every primitive of a many-lobe model would compile on its own (minutes of CI time).
@@ -46,10 +43,10 @@ def _dense(problem, tree, data, physical):
     return jac.T @ jac, jac.T @ res, float(res @ res), scaled.T @ scaled, per_channel
 
 
-def _check(problem, tree, data, physical, chunk=None):
+def _check(problem, tree, data, chunk=None):
     pieces = chunks(data) if chunk is None else chunks(data, chunk)
-    got = accumulate(problem, tree, pieces, physical=physical)
-    want = _dense(problem, tree, data, physical)
+    got = accumulate(problem, tree, pieces)
+    want = _dense(problem, tree, data)
     for g, w in zip(got, want):
         np.testing.assert_allclose(g, w, rtol=1e-9, atol=1e-12 * np.max(np.abs(w)))
 
@@ -58,29 +55,28 @@ def test_matches_dense_jacobian_for_a_sum_of_lobes():
     # The assembly is lobe-agnostic (one tangent per parameter name), so one sum covers what differs between
     # lobes: per-channel colour and shared shape parameters, an anisotropic pair, numbered Lafortune sub-lobes
     # and a declared-fixed parameter (toon width). A sum of every registered lobe tested the same in 60 s of CI.
-    problem, y, physical, data = _setup("oren-nayar+cook-torrance+ashikhmin-shirley-aniso+lafortune(lobes=2)"
-                                        "+toon-specular")
+    problem, physical, data = _setup("oren-nayar+cook-torrance+ashikhmin-shirley-aniso+lafortune(lobes=2)"
+                                     "+toon-specular")
     assert {"rho_d", "sigma", "m", "nu", "nv", "cxy_2", "n_2"}.issubset(problem.free)
     assert "width" not in problem.free
-    _check(problem, y, data, physical=False)
-    _check(problem, physical, data, physical=True)
+    _check(problem, physical, data)
 
 
 @pytest.mark.parametrize("loss, robust", [("log", None), ("relative", None), ("sigma", "cauchy"),
                                           ("absolute", "huber")])
 def test_matches_dense_jacobian_for_losses(loss, robust):
-    problem, y, _, data = _setup("oren-nayar+ggx", loss=loss, robust=robust)
-    _check(problem, y, data, physical=False)
+    problem, physical, data = _setup("oren-nayar+ggx", loss=loss, robust=robust)
+    _check(problem, physical, data)
 
 
 def test_chunking_gives_the_same_sums():
     # 2,500 samples in chunks of 1,100: the last chunk is padded with masked samples.
-    problem, y, _, data = _setup("lambert+ward-aniso", n=2500)
-    _check(problem, y, data, physical=False, chunk=1100)
+    problem, physical, data = _setup("lambert+ward-aniso", n=2500)
+    _check(problem, physical, data, chunk=1100)
 
 
 def test_misshaped_parameter_is_rejected():
-    problem, y, _, data = _setup("lambert")
+    problem, _, data = _setup("lambert")
     bad = {"rho_d": jnp.ones((2,))}
     with pytest.raises(ValueError, match="rho_d"):
-        accumulate(problem, bad, chunks(data), physical=True)
+        accumulate(problem, bad, chunks(data))

@@ -64,8 +64,9 @@ def test_fit_reports_its_stages_and_the_number_of_starts(capsys):
     data = synth.generate("lambert+ggx", n=400, noise="relative:0.01", seed=0)
     result = fit(data, "lambert+ggx", multistart=3, progress=True)
     err = capsys.readouterr().err
-    assert "fit lambert+ggx 0/4 stages" in err and "initial guess" in err
-    assert "solving 4 starts in one batch" in err
+    assert "fit lambert+ggx 0/4 stages" in err and "search" in err
+    # The search's separated candidates plus the 3 quasi-random starts, all polished in one batch.
+    assert f"polishing {len(result.starts)} starts" in err
     assert f"{result.status}, cost" in err
     fit(data, "lambert+ggx")
     assert capsys.readouterr().err == ""

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from brdffit import io, models, synth
-from brdffit.multilobe import fit_lobes
+from brdffit.fitting.progressive import fit_lobes
 from brdffit.scene import Scene
 from brdffit.select import select
 

@@ -14,7 +14,8 @@ from .specs import exponent
 
 __all__ = ["AshikhminShirley", "AshikhminShirleyAniso"]
 
-RS = ParamSpec("rs", 0.05, 0.0, 1.0, colour=True, unit="1", doc="specular reflectance at normal incidence")
+RS = ParamSpec("rs", 0.05, 0.0, 1.0, colour=True, unit="1", doc="specular reflectance at normal incidence",
+               linear=True)
 
 
 def ashikhmin_shirley_lobe(pair: LocalPair, rs, nu, nv):

@@ -43,6 +43,12 @@ class Lobe(abc.ABC):
         """The option values of this lobe, as a dict."""
         return {name: getattr(self, name) for name in self.option_names()}
 
+    def token(self) -> str:
+        """The spec token of this lobe: its name, with its non-default options in brackets."""
+        defaults = type(self)()
+        changed = [f"{k}={v}" for k, v in self.options().items() if getattr(defaults, k) != v]
+        return self.name + (f"({', '.join(changed)})" if changed else "")
+
     def start_candidates(self) -> list[dict]:
         """Starting values of shape parameters (local names) worth trying first; the initial guess adds them to
         its grid. Lobes with several similar sub-lobes use this to start them apart. Default: none."""

@@ -6,52 +6,15 @@ the lobes and channel count are static structure.
 
 from __future__ import annotations
 
-from collections import Counter
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from ..geometry import LocalPair, spherical_to_vector
 from ..params import ParamSpec, ParamTable
-from .lobe import Lobe
+from .layout import Layout, layout
 
 __all__ = ["Model", "evaluate", "evaluate_dirs", "evaluate_pair"]
-
-
-def global_names(lobes: tuple[Lobe, ...]) -> tuple[tuple[str, ...], ...]:
-    """Model-level parameter names of each lobe: a name already used gets the suffix ``_2``, ``_3``, ...
-
-    The k-th lobe declaring a name gets ``name_k``, unless another lobe declares that name itself (Lafortune's
-    ``ks_2``) or it is already taken; then the count goes on to the next free suffix. So ``"lambert+ward+ward"``
-    has ``rho_d, ks, alpha, ks_2, alpha_2`` and ``"phong+phong+lafortune(lobes=2)"`` gives the second Phong
-    ``ks_3`` and ``n_3``, since ``ks_2`` and ``n_2`` belong to Lafortune's second lobe.
-
-    Arguments:
-        lobes: the lobes of the sum, in order.
-
-    Returns:
-        For each lobe, the model-level names of its parameters in declaration order.
-    """
-    declared = {spec.name for lobe in lobes for spec in lobe.param_specs()}
-    seen: Counter[str] = Counter()
-    taken: set[str] = set()
-    names = []
-    for lobe in lobes:
-        lobe_names = []
-        for spec in lobe.param_specs():
-            seen[spec.name] += 1
-            name = spec.name
-            if seen[spec.name] > 1:
-                count = seen[spec.name]
-                while f"{spec.name}_{count}" in declared or f"{spec.name}_{count}" in taken:
-                    count += 1
-                seen[spec.name] = count
-                name = f"{spec.name}_{count}"
-            taken.add(name)
-            lobe_names.append(name)
-        names.append(tuple(lobe_names))
-    return tuple(names)
 
 
 class Model(eqx.Module):
@@ -72,22 +35,22 @@ class Model(eqx.Module):
     @property
     def spec(self) -> str:
         """The spec string of the sum, with non-default lobe options in brackets."""
-        from .registry import lobe_token
+        return "+".join(lobe.token() for lobe in self.lobes)
 
-        return "+".join(lobe_token(lobe) for lobe in self.lobes)
+    @property
+    def layout(self) -> Layout:
+        """The parameter layout (model-level names, declarations, shapes, roles), computed once per structure."""
+        return layout(self.lobes, self.channels)
 
     @property
     def names_by_lobe(self) -> tuple[tuple[str, ...], ...]:
         """For each lobe, the model-level names of its parameters."""
-        return global_names(self.lobes)
+        return tuple(tuple(slot.name for slot in self.layout.lobe_slots(j)) for j in range(len(self.lobes)))
 
     @property
     def param_specs(self) -> ParamTable:
         """The parameter declarations under their model-level names, in order."""
-        specs: list[ParamSpec] = []
-        for lobe, names in zip(self.lobes, self.names_by_lobe):
-            specs.extend(spec.renamed(name) for spec, name in zip(lobe.param_specs(), names))
-        return ParamTable(specs)
+        return self.layout.specs
 
     @property
     def reciprocal(self) -> bool:
@@ -165,9 +128,8 @@ def evaluate_pair(model: Model, pair: LocalPair):
     """
     out_shape = pair.above.shape + (model.channels,)
     total = jnp.zeros(out_shape, dtype=pair.wi.dtype)
-    for lobe, names in zip(model.lobes, model.names_by_lobe):
-        local = {spec.name: model.params[name] for spec, name in zip(lobe.param_specs(), names)}
-        total = total + jnp.broadcast_to(lobe(local, pair), out_shape)
+    for j, lobe in enumerate(model.lobes):
+        total = total + jnp.broadcast_to(lobe(model.layout.local_params(model.params, j), pair), out_shape)
     return jnp.where(pair.above[..., None], total, 0.0)
 
 

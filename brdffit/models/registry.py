@@ -14,12 +14,13 @@ from .cook_torrance import GGX, CookTorrance
 from .diffuse import Lambert, OrenNayar
 from .lafortune import Lafortune
 from .lobe import Lobe
-from .model import Model, coerce_value, global_names
+from .layout import layout
+from .model import Model, coerce_value
 from .phong import BlinnPhong, Phong
 from .toon import ToonDiffuse, ToonSpecular
 from .ward import Ward, WardAniso, WardDuer
 
-__all__ = ["names", "get", "lobe_class", "parse_spec", "lobe_token", "describe", "model_to_dict", "model_from_dict"]
+__all__ = ["names", "get", "lobe_class", "parse_spec", "describe", "model_to_dict", "model_from_dict"]
 
 _LOBES: dict[str, type[Lobe]] = {
     cls.name: cls
@@ -107,13 +108,6 @@ def parse_spec(spec: str) -> list[tuple[str, dict]]:
     return parsed
 
 
-def lobe_token(lobe: Lobe) -> str:
-    """The spec token of a lobe: its name, with its non-default options in brackets."""
-    defaults = type(lobe)()
-    changed = [f"{k}={v}" for k, v in lobe.options().items() if getattr(defaults, k) != v]
-    return lobe.name + (f"({', '.join(changed)})" if changed else "")
-
-
 def get(spec, channels: int = 3, **options_and_params) -> Model:
     """Build a model from a spec string.
 
@@ -150,7 +144,7 @@ def get(spec, channels: int = 3, **options_and_params) -> Model:
         kwargs.update(own)
         lobes.append(cls(**kwargs))
     lobes = tuple(lobes)
-    specs = [s.renamed(n) for lobe, ns in zip(lobes, global_names(lobes)) for s, n in zip(lobe.param_specs(), ns)]
+    specs = layout(lobes, channels).specs
     values = {k: v for k, v in options_and_params.items() if k not in shared_options}
     known = {s.name for s in specs}
     unknown = set(values) - known

@@ -8,8 +8,10 @@ from ..params import ParamSpec
 
 __all__ = ["RHO_D", "KS", "exponent", "roughness"]
 
-RHO_D = ParamSpec("rho_d", 0.5, 0.0, 1.0, colour=True, unit="1", doc="diffuse albedo (reflectance)")
-KS = ParamSpec("ks", 0.2, 0.0, math.inf, colour=True, unit="1", doc="specular amplitude", scale=True)
+RHO_D = ParamSpec("rho_d", 0.5, 0.0, 1.0, colour=True, unit="1", doc="diffuse albedo (reflectance)",
+                  linear=True)
+KS = ParamSpec("ks", 0.2, 0.0, math.inf, colour=True, unit="1", doc="specular amplitude", scale=True,
+               linear=True)
 
 # Smallest roughness width a lobe accepts: narrower lobes are mirrors for any gonio-reflectometer (pbrt-v4 treats
 # α < 1e-3 as perfectly smooth, TrowbridgeReitzDistribution::EffectivelySmooth).

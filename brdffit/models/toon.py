@@ -37,7 +37,7 @@ class ToonDiffuse(Lobe):
     def param_specs(self):
         return (
             RHO_D,
-            ParamSpec("rho_shade", 0.1, 0.0, 1.0, colour=True, unit="1", doc="albedo of the shaded tone"),
+            ParamSpec("rho_shade", 0.1, 0.0, 1.0, colour=True, unit="1", doc="albedo of the shaded tone", linear=True),
             ParamSpec("threshold", 0.3, 0.0, 1.0, unit="1", doc="cosθi at which the tone switches"),
             _width(),
         )

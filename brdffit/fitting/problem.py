@@ -1,29 +1,27 @@
-"""The least-squares problem a fit solves: static structure, data arrays, residuals and the compiled solve.
+"""The least-squares problem a fit solves: its static structure, its data arrays and its residuals.
 
-`Problem` is the hashable static part (lobes, which parameters are free, loss, solver, step limit); `FitData`
-holds the arrays. Compiled solves are cached by (problem, array shapes, batch layout), so fitting the same model
-to data of the same shape again never recompiles (`compiled_solve`).
+`Problem` is the hashable static part (lobes, which parameters are free, loss, solver, step limit, whether the
+amplitudes are projected out); `FitData` holds the arrays.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-import time
 from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
-from .losses import residuals, robust_residuals
-from .geometry import LocalPair, spherical_to_vector
-from .models.model import Model, evaluate_pair, global_names
-from .params import ParamTable
+from ..geometry import LocalPair, spherical_to_vector
+from ..models.layout import Layout, layout
+from ..models.model import Model, evaluate_pair
+from ..params import ParamTable
+from .losses import get_loss, robust_residuals
 
-__all__ = ["Problem", "FitData", "make_fit_data", "physical_params", "residual_fn", "compiled_solve",
-           "param_table", "stack_data", "chunk_data", "flatten_free"]
+__all__ = ["Problem", "FitData", "make_fit_data", "physical_params", "residual_fn", "stack_data", "chunk_data",
+           "flatten_free"]
 
 _PER_SAMPLE = ("pair", "values", "mask", "cos_i", "sqrt_weight", "sigma")
 
@@ -36,10 +34,12 @@ class Problem:
         lobes: the lobes of the model.
         channels: number of channels.
         free: names of the fitted parameters, in model order; all others are held at values in `FitData.fixed`.
-        loss: residual definition (`brdffit.losses.LOSSES`).
+        loss: residual definition (a name in `brdffit.fitting.losses.LOSSES`).
         robust: None, ``"huber"`` or ``"cauchy"``.
         solver: the optimistix solver object.
         max_steps: the solver's step limit.
+        separable: True to solve the free linear amplitudes exactly for each value of the other parameters
+            (`brdffit.fitting.separable`); the solver then sees only `outer`.
     """
 
     lobes: tuple
@@ -49,6 +49,7 @@ class Problem:
     robust: str | None
     solver: Any
     max_steps: int
+    separable: bool = False
 
     def _key(self) -> tuple:
         # Solver objects may hold JAX arrays (GaussNewton's learning rate), which are unhashable: key them by
@@ -56,7 +57,8 @@ class Problem:
         leaves, treedef = jax.tree_util.tree_flatten(self.solver)
         solver_key = (treedef, tuple(np.asarray(leaf).tobytes() if hasattr(leaf, "shape") else leaf
                                      for leaf in leaves))
-        return (self.lobes, self.channels, self.free, self.loss, self.robust, solver_key, self.max_steps)
+        return (self.lobes, self.channels, self.free, self.loss, self.robust, solver_key, self.max_steps,
+                self.separable)
 
     def __hash__(self) -> int:
         return hash(self._key())
@@ -65,19 +67,29 @@ class Problem:
         return isinstance(other, Problem) and self._key() == other._key()
 
     @property
+    def layout(self) -> Layout:
+        """The model's parameter layout."""
+        return layout(self.lobes, self.channels)
+
+    @property
     def specs(self) -> ParamTable:
         """The model's parameter declarations under their model-level names."""
-        return param_table(self.lobes)
+        return self.layout.specs
+
+    @property
+    def linear(self) -> tuple:
+        """The free amplitudes solved by projection (empty unless `separable`)."""
+        return self.layout.linear(self.free) if self.separable else ()
+
+    @property
+    def outer(self) -> tuple:
+        """The free parameters the solver sees: all free ones but the projected amplitudes."""
+        linear = set(self.linear)
+        return tuple(name for name in self.free if name not in linear)
 
     def model(self, params: dict) -> Model:
         """A `Model` of this problem's lobes with the given parameter values."""
         return Model(params=params, lobes=self.lobes, channels=self.channels)
-
-
-def param_table(lobes) -> ParamTable:
-    """Parameter declarations of a sum of lobes under their model-level names."""
-    return ParamTable(spec.renamed(name) for lobe, names in zip(lobes, global_names(lobes))
-                      for spec, name in zip(lobe.param_specs(), names))
 
 
 class FitData(NamedTuple):
@@ -177,25 +189,20 @@ def _split(per_sample: dict, size: int) -> list:
             for start in range(0, n, size)]
 
 
-def flatten_free(problem: Problem, tree: dict):
-    """Flatten the free parameters of ``tree`` in model order (``ravel_pytree`` would sort the names).
+def flatten_free(problem: Problem, tree: dict, names=None):
+    """Flatten the free parameters (or ``names``) of ``tree`` in model order (`Layout.flatten`).
 
     Arguments:
-        problem: the `Problem` whose ``free`` names are flattened.
-        tree: name -> array for (at least) every free name.
+        problem: the `Problem`.
+        tree: name -> array for (at least) every flattened name.
+        names: the names to flatten; default ``problem.free``.
 
     Returns:
-        ``(flat, unravel)``: the 1-d array and the function that maps such an array back to a dict.
+        ``(flat, unravel)``: the 1-d JAX array and the function that maps such an array back to a dict.
     """
-    shapes = [jnp.shape(tree[name]) for name in problem.free]
-    sizes = [int(np.prod(shape)) for shape in shapes]
-    flat = jnp.concatenate([jnp.ravel(jnp.asarray(tree[name])) for name in problem.free])
-
-    def unravel(theta):
-        pieces = jnp.split(theta, np.cumsum(sizes)[:-1])
-        return {name: piece.reshape(shape) for name, piece, shape in zip(problem.free, pieces, shapes)}
-
-    return flat, unravel
+    names = problem.free if names is None else tuple(names)
+    flat = problem.layout.flatten(tree, names, xp=jnp)
+    return flat, lambda theta: problem.layout.unflatten(theta, names, xp=jnp)
 
 
 def physical_params(problem: Problem, y: dict, fixed: dict) -> dict:
@@ -203,73 +210,23 @@ def physical_params(problem: Problem, y: dict, fixed: dict) -> dict:
 
     Arguments:
         problem: the `Problem`.
-        y: free name -> unconstrained value.
-        fixed: fixed name -> physical value.
+        y: name -> unconstrained value of the parameters the solver moves.
+        fixed: name -> physical value of the others (fixed ones, and projected amplitudes when known).
 
     Returns:
         name -> physical value for every parameter of the model, in model order.
     """
-    specs = problem.specs
-    out = {}
-    for spec in specs:
-        out[spec.name] = spec.from_unconstrained(y[spec.name]) if spec.name in y else fixed[spec.name]
-    return out
+    return {spec.name: spec.from_unconstrained(y[spec.name]) if spec.name in y else fixed[spec.name]
+            for spec in problem.specs}
 
 
 def residual_fn(problem: Problem, params: dict, data: FitData):
     """Residuals ``(N, C)`` of the model with physical ``params`` against ``data``; missing samples give 0."""
-    f_model = evaluate_pair(problem.model(params), data.pair)
-    r = residuals(problem.loss, f_model, data.values, data.cos_i, data.sqrt_weight, data.sigma, data.eps)
+    return residuals_of(problem, evaluate_pair(problem.model(params), data.pair), data)
+
+
+def residuals_of(problem: Problem, f_model, data: FitData):
+    """Residuals ``(N, C)`` of model values ``f_model`` against ``data`` (loss, robust rewrite, mask)."""
+    r = get_loss(problem.loss).residuals(f_model, data.values, data.cos_i, data.sqrt_weight, data.sigma, data.eps)
     r = robust_residuals(problem.robust, r, data.robust_scale)
     return jnp.where(data.mask, r, 0.0)
-
-
-def _solve_one(y0: dict, data: FitData, problem: Problem):
-    def fn(y, args):
-        return residual_fn(problem, physical_params(problem, y, data.fixed), data)
-
-    sol = optx.least_squares(fn, problem.solver, y0, max_steps=problem.max_steps, throw=False)
-    r = fn(sol.value, None)
-    cost = jnp.sum(r * r)
-    return {
-        "y": sol.value,
-        "cost": cost,
-        "steps": sol.stats["num_steps"],
-        "successful": sol.result == optx.RESULTS.successful,
-        "max_steps": sol.result == optx.RESULTS.nonlinear_max_steps_reached,
-        "nonfinite": (sol.result == optx.RESULTS.nonfinite) | ~jnp.isfinite(cost),
-    }
-
-
-_COMPILED: dict = {}
-
-
-def _signature(tree) -> tuple:
-    leaves, treedef = jax.tree_util.tree_flatten(tree)
-    return treedef, tuple((leaf.shape, str(leaf.dtype)) for leaf in leaves)
-
-
-def compiled_solve(problem: Problem, y0: dict, data: FitData, data_batched: bool):
-    """The compiled, vmapped solve for this problem and these shapes, and the seconds spent compiling it.
-
-    The solve is vmapped over the leading axis of every leaf of ``y0`` (several starts, or several materials) and,
-    when ``data_batched``, of ``data`` too. Executables are cached in this process, keyed by the problem and the
-    shapes, so a second fit of the same model and shapes compiles nothing (compile time 0).
-
-    Arguments:
-        problem: the `Problem`.
-        y0: free name -> unconstrained starting values with a leading batch axis.
-        data: the `FitData` (batched or not).
-        data_batched: whether ``data`` has the leading batch axis.
-
-    Returns:
-        ``(executable, compile_seconds)``; call ``executable(y0, data)``.
-    """
-    key = (problem, _signature(y0), _signature(data), data_batched)
-    if key in _COMPILED:
-        return _COMPILED[key], 0.0
-    start = time.perf_counter()
-    batched = jax.vmap(lambda y, d: _solve_one(y, d, problem), in_axes=(0, 0 if data_batched else None))
-    executable = jax.jit(batched).lower(y0, data).compile()
-    _COMPILED[key] = executable
-    return executable, time.perf_counter() - start

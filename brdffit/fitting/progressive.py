@@ -13,8 +13,8 @@ import itertools
 
 import numpy as np
 
-from .fit import fit
-from .fit_result import FitResult
+from .api import fit
+from .result import FitResult
 
 __all__ = ["fit_lobes", "lobe_spec", "new_lobe_candidates", "NEW_LOBE_DIRECTIONS", "NEW_LOBE_SHARPNESS"]
 

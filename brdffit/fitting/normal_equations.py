@@ -1,7 +1,8 @@
 """Normal matrices of a fit's residual Jacobian: JᵀJ, Jᵀr, rᵀr and Jᵀ diag(r²) J, accumulated over chunks.
 
-Used by the full-data refinement (`brdffit.refine`, J with respect to the solver's unconstrained variables) and by
-the covariance of a fit (`brdffit.fit`, J with respect to the physical parameters).
+J is taken with respect to the free physical parameters. Used by the full-data refinement
+(`brdffit.fitting.refine`, which maps the outer parameters' columns to the solver's unconstrained variables by the
+chain rule) and by the covariance of a fit (`brdffit.fitting.uncertainty`).
 
 Colour parameters hold one value per channel, and channel c of the residuals depends on channel c of a colour
 parameter only (a model evaluates its channels independently; only shape parameters are shared). One
@@ -48,13 +49,12 @@ class NormalEquations(NamedTuple):
 
 
 @functools.lru_cache(maxsize=64)
-def chunk_tangents(problem: Problem, physical: bool):
+def chunk_tangents(problem: Problem):
     """The jitted tangents and residuals of one chunk, laid out for the per-channel Gram matrices.
 
     Arguments:
-        problem: the `Problem`.
-        physical: True to differentiate with respect to the free physical parameters (the other parameters come
-            from ``data.fixed``), False for the solver's unconstrained variables.
+        problem: the `Problem`; the tangents are taken with respect to its free physical parameters (the other
+            parameters come from ``data.fixed``).
 
     Returns:
         ``fn(tree, data) -> A`` with ``tree`` the free name -> value dict and ``A`` of shape ``(C, Q + 1, N)``:
@@ -64,9 +64,7 @@ def chunk_tangents(problem: Problem, physical: bool):
 
     def fn(tree: dict, data: FitData):
         def r(values):
-            if physical:
-                return residual_fn(problem, physical_params(problem, {}, dict(data.fixed, **values)), data)
-            return residual_fn(problem, physical_params(problem, values, data.fixed), data)
+            return residual_fn(problem, physical_params(problem, {}, dict(data.fixed, **values)), data)
 
         rows = []
         for name in problem.free:
@@ -78,43 +76,32 @@ def chunk_tangents(problem: Problem, physical: bool):
     return jax.jit(fn)
 
 
-def _channel_incidence(problem: Problem, tree: dict):
-    """For each free scalar in `flatten_free` order: its name's index, and the channels it acts on ``(P, C)``."""
-    index, incidence = [], []
-    for q, name in enumerate(problem.free):
-        size = int(np.size(tree[name]))
-        if size == 1 and np.ndim(tree[name]) == 0:  # shared: every channel
-            index.append(q)
-            incidence.append(np.ones(problem.channels))
-        elif size == problem.channels:  # one value per channel
-            index.extend([q] * size)
-            incidence.extend(np.eye(problem.channels))
-        else:
-            raise ValueError(f"parameter {name!r} has shape {np.shape(tree[name])}; expected () or "
-                             f"({problem.channels},)")
-    return np.asarray(index), np.asarray(incidence)
-
-
 def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
     """``data`` in equally shaped chunks of ``size`` samples (bounds the memory of the tangents); split once and
     reuse the list when accumulating repeatedly."""
     return chunk_data(data, size)
 
 
-def accumulate(problem: Problem, tree: dict, pieces: list[FitData], *, physical: bool) -> NormalEquations:
+def accumulate(problem: Problem, tree: dict, pieces: list[FitData]) -> NormalEquations:
     """JᵀJ, Jᵀr, rᵀr, Jᵀ diag(r²) J and the per-channel rᵀr over all of the data.
 
     Arguments:
         problem: the `Problem`.
-        tree: free name -> value (physical or unconstrained, see ``physical``), no batch axis.
+        tree: free name -> physical value, no batch axis.
         pieces: the `FitData` in chunks (`chunks`).
-        physical: differentiate with respect to physical parameters (True) or unconstrained variables (False).
 
     Returns:
         The `NormalEquations`.
+
+    Raises:
+        ValueError: a value of the wrong shape.
     """
-    index, incidence = _channel_incidence(problem, tree)
-    fn = chunk_tangents(problem, physical)
+    for name in problem.free:
+        want = problem.layout[name].shape
+        if np.shape(tree[name]) != want:
+            raise ValueError(f"parameter {name!r} has shape {np.shape(tree[name])}; expected {want}")
+    index, incidence = problem.layout.channel_incidence(problem.free)
+    fn = chunk_tangents(problem)
     q = len(problem.free)
     gram, meat = 0.0, 0.0
     # A diverged solver (undamped Gauss-Newton far away) can overflow the products: inf/NaN then reach the

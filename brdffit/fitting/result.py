@@ -8,22 +8,11 @@ import math
 
 import numpy as np
 
-from .models.model import Model, evaluate
-from .models.registry import model_from_dict, model_to_dict
+from ..models.model import Model, evaluate
+from ..models.registry import model_from_dict, model_to_dict
+from .status import STATUSES
 
-__all__ = ["FitResult", "STATUSES", "param_labels"]
-
-# Every status a fit can end with (docs/fitting.md explains each).
-STATUSES = ("converged", "converged-at-bound", "max-steps", "stalled", "nonfinite")
-
-
-def param_labels(params: dict, names) -> list[str]:
-    """Labels of the scalar entries of the named parameters: ``name`` for a scalar, ``name[i]`` per channel."""
-    labels = []
-    for name in names:
-        size = np.asarray(params[name]).size
-        labels.extend([name] if np.ndim(params[name]) == 0 else [f"{name}[{i}]" for i in range(size)])
-    return labels
+__all__ = ["FitResult", "STATUSES"]
 
 
 def _json_value(value):
@@ -195,7 +184,7 @@ class FitResult:
         Returns:
             The group path written, e.g. ``"/fits/lambert+ggx"``.
         """
-        from .io.hdf5 import update_hdf5
+        from ..io.hdf5 import update_hdf5
 
         group = f"fits/{(name or self.spec).replace('/', '_')}"
         payload = json.dumps(self.to_dict())
@@ -243,7 +232,7 @@ class FitResult:
         """
         import h5py
 
-        from .io import FormatError
+        from ..io import FormatError
 
         with h5py.File(path, "r") as f:
             fits = f.get("fits")

@@ -1,0 +1,648 @@
+"""`fit` and `fit_many`: one pipeline for one material, many materials and independent channels (docs/fitting.md).
+
+The pipeline, step by step, for a batch of equally shaped materials (`fit` is a batch of one; independent
+channels are a batch of single-channel materials):
+
+1. **prepare**: validate the options, build the `Problem` (amplitudes projected whenever the loss is linear and
+   no robust rewrite is asked, `brdffit.fitting.separable`) and the data arrays;
+2. **search**: score a grid of the nonlinear parameters over their declared bounds, amplitudes solved at each, on a
+   subsample; the best separated candidates become the starts (`brdffit.fitting.search`);
+3. **polish**: all starts of all materials in one vmapped optimistix solve (on a subsample first when the data
+   are large); the lowest cost is kept;
+4. **hold**: a polish that did not converge because an outer parameter runs into a bound (its transform
+   saturates) or a lobe whose amplitudes all went to 0 leaves its shape drifting is solved again with those
+   parameters held (on the bound, or where they are); the better answer is kept, and the bound stays visible in
+   the status;
+5. **refine**: large data are refined on all samples (`brdffit.fitting.refine`);
+6. **diagnose and report**: canonical lobe order, the status with its Karush-Kuhn-Tucker test, standard errors
+   (`brdffit.fitting.uncertainty`), warnings, metrics and information criteria.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..metrics import fit_metrics
+from ..models.model import Model
+from ..models.registry import get as get_model
+from ..params import at_bound
+from ..progress import Progress
+from .losses import ROBUST, get_loss, loss_epsilon
+from .problem import FitData, Problem, make_fit_data, residual_fn, stack_data
+from .refine import refine
+from .result import FitResult
+from .search import SEARCH_SAMPLES, canonical, interior, quasi_random_starts, score, search
+from .solvers import coarse_solver, compiled_solve, make_solver, no_pins, solver_name, working_tolerances
+from .status import diagnose, information_criteria, warnings_of
+from .uncertainty import Uncertainty, normal_equations_at
+
+__all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
+
+CHANNEL_MODES = ("shared-shape", "independent")
+# Data with more (sample, channel) values than this is first solved on a subsample of COARSE_SAMPLES samples and
+# then refined on all of it (`brdffit.fitting.refine`).
+COARSE_RESIDUALS = 150_000
+COARSE_SAMPLES = 10_000
+COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
+# An outer scalar closer than this fraction of its range to a bound, at the end of a polish that did not
+# converge, is held on the bound (step 4 of the pipeline).
+HOLD_FRACTION = 1e-3
+# Rounds of holding and releasing bounds (an active-set iteration) before the pipeline reports what it has.
+HOLD_ROUNDS = 3
+
+
+class FitError(RuntimeError):
+    """Raised by a strict fit that did not converge; ``.result`` holds the `FitResult`."""
+
+    def __init__(self, message: str, result: FitResult):
+        super().__init__(message)
+        self.result = result
+
+
+# ------------------------------------------------------------------------------------------------------- prepare
+def _parse_robust(robust):
+    if robust is None or isinstance(robust, str):
+        kind, scale = robust, None
+    else:
+        kind, scale = robust
+    if kind not in ROBUST:
+        raise ValueError(f"robust must be None, 'huber', 'cauchy' or a (kind, scale) pair, got {robust!r}")
+    if scale is not None and not scale > 0:
+        raise ValueError(f"the robust scale must be positive, got {scale!r}")
+    return kind, scale
+
+
+def _resolve_model(model, channels: int) -> Model:
+    if isinstance(model, Model):
+        if model.channels != channels:
+            raise ValueError(f"the model has {model.channels} channels but the measurements have {channels}")
+        return model
+    return get_model(model, channels=channels)
+
+
+def _split_fixed(model: Model, fixed, free) -> dict:
+    """name -> value of every parameter held fixed: declared-fixed ones unless freed, plus the user's."""
+    specs = model.param_specs
+    free = set(free or ())
+    for name in free:
+        specs[name]  # raises KeyError naming the valid parameters
+    values = {s.name: model.params[s.name] for s in specs if s.fixed and s.name not in free}
+    if isinstance(fixed, dict):
+        for name, value in fixed.items():
+            values[name] = model.replace(**{name: value}).params[name]
+    else:
+        for name in fixed or ():
+            values[name] = model.params[specs[name].name]
+    return values
+
+
+def _prepare(measurements, model, *, loss, solver, fixed, free, robust, max_steps, rtol, atol):
+    """Validate the arguments and build the `Problem`, the base model, the fixed values and the robust scale."""
+    declared = get_loss(loss)
+    if declared.needs_sigma and measurements.sigma is None:
+        raise ValueError(f"loss={loss!r} needs measurements with per-sample sigma; these have none")
+    robust_kind, robust_scale = _parse_robust(robust)
+    model = _resolve_model(model, measurements.n_channels)
+    fixed_values = _split_fixed(model, fixed, free)
+    problem = Problem(
+        lobes=model.lobes, channels=model.channels,
+        free=tuple(s.name for s in model.param_specs if s.name not in fixed_values),
+        loss=loss, robust=robust_kind, solver=make_solver(solver, rtol, atol), max_steps=int(max_steps),
+        separable=declared.linear and robust_kind is None,
+    )
+    return problem, model, fixed_values, robust_scale
+
+
+def _use_coarse(coarse, measurements) -> bool:
+    if coarse not in ("auto", True, False):
+        raise ValueError(f"coarse must be 'auto', True or False, got {coarse!r}")
+    if coarse == "auto":
+        return measurements.n * measurements.n_channels > COARSE_RESIDUALS and measurements.n > COARSE_SAMPLES
+    return bool(coarse) and measurements.n > COARSE_SAMPLES
+
+
+def _subsample(measurements, limit: int, seed: int):
+    return measurements if measurements.n <= limit else measurements.subsample(limit, seed=seed)
+
+
+def _json_params(params: dict) -> dict:
+    return {k: np.asarray(v, dtype=float).tolist() for k, v in params.items()}
+
+
+# -------------------------------------------------------------------------------------------------------- search
+def _starts(problem: Problem, model: Model, fixed_values: dict, init, multistart: int, seed: int,
+            data: FitData) -> list[list[dict]]:
+    """The starts of every material (physical values of every parameter, amplitudes solved), equally many."""
+    base = dict(model.params, **fixed_values)
+    materials = int(np.shape(data.values)[0])
+    extra = quasi_random_starts(problem, multistart, seed)
+
+    def scored(settings):  # the settings with their amplitudes solved, in the given order
+        return search(problem, base, data, seed, candidates=settings, starts=len(settings) + 1, separation=-1.0)
+
+    if isinstance(init, str) and init == "auto":
+        starts = search(problem, base, data, seed)
+    elif isinstance(init, list):
+        starts = search(problem, base, data, seed, candidates=init)
+    elif isinstance(init, str) and init == "model" or isinstance(init, (dict, Model)):
+        if isinstance(init, (dict, Model)):
+            given = init.params if isinstance(init, Model) else model.replace(**init).params
+            base = dict(base, **{k: v for k, v in given.items() if k not in fixed_values})
+        # The given values start the solve (a separable one solves the amplitudes itself).
+        starts = [[dict(base)] for _ in range(materials)]
+    else:
+        raise ValueError(f"init must be 'auto', 'model', a Model, a dict of values or a list of candidate "
+                         f"shape settings, got {init!r}")
+    if extra:
+        for material, more in zip(starts, scored(extra)):
+            material.extend(more[:len(extra)])
+    count = max(len(s) for s in starts)
+    return [s + [s[-1]] * (count - len(s)) for s in starts]
+
+
+def _robust_scale(problem: Problem, start: dict, data: FitData) -> float:
+    """1.4826 times the median absolute residual at the start (the robust loss's default scale)."""
+    plain = dataclasses.replace(problem, robust=None)
+    r = np.asarray(residual_fn(plain, {k: jnp.asarray(v) for k, v in start.items()}, data))
+    mask = np.asarray(data.mask)
+    return float(max(1.4826 * np.median(np.abs(r[mask])), 1e-12)) if mask.any() else 1.0
+
+
+# -------------------------------------------------------------------------------------------------------- polish
+def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: list[dict] | None = None):
+    """Solve every start of every material in one batched program.
+
+    Arguments:
+        problem: the `Problem`.
+        starts: for each material, its starts (physical values of every parameter).
+        data: `FitData` with a leading material axis.
+        held: for each material, outer name -> physical value to hold (a NaN entry holds nothing), the same for
+            every start of that material.
+
+    Returns:
+        ``(outcomes, compile_seconds, run_seconds)``: for each material a list of per-start dicts ``params``
+        (physical, every parameter), ``cost``, ``steps``, ``max_steps``, ``nonfinite``.
+    """
+    specs = problem.specs
+    if not problem.outer:  # nothing nonlinear is free: the projection is the whole solve
+        t0 = time.perf_counter()
+        costs, amplitudes = score(problem, [starts[0][0]], data)  # the fixed values are the same for every material
+        out = []
+        for m, material in enumerate(starts):
+            params = dict(material[0], **{a: amplitudes[a][m, 0] for a in amplitudes})
+            out.append([{"params": params, "cost": float(costs[m, 0]), "steps": 0, "max_steps": False,
+                         "nonfinite": not np.isfinite(costs[m, 0])}])
+        return out, 0.0, time.perf_counter() - t0
+    y0 = {name: jnp.asarray(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
+                                                for s in material]) for material in starts]))
+          for name in problem.outer}
+    solve_data = data._replace(fixed={k: jnp.asarray(np.stack([np.asarray(material[0][k], dtype=float)
+                                                               for material in starts]))
+                                      for k in problem.layout.names if k not in problem.free})
+    executable, compile_time = compiled_solve(problem, y0, solve_data)
+    pins = no_pins(problem, y0)
+    if held:
+        for name in problem.outer:
+            value = np.stack([np.broadcast_to(np.asarray(h.get(name, np.nan), dtype=float), np.shape(y0[name])[1:])
+                              for h in held])
+            pins[name] = (jnp.asarray(np.isfinite(value)), jnp.asarray(np.nan_to_num(value)))
+    t0 = time.perf_counter()
+    out = jax.tree_util.tree_map(np.asarray, jax.block_until_ready(executable(y0, solve_data, pins)))
+    run_time = time.perf_counter() - t0
+    outcomes = []
+    for m, material in enumerate(starts):
+        outcomes.append([{"params": {k: v[m, i] for k, v in out["params"].items()}, "cost": float(out["cost"][m, i]),
+                          "steps": int(out["steps"][m, i]), "max_steps": bool(out["max_steps"][m, i]),
+                          "nonfinite": bool(out["nonfinite"][m, i])} for i in range(len(material))])
+    return outcomes, compile_time, run_time
+
+
+def _start_status(outcome: dict) -> str:
+    if outcome["nonfinite"]:
+        return "nonfinite"
+    return "max-steps" if outcome["max_steps"] else "converged"
+
+
+def _best(outcomes: list[dict]) -> dict:
+    costs = [o["cost"] if not o["nonfinite"] else np.inf for o in outcomes]
+    return outcomes[int(np.argmin(costs))] if np.isfinite(costs).any() else outcomes[0]
+
+
+# ---------------------------------------------------------------------------------------------------------- hold
+def _to_hold(problem: Problem, params: dict) -> dict:
+    """Outer parameters to hold for a re-solve: scalars within `HOLD_FRACTION` of a bound (snapped onto it), and
+    the shape of lobes whose amplitudes are all 0 (held where they are). NaN marks a scalar left free."""
+    layout = problem.layout
+    held = {}
+    for name in problem.outer:
+        spec = layout[name].spec
+        value = np.array(params[name], dtype=float)
+        near = np.asarray(at_bound(value, spec, HOLD_FRACTION))
+        if near.any():
+            nearest = np.where(np.abs(value - spec.lower) <= np.abs(value - spec.upper), spec.lower, spec.upper)
+            held[name] = np.where(near, nearest, np.nan)
+    for j, lobe in enumerate(problem.lobes):
+        for slot in layout.lobe_slots(j):
+            if slot.name in problem.linear and np.all(np.asarray(params[slot.name]) == 0.0):
+                for partner in lobe.amplitude_partners(slot.local):
+                    name = layout.global_names(j, {partner: None}).popitem()[0]
+                    if name in problem.outer:
+                        held[name] = np.asarray(params[name], dtype=float)
+    return held
+
+
+def _release(problem: Problem, held: dict, params: dict, jtr) -> dict:
+    """The holds of the next round after a re-solve: a scalar held on a bound whose descent direction
+    −∂cost/∂p points into the box is released (its entry becomes NaN); scalars held inside the box (a dead lobe's
+    shape) stay. Empty when nothing was released: another round would repeat this one."""
+    offsets = problem.layout.offsets(problem.free)
+    released, out = False, {}
+    for name, value in held.items():
+        spec = problem.specs[name]
+        value = np.array(value, dtype=float)
+        gradient = np.reshape(np.asarray(jtr)[offsets[name]], value.shape)
+        inward = ((value == spec.lower) & (gradient < 0)) | ((value == spec.upper) & (gradient > 0))
+        released |= bool(inward.any())
+        out[name] = np.where(inward, np.nan, value)
+    return out if released else {}
+
+
+def _held_start(problem: Problem, params: dict, held: dict) -> dict:
+    """The start of a re-solve: the held scalars on their values, the other outer ones moved inside the bounds."""
+    start = dict(params)
+    for name in problem.outer:
+        inside = interior(params[name], problem.specs[name])
+        start[name] = np.where(np.isfinite(held[name]), held[name], inside) if name in held else inside
+    return start
+
+
+# --------------------------------------------------------------------------------------------------------- prune
+def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData) -> list[str]:
+    """Projected amplitudes whose lobe does not pay for its parameters: setting the amplitude to 0 raises χ² (the
+    cost over the noise variance, cost/dof or 1 for ``loss="sigma"``) by at most twice the lobe's number of free
+    scalars, AIC's price of those parameters (a useless lobe of k parameters fits away about k of χ² of noise).
+    Only amplitudes not already 0 everywhere are tested, and never the only lobe's."""
+    if len(problem.lobes) < 2 or not problem.linear:
+        return []
+    layout = problem.layout
+    n_valid = int(np.sum(np.asarray(data.mask)))
+    k = layout.size(problem.free)
+    variance = 1.0 if problem.loss == "sigma" else cost / max(n_valid - k, 1)
+    dead = []
+    for j, lobe in enumerate(problem.lobes):
+        for slot in layout.lobe_slots(j):
+            if slot.name not in problem.linear or np.all(np.asarray(params[slot.name]) == 0.0):
+                continue
+            partners = {layout.global_names(j, {p: None}).popitem()[0] for p in lobe.amplitude_partners(slot.local)}
+            size = layout[slot.name].size + layout.size([n for n in partners if n in problem.outer])
+            trial = dict(params, **{slot.name: np.zeros(layout[slot.name].shape)})
+            increase = _cost_fn(problem)({k_: jnp.asarray(v) for k_, v in trial.items()}, data) - cost
+            if float(increase) <= 2.0 * size * variance:
+                dead.append(slot.name)
+    return dead
+
+
+@functools.lru_cache(maxsize=64)
+def _cost_fn(problem: Problem):
+    return jax.jit(lambda params, data: jnp.sum(residual_fn(problem, params, data) ** 2))
+
+
+def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, data: FitData, starts: int):
+    """Solve one material again with the ``dead`` amplitudes held at 0 and the parameters that act only through
+    them (`Lobe.amplitude_partners`) held where they are: a problem with fewer free parameters."""
+    layout = problem.layout
+    held = {name: np.zeros(layout[name].shape) for name in dead}
+    for j, lobe in enumerate(problem.lobes):
+        for slot in layout.lobe_slots(j):
+            if slot.name in dead:
+                for partner in lobe.amplitude_partners(slot.local):
+                    name = layout.global_names(j, {partner: None}).popitem()[0]
+                    if name in problem.free and name not in dead:
+                        held[name] = np.asarray(kept["params"][name], dtype=float)
+    free = tuple(n for n in problem.free if n not in held)
+    reduced = dataclasses.replace(problem, free=free)
+    start = dict(kept["params"], **held)
+    start = {k: (interior(v, problem.specs[k]) if k in reduced.outer else v) for k, v in start.items()}
+    single = jax.tree_util.tree_map(lambda a: a[None], data)
+    single = single._replace(fixed={k: jnp.asarray(v)[None] for k, v in start.items() if k not in free})
+    outcomes, compile_time, run_time = _polish(dataclasses.replace(solve_problem, free=free), [[start] * starts],
+                                               single)
+    pruned = dict(_best(outcomes[0]))
+    pruned["steps"] += kept["steps"]
+    pruned["notes"] = kept["notes"] + [
+        f"{', '.join(dead)} went to 0 in every channel: the lobe contributes nothing and was pruned (amplitude "
+        f"held at 0; {', '.join(sorted(set(held) - set(dead))) or 'nothing else'} held where it was); a model "
+        "without it suffices"]
+    pruned["pruned"] = dead
+    return reduced, pruned, compile_time, run_time
+
+
+# ---------------------------------------------------------------------------------------------------- the result
+def _result(problem: Problem, model: Model, measurements, data: FitData, params: dict, outcome: dict, normal,
+            starts: list, times: dict, strategy: str) -> FitResult:
+    """Diagnose the kept solution of one material and build its `FitResult`."""
+    params = {k: np.asarray(v) for k, v in params.items()}
+    fitted = model.replace(**params)
+    layout = problem.layout
+    valid = np.isfinite(measurements.values)
+    n_valid = int(valid.sum())
+    cost = float(normal.cost) if normal is not None else float(outcome["cost"])
+    if problem.free:
+        status, hit, decrease = diagnose(problem, params, cost, outcome["max_steps"], outcome["nonfinite"],
+                                         normal.jtj, normal.jtr)
+    else:
+        status, hit, decrease = ("nonfinite" if not np.isfinite(cost) else "converged"), [], 0.0
+    if n_valid <= 0:
+        status = "nonfinite"
+    pruned = [label for name in outcome.get("pruned", []) for label in layout[name].labels()]
+    if pruned and status == "converged":
+        status = "converged-at-bound"
+    hit = hit + pruned
+    uncertainty = Uncertainty(normal if problem.free else None, cost, problem.loss, n_valid)
+    labels = layout.labels(problem.free)
+    warnings = warnings_of(problem, labels, uncertainty, hit, status, decrease, cost)
+    warnings = outcome.get("notes", []) + warnings
+    k = len(labels)
+    aic, bic = information_criteria(problem.loss, cost, n_valid, k)
+    channel_cost = normal.channel_cost if normal is not None else np.full(problem.channels, cost / problem.channels)
+    metrics = {"rmse_loss": np.sqrt(channel_cost / np.maximum(valid.sum(axis=0), 1))}
+    metrics.update(fit_metrics(fitted, measurements, pair=data.pair))
+
+    def per_param(flat):
+        offsets = layout.offsets(problem.free)
+        return {name: (np.reshape(flat[offsets[name]], layout[name].shape) if name in offsets
+                       else np.zeros(layout[name].shape)) for name in layout.names}
+
+    return FitResult(
+        model=fitted, params=dict(fitted.params), stderr=per_param(uncertainty.stderr),
+        stderr_robust=per_param(uncertainty.stderr_robust), covariance=uncertainty.covariance,
+        correlation=uncertainty.correlation, labels=labels, metrics=metrics, n_samples=n_valid, n_params=k,
+        dof=n_valid - k, cost=cost, aic=aic, bic=bic, status=status, bounds_hit=hit, warnings=warnings,
+        steps=int(outcome["steps"]), compile_time=times["compile"], run_time=times["run"], init_time=times["init"],
+        loss=problem.loss, solver=solver_name(problem.solver), channel_mode="shared-shape",
+        fixed=sorted(n for n in layout.names if n not in problem.free), starts=starts,
+        noise_variance=float(uncertainty.variance), strategy=strategy, models=[fitted],
+    )
+
+
+# ------------------------------------------------------------------------------------------------------ pipeline
+def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart, robust, max_steps, rtol, atol,
+              seed, coarse, bar: Progress) -> list[FitResult]:
+    """The fitting pipeline of the module doc over equally shaped materials ``items``."""
+    rtol, atol = working_tolerances(rtol, atol)
+    problem, base_model, fixed_values, robust_scale = _prepare(
+        items[0], model, loss=loss, solver=solver, fixed=fixed, free=free, robust=robust, max_steps=max_steps,
+        rtol=rtol, atol=atol)
+    if not isinstance(multistart, int) or isinstance(multistart, bool) or multistart < 0:
+        raise ValueError(f"multistart must be a non-negative integer, got {multistart!r}")
+    eps = [loss_epsilon(loss, m.values) for m in items]
+    two_stage = bool(problem.outer) and _use_coarse(coarse, items[0])
+    strategy = f"coarse ({COARSE_SAMPLES} samples) + refine" if two_stage else "full"
+
+    bar.update(0, "search")
+    t0 = time.perf_counter()
+    search_data = stack_data([make_fit_data(_subsample(m, SEARCH_SAMPLES, seed), fixed_values, e, 1.0)
+                              for m, e in zip(items, eps)])
+    starts = _starts(problem, base_model, fixed_values, init, multistart, seed, search_data)
+    if problem.robust is not None and robust_scale is None:
+        scales = [_robust_scale(problem, s[0], jax.tree_util.tree_map(lambda a, m=m: a[m], search_data))
+                  for m, s in enumerate(starts)]
+    else:
+        scales = [robust_scale if robust_scale is not None else 1.0] * len(items)
+    init_time = time.perf_counter() - t0
+
+    full = [make_fit_data(m, fixed_values, e, s) for m, e, s in zip(items, eps, scales)]
+    if two_stage:
+        solve_items = [make_fit_data(m.subsample(COARSE_SAMPLES, seed=seed), fixed_values, e, s)
+                       for m, e, s in zip(items, eps, scales)]
+        loose = coarse_solver(solver, max(COARSE_RTOL, rtol), max(COARSE_ATOL, atol)) \
+            if isinstance(solver, str) else problem.solver
+        solve_problem = dataclasses.replace(problem, solver=loose)
+    else:
+        solve_items, solve_problem = full, problem
+    bar.update(1, f"polishing {len(starts[0])} start{'s' if len(starts[0]) > 1 else ''}"
+                  f"{f' on {COARSE_SAMPLES} samples' if two_stage else ''}")
+    outcomes, compile_time, run_time = _polish(solve_problem, starts, stack_data(solve_items))
+
+    records = [[{"init": _json_params(s), "cost": o["cost"], "status": _start_status(o), "steps": o["steps"]}
+                for s, o in zip(starts[m], outcomes[m])] for m in range(len(items))]
+    kept = [dict(_best(o), notes=[]) for o in outcomes]
+    normals = [normal_equations_at(problem, b["params"], d) if problem.free else None
+               for b, d in zip(kept, solve_items)]
+    statuses = [diagnose(problem, b["params"], b["cost"], b["max_steps"], b["nonfinite"], n.jtj, n.jtr)[0]
+                if problem.free else "converged" for b, n in zip(kept, normals)]
+    holds = [_to_hold(problem, b["params"]) if st in ("max-steps", "stalled") else {}
+             for b, st in zip(kept, statuses)]
+    for _ in range(HOLD_ROUNDS):
+        if not any(holds):
+            break
+        bar.update(2, "holding parameters and solving again")
+        again, c_time, r_time = _polish(solve_problem, [[_held_start(problem, b["params"], h)] * len(starts[0])
+                                                        for b, h in zip(kept, holds)],
+                                        stack_data(solve_items), holds)
+        compile_time += c_time
+        run_time += r_time
+        for m, held in enumerate(holds):
+            if not held:
+                continue
+            retry = dict(again[m][0])
+            retry_normal = normal_equations_at(problem, retry["params"], solve_items[m])
+            retry_status = diagnose(problem, retry["params"], retry["cost"], retry["max_steps"], retry["nonfinite"],
+                                    retry_normal.jtj, retry_normal.jtr)[0]
+            records[m].append({"init": _json_params(_held_start(problem, kept[m]["params"], held)),
+                               "cost": retry["cost"], "status": retry_status, "steps": retry["steps"],
+                               "held": sorted(held)})
+            if retry["cost"] <= kept[m]["cost"] or retry_status.startswith("converged"):
+                retry["steps"] += kept[m]["steps"]
+                retry["notes"] = kept[m]["notes"] + [
+                    f"{', '.join(sorted(held))} held (on a bound, or where a lobe whose amplitudes all went to 0 "
+                    f"left them) after a solve that ended {statuses[m]} "
+                    f"(cost {kept[m]['cost']:.6g} -> {retry['cost']:.6g})"]
+                kept[m], normals[m], statuses[m] = retry, retry_normal, retry_status
+            # Karush-Kuhn-Tucker: a held bound whose descent direction points into the box is released.
+            holds[m] = _release(problem, held, retry["params"], retry_normal.jtr) \
+                if statuses[m] in ("max-steps", "stalled") else {}
+
+    problems = [problem] * len(items)
+    for m in range(len(items)):
+        dead = _dead_amplitudes(problem, kept[m]["params"], kept[m]["cost"], solve_items[m])
+        if dead:
+            bar.update(2, f"pruning {', '.join(dead)}")
+            problems[m], pruned, c_time, r_time = _prune(problem, solve_problem, kept[m], dead, solve_items[m],
+                                                          len(starts[0]))
+            compile_time += c_time
+            run_time += r_time
+            records[m].append({"init": _json_params(pruned["params"]), "cost": pruned["cost"],
+                               "status": _start_status(pruned), "steps": pruned["steps"], "pruned": dead})
+            kept[m] = pruned
+            normals[m] = normal_equations_at(problems[m], pruned["params"], solve_items[m])
+
+    results = []
+    for m, measurements in enumerate(items):
+        best, normal, problem = kept[m], normals[m], problems[m]
+        params = canonical(problem, best["params"])
+        if two_stage:
+            bar.update(3, f"refining on all {measurements.n} samples")
+            t0 = time.perf_counter()
+            data = full[m]._replace(fixed={k: jnp.asarray(v) for k, v in params.items() if k not in problem.free})
+            refined_params, refined = refine(problem, params, data, rtol=rtol, atol=atol)
+            run_time += time.perf_counter() - t0
+            best = dict(best, params=refined_params, cost=refined["cost"], steps=best["steps"] + refined["steps"],
+                        max_steps=refined["max_steps"], nonfinite=refined["nonfinite"])
+            normal = refined["normal"]
+            params = canonical(problem, refined_params)
+        if not problem.free:
+            r = residual_fn(problem, {k: jnp.asarray(v) for k, v in params.items()}, full[m])
+            best = dict(best, cost=float(jnp.sum(r * r)))
+        elif any(not np.array_equal(np.asarray(params[k]), np.asarray(best["params"][k])) for k in problem.free):
+            normal = normal_equations_at(problem, params, full[m])  # the canonical order moved the columns
+        results.append(_result(problem, base_model, measurements, full[m], params, best, normal, records[m],
+                               {"compile": compile_time, "run": run_time / len(items), "init": init_time / len(items)},
+                               strategy))
+    return results
+
+
+# ---------------------------------------------------------------------------------------------------- public API
+def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", fixed=None, free=None,
+        multistart: int = 0, channel_mode: str = "shared-shape", robust=None, max_steps: int = 256,
+        rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0, coarse="auto",
+        strict: bool = False, progress: bool = False) -> FitResult:
+    """Fit a model to measurements by least squares: amplitudes exactly, the rest by a global search and a
+    polish (the pipeline of the module doc).
+
+    Arguments:
+        measurements: `brdffit.Measurements`.
+        model: a spec string (``"lambert+ggx"``) or a `Model` (its values are the start when ``init="model"``).
+        loss: a name in `brdffit.fitting.losses.LOSSES`: ``"cosine"`` (default), ``"log"``, ``"relative"``,
+            ``"absolute"`` or ``"sigma"`` (docs/fitting.md).
+        solver: a name from `brdffit.fitting.solvers.SOLVERS` (``"lm"``, ``"gauss-newton"``, ``"dogleg"``,
+            ``"indirect-lm"``, ``"bfgs"``) or any optimistix least-squares solver or minimiser; it moves the
+            nonlinear parameters (the amplitudes are projected out for a linear loss).
+        init: ``"auto"`` (global search over the declared bounds, `brdffit.fitting.search`), ``"model"`` (the
+            model's values), a `Model`, a dict of starting values, or a list of candidate settings of the
+            nonlinear parameters (dicts) that the search scores instead of its own grid.
+        fixed: parameters held fixed: a dict name -> value, or names held at the model's values.
+        free: names of parameters declared fixed by default (e.g. the toon ``width``) that this fit frees.
+        multistart: extra quasi-random starts over the bounds, polished with the others in one vmapped solve; the
+            lowest cost is kept and every start is recorded in ``result.starts``.
+        channel_mode: ``"shared-shape"`` (colour parameters per channel, shape parameters shared and fitted
+            jointly) or ``"independent"`` (one fit per channel, all solved in one batch).
+        robust: None, ``"huber"``, ``"cauchy"`` or ``(kind, scale)``; without a scale it is 1.4826 times the
+            median absolute residual at the start.
+        max_steps: the solver's step limit.
+        rtol, atol: the solver's convergence tolerances (optimistix's Cauchy termination), raised to what the
+            working precision can meet (`brdffit.fitting.solvers.working_tolerances`; changes nothing in float64).
+        seed: seed of the subsamples and of the quasi-random starts.
+        coarse: ``"auto"`` solves data with more than `COARSE_RESIDUALS` values on a seeded subsample of
+            `COARSE_SAMPLES` samples first and then refines on all of it (`brdffit.fitting.refine`); True forces
+            and False disables this. The answer is the full-data optimum either way; only the time differs.
+        strict: raise `FitError` instead of returning a non-converged result.
+        progress: report the stages (search, polish, hold, refinement, uncertainty) on a progress line on stderr
+            (`brdffit.progress.Progress`).
+
+    Returns:
+        A `FitResult`.
+    """
+    if channel_mode not in CHANNEL_MODES:
+        raise ValueError(f"channel_mode must be one of {', '.join(CHANNEL_MODES)}, got {channel_mode!r}")
+    options = dict(loss=loss, solver=solver, init=init, fixed=fixed, free=free, multistart=multistart,
+                   robust=robust, max_steps=max_steps, rtol=rtol, atol=atol, seed=seed, coarse=coarse)
+    spec = model.spec if isinstance(model, Model) else model
+    bar = Progress(f"fit {spec}", 4, enabled=progress, unit="stages")
+    if channel_mode == "independent":
+        result = _fit_independent(measurements, model, options, bar)
+    else:
+        result = _pipeline([measurements], model, bar=bar, **options)[0]
+    bar.close(f"{result.status}, cost {result.cost:.6g}")
+    if strict and not result.converged:
+        raise FitError(f"fit of {result.spec} did not converge: {result.status}", result)
+    return result
+
+
+# The worst status of a set of fits, for independent channels (every status ranked).
+_SEVERITY = {"converged": 0, "converged-at-bound": 1, "stalled": 2, "max-steps": 3, "nonfinite": 4}
+
+
+def _fit_independent(measurements, model, options: dict, bar: Progress) -> FitResult:
+    """One fit per channel, solved as one batch of single-channel materials, assembled: shape parameters become
+    per-channel arrays."""
+    channels = measurements.n_channels
+    base = _resolve_model(model, channels)
+    single = get_model(base.spec, channels=1, **{
+        name: (value[:1] if spec.colour else value) for (name, value), spec in zip(base.params.items(),
+                                                                                   base.param_specs)})
+    per_channel = [measurements.select_channels([c]) for c in range(channels)]
+    if isinstance(options["init"], (dict, Model)):
+        raise ValueError("channel_mode='independent' takes init='auto', 'model' or a list of candidates")
+    results = _pipeline(per_channel, single, bar=bar, **options)
+
+    def merge(attr):
+        merged = {}
+        for name, spec in zip(base.params, base.param_specs):
+            parts = [np.atleast_1d(np.asarray(getattr(r, attr)[name])) for r in results]
+            merged[name] = np.concatenate(parts) if spec.colour else np.stack([p[0] for p in parts])
+        return merged
+
+    worst = max((r.status for r in results), key=_SEVERITY.__getitem__)
+    k = sum(r.n_params for r in results)
+    n = sum(r.n_samples for r in results)
+    cost = sum(r.cost for r in results)
+    aic, bic = information_criteria(results[0].loss, cost, n, k)
+    labels = [f"{label}@{c}" for c, r in enumerate(results) for label in r.labels]
+    size = len(labels)
+    cov, cor = np.zeros((size, size)), np.zeros((size, size))
+    offset = 0
+    for r in results:
+        s = len(r.labels)
+        cov[offset:offset + s, offset:offset + s] = r.covariance
+        cor[offset:offset + s, offset:offset + s] = r.correlation
+        offset += s
+    return FitResult(
+        model=None, params=merge("params"), stderr=merge("stderr"), stderr_robust=merge("stderr_robust"),
+        covariance=cov, correlation=cor,
+        labels=labels, metrics={m: np.concatenate([r.metrics[m] for r in results]) for m in results[0].metrics},
+        n_samples=n, n_params=k, dof=n - k, cost=cost, aic=aic, bic=bic, status=worst,
+        bounds_hit=[f"{b}@{c}" for c, r in enumerate(results) for b in r.bounds_hit],
+        warnings=[f"channel {c}: {w}" for c, r in enumerate(results) for w in r.warnings],
+        steps=max(r.steps for r in results), compile_time=results[0].compile_time,
+        run_time=sum(r.run_time for r in results), init_time=sum(r.init_time for r in results),
+        loss=results[0].loss, solver=results[0].solver, channel_mode="independent", fixed=results[0].fixed,
+        starts=[s for r in results for s in r.starts],
+        noise_variance=float(np.mean([r.noise_variance for r in results])),
+        strategy=results[0].strategy, models=[r.model for r in results],
+    )
+
+
+def fit_many(measurements_list, model, *, loss: str = "cosine", solver="lm", init="auto", fixed=None,
+             free=None, robust=None, max_steps: int = 256, rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0,
+             ) -> list[FitResult]:
+    """Fit one model to many equally shaped data sets: the pipeline of `fit`, every stage batched.
+
+    This is the path for databases and spatially varying materials: every data set must have the same number of
+    samples and channels (missing samples may differ). Each gets its own search; the solves run together, so one
+    compiled program serves them all.
+
+    Arguments:
+        measurements_list: a sequence of `brdffit.Measurements` of equal shape.
+        model, loss, solver, init, fixed, free, robust, max_steps, rtol, atol, seed: as for `fit`.
+
+    Returns:
+        One `FitResult` per data set, in order; each has the same answer as `fit` on that data set alone.
+    """
+    items = list(measurements_list)
+    if not items:
+        raise ValueError("fit_many needs at least one data set")
+    shape = np.shape(items[0].values)
+    for i, m in enumerate(items):
+        if np.shape(m.values) != shape:
+            raise ValueError(f"fit_many needs equally shaped data sets: item 0 has values of shape {shape}, "
+                             f"item {i} has {np.shape(m.values)}; fit them separately with fit()")
+    return _pipeline(items, model, loss=loss, solver=solver, init=init, fixed=fixed, free=free, multistart=0,
+                     robust=robust, max_steps=max_steps, rtol=rtol, atol=atol, seed=seed, coarse="auto",
+                     bar=Progress("fit_many", 4, enabled=False, unit="stages"))

@@ -1,0 +1,245 @@
+"""The global start of a fit: a coarse search over the declared bounds of the nonlinear parameters.
+
+With the amplitudes projected out (`brdffit.fitting.separable`) a fit has one to a few nonlinear unknowns, few
+enough to search globally before any local solve:
+
+1. candidates: a grid over each outer scalar's declared range (log-spaced for scale parameters, cells centred so
+   that the bounds' neighbourhoods are covered), or a scrambled Sobol set when the grid would exceed
+   `MAX_CANDIDATES`; plus the model's own values and the lobes' own suggestions (`Lobe.start_candidates`, e.g.
+   Lafortune lobes started forward, off-specular and retro at increasing sharpness), or the caller's candidates;
+2. every candidate is scored in one batched, jitted pass on a seeded subsample of at most `SEARCH_SAMPLES`
+   samples, its amplitudes solved exactly (for a nonlinear loss: with the loss linearised at the data, then
+   scored by the true loss);
+3. the `POLISH_STARTS` best candidates that lie apart from each other (in the unit cube of the search ranges)
+   become the starts that the solver polishes together; the lowest polished cost wins.
+
+A colour parameter that is not linear (a conductor's η and k) is searched as one value shared by the channels,
+which the polish then separates.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.stats import qmc
+
+from ..params import bound_margin
+from .problem import FitData, Problem, residuals_of
+from .separable import project
+
+__all__ = ["search", "interior", "canonical", "search_range", "SEARCH_SAMPLES", "MAX_CANDIDATES", "POLISH_STARTS"]
+
+SEARCH_SAMPLES = 4000
+MAX_CANDIDATES = 256
+POLISH_STARTS = 4
+# Candidates closer than this in the unit cube of the search ranges count as the same basin.
+_MIN_SEPARATION = 0.12
+_CHUNK = 64
+
+
+def interior(value, spec):
+    """Move a value at least 1e-3 of the parameter's scale inside its bounds, so that its transform has a usable
+    gradient when a solver starts there.
+
+    Arguments:
+        value: physical value(s).
+        spec: the parameter's `ParamSpec`.
+
+    Returns:
+        The nudged value(s) as a NumPy array.
+    """
+    value = np.asarray(value, dtype=float)
+    margin = bound_margin(spec, 1e-3)
+    lo = spec.lower + margin if math.isfinite(spec.lower) else -np.inf
+    hi = spec.upper - margin if math.isfinite(spec.upper) else np.inf
+    return np.clip(value, lo, hi)
+
+
+def search_range(spec) -> tuple[float, float]:
+    """Interval searched for a parameter: its bounds, narrowed to 1/100..100 times the default for an unbounded
+    scale parameter (an exponent n in (0, ∞) with default 20 is searched over 0.2..2000) and to ±10 scales around
+    the default for an unbounded other one."""
+    if spec.scale:
+        lo = spec.lower if spec.lower > 0 else spec.default / 100.0
+        hi = spec.upper if math.isfinite(spec.upper) else spec.default * 100.0
+    else:
+        width = 10.0 * max(abs(spec.default), 1.0)
+        lo = spec.lower if math.isfinite(spec.lower) else spec.default - width
+        hi = spec.upper if math.isfinite(spec.upper) else spec.default + width
+    return float(lo), float(hi)
+
+
+def _log_axis(spec) -> bool:
+    return spec.scale and search_range(spec)[0] > 0
+
+
+def _from_unit(u, spec) -> float:
+    lo, hi = search_range(spec)
+    if _log_axis(spec):
+        return float(np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo))))
+    return float(lo + u * (hi - lo))
+
+
+def _to_unit(value, spec) -> float:
+    lo, hi = search_range(spec)
+    value = float(np.mean(value))
+    if _log_axis(spec):
+        return float(np.clip((np.log(max(value, lo)) - np.log(lo)) / (np.log(hi) - np.log(lo)), 0.0, 1.0))
+    return float(np.clip((value - lo) / (hi - lo), 0.0, 1.0))
+
+
+def _grid_units(d: int, seed: int) -> np.ndarray:
+    """Points of the unit cube: a centred grid of up to 32 points per axis within `MAX_CANDIDATES` (one to three
+    dimensions), else scrambled Sobol points, which cover more dimensions better than 4 or fewer levels per axis."""
+    per_axis = min(32, int(math.floor(MAX_CANDIDATES ** (1.0 / d) + 1e-9)))
+    if per_axis >= 5:
+        axes = [(np.arange(per_axis) + 0.5) / per_axis for _ in range(d)]
+        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
+    return qmc.Sobol(d, scramble=True, seed=seed).random(MAX_CANDIDATES)
+
+
+def _lobe_candidates(problem: Problem, names: set, seed: int) -> list[dict]:
+    """The lobes' own start candidates (`Lobe.start_candidates`) under model-level names, combined across lobes
+    (at most `MAX_CANDIDATES`, a seeded choice when there are more)."""
+    per_lobe = []
+    for j, lobe in enumerate(problem.lobes):
+        starts = [{k: v for k, v in problem.layout.global_names(j, c).items() if k in names}
+                  for c in lobe.start_candidates()]
+        if starts:
+            per_lobe.append(starts)
+    if not per_lobe:
+        return []
+    sizes = [len(c) for c in per_lobe]
+    total = int(np.prod(sizes))
+    rng = np.random.default_rng(seed)
+    picks = range(total) if total <= MAX_CANDIDATES else rng.choice(total, MAX_CANDIDATES, replace=False)
+    combined = []
+    for flat in picks:
+        merged = {}
+        for starts, index in zip(per_lobe, np.unravel_index(int(flat), sizes)):
+            merged.update(starts[index])
+        combined.append(merged)
+    return combined
+
+
+def canonical(problem: Problem, params: dict) -> dict:
+    """The parameters in each lobe's canonical order (`Lobe.canonical`, e.g. Lafortune lobes sorted by n)."""
+    out = dict(params)
+    for j, lobe in enumerate(problem.lobes):
+        out.update(problem.layout.global_names(j, lobe.canonical(problem.layout.local_params(params, j))))
+    return out
+
+
+def quasi_random_starts(problem: Problem, count: int, seed: int) -> list[dict]:
+    """``count`` scrambled-Sobol points over the outer parameters' search ranges (the extra starts of
+    ``multistart``)."""
+    specs = [problem.specs[name] for name in dataclasses.replace(problem, separable=True).outer]
+    if not specs or count <= 0:
+        return []
+    # A power-of-two draw keeps Sobol's balance (and scipy quiet); the first `count` points are used.
+    units = qmc.Sobol(len(specs), scramble=True, seed=seed + 1).random_base2(max(count - 1, 0).bit_length())[:count]
+    return [{s.name: _from_unit(u[k], s) for k, s in enumerate(specs)} for u in units]
+
+
+@functools.lru_cache(maxsize=64)
+def _score_fn(problem: Problem):
+    """Jitted ``(candidates, data) -> (costs (M, B), amplitudes)``: candidates batched on a leading axis B and the
+    data on a leading material axis M."""
+    def one(params, data: FitData):
+        params, f = project(problem, params, data)
+        r = residuals_of(problem, f, data)
+        return jnp.sum(r * r), {a: params[a] for a in problem.linear}
+
+    return jax.jit(jax.vmap(jax.vmap(one, in_axes=(0, None)), in_axes=(None, 0)))
+
+
+def score(problem: Problem, candidates: list[dict], data: FitData):
+    """Costs of full-parameter candidates with their amplitudes solved, for each material.
+
+    Arguments:
+        problem: the problem, with `separable` set for the scoring (amplitudes projected with the loss's
+            weights, linearised at the data for a nonlinear loss).
+        candidates: dicts of physical values of every parameter.
+        data: `FitData` with a leading material axis.
+
+    Returns:
+        ``(costs (M, B), amplitudes)``: amplitudes name -> ``(M, B, C)``.
+    """
+    fn = _score_fn(problem)
+    costs, amps = [], []
+    for start in range(0, len(candidates), _CHUNK):
+        chunk = candidates[start:start + _CHUNK]
+        padded = chunk + [chunk[-1]] * (_CHUNK - len(chunk))
+        # Stack on the host and transfer once per name (a device array per dict cost ~0.1 s per search).
+        batch = {k: jnp.asarray(np.stack([np.asarray(d[k], dtype=float) for d in padded])) for k in padded[0]}
+        c, a = fn(batch, data)
+        costs.append(np.asarray(c)[:, :len(chunk)])
+        amps.append({k: np.asarray(v)[:, :len(chunk)] for k, v in a.items()})
+    joined = {k: np.concatenate([a[k] for a in amps], axis=1) for k in amps[0]}
+    return np.concatenate(costs, axis=1), joined
+
+
+def search(problem: Problem, base: dict, data: FitData, seed: int, candidates: list[dict] | None = None,
+           starts: int = POLISH_STARTS, separation: float = _MIN_SEPARATION) -> list[list[dict]]:
+    """The best separated candidates of each material, as starts for the polish.
+
+    Arguments:
+        problem: the `Problem` (its `outer` names are searched).
+        base: physical values of every parameter (the model's own values; fixed ones are kept).
+        data: `FitData` of a subsample (at most `SEARCH_SAMPLES` samples), leading material axis.
+        seed: seed of the Sobol points and of the choice among the lobes' candidates.
+        candidates: outer-parameter settings to score instead of the grid and the lobes' suggestions (missing
+            names take their ``base`` values).
+        starts: how many starts to return per material.
+        separation: the least distance between two starts in the unit cube of the search ranges (negative:
+            keep every candidate).
+
+    Returns:
+        For each material, up to ``starts`` dicts of physical values of every parameter (amplitudes solved),
+        best first, each outer value moved inside its bounds.
+    """
+    specs = problem.specs
+    scoring = dataclasses.replace(problem, separable=True)
+    outer = [specs[name] for name in scoring.outer]
+    base = {k: np.asarray(v, dtype=float) for k, v in base.items()}
+    own = {s.name: base[s.name] for s in outer}
+    if candidates is not None:
+        settings = [own] + [{k: v for k, v in c.items() if k in own} for c in candidates]
+    else:
+        settings = [own] + [{s.name: _from_unit(u[k], s) for k, s in enumerate(outer)}
+                            for u in (_grid_units(len(outer), seed) if outer else np.zeros((0, 0)))]
+        settings += _lobe_candidates(problem, set(own), seed)
+    full = []
+    for setting in settings:
+        params = dict(base)
+        for name, value in setting.items():
+            params[name] = np.broadcast_to(np.asarray(value, dtype=float), np.shape(base[name])).copy()
+        full.append(params)
+    # Equivalent settings (Lafortune lobes in another order) are one candidate: put each in canonical order.
+    full = [canonical(problem, p) for p in full]
+    costs, amplitudes = score(scoring, full, data)
+    costs = np.where(np.isfinite(costs), costs, np.inf)
+    units = np.array([[_to_unit(p[s.name], s) for s in outer] for p in full]).reshape(len(full), len(outer))
+    chosen = []
+    for m in range(costs.shape[0]):
+        picks: list[int] = []
+        for index in np.argsort(costs[m], kind="stable"):
+            if len(picks) == starts or not np.isfinite(costs[m, index]):
+                break
+            if all(np.max(np.abs(units[index] - units[p]), initial=0.0) > separation for p in picks):
+                picks.append(int(index))
+        picks = picks or [0]
+        material = []
+        for index in picks:
+            params = dict(full[index], **{a: amplitudes[a][m, index] for a in amplitudes})
+            for name in problem.outer:  # the solver's variables (amplitudes too in a joint solve)
+                params[name] = interior(params[name], specs[name])
+            material.append(params)
+        chosen.append(material)
+    return chosen
+

@@ -1,0 +1,312 @@
+r"""Separable least squares: the linear amplitudes solved exactly for each value of the other parameters.
+
+Most colour parameters (diffuse albedo ρd, specular amplitudes ks, Ashikhmin-Shirley's rs, the toon tones) enter
+the BRDF affinely, channel by channel: with the other parameters θ held, f_c = f₀,c(θ) + Σ_k a_k,c B_k,c(θ). For a
+linear loss r = w (f − f_d) the best amplitudes for given θ solve a small bounded linear least-squares problem
+per channel,
+
+    a*_c(θ) = argmin_{lo <= a <= hi} ‖w_c (f₀,c + B_c a − f_d,c)‖²,
+
+and the solver minimises the *projected* residual r(θ, a*(θ)) over θ alone: variable projection (Golub & Pereyra,
+SIAM J. Numer. Anal. 10, 1973; Kaufman, BIT 15, 1975). The nonlinear solver then sees only roughness, exponents,
+σ, f₀/η and lobe directions (one to a few unknowns instead of 3 per amplitude), an amplitude that the data do not
+want sits exactly on its bound instead of saturating a transform, and `lambert` is a single linear solve.
+
+The bounded problem is solved exactly by enumerating its active sets: each amplitude is free, at its lower or at
+its upper bound (2 or 3 states; K amplitudes give at most 3^K systems of size K, e.g. 24 for ρd and three
+Lafortune lobes). The optimum is the feasible candidate of lowest objective, since the optimum's own active set
+reproduces it and every feasible candidate is a point of the box. Everything is plain JAX, so the projected
+residual is jitted, vmapped over starts and materials and differentiated by the solver like any residual
+(forward-mode through the chosen system: the exact derivative of the projected residual on its active set).
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..models.model import evaluate_pair
+from .losses import get_loss
+from .problem import FitData, Problem
+
+__all__ = ["amplitude_basis", "solve_amplitudes", "solve_box", "box_patterns", "project"]
+
+# Relative ridge added to the amplitude normal matrix: keeps the candidate systems solvable when a basis
+# function vanishes on the data (a lobe that no sample sees) or two coincide (lambert+lambert); far below any
+# conditioning the data can support.
+_RIDGE = 1e-13
+
+
+def amplitude_basis(problem: Problem, params: dict, names: tuple, data: FitData):
+    """The affine decomposition f = f₀ + Σ_k B_k a_k of the model in the amplitudes ``names``.
+
+    Each lobe is evaluated on its own: once with its amplitudes at 0 (its part of f₀) and once per amplitude at 1
+    (the others at 0) for that amplitude's B. A channel's value depends only on that channel's amplitude, so
+    ones in every channel give every channel's column at once. Lobes without such amplitudes go into f₀.
+
+    Arguments:
+        problem: the `Problem`.
+        params: physical values of every parameter (the values of ``names`` are ignored).
+        names: the linear amplitudes (colour parameters declared ``linear``).
+        data: the `FitData`.
+
+    Returns:
+        ``(f0, basis)``: f₀ ``(N, C)`` and B ``(N, C, K)``, ``basis[n, c, k]`` = ∂f[n, c]/∂a_k[c]; both zero
+        unless the sample lies above the horizon.
+    """
+    layout = problem.layout
+    pair = data.pair
+    shape = pair.above.shape + (problem.channels,)
+    f0 = jnp.zeros(shape, dtype=pair.wi.dtype)
+    columns = {}
+    for j, lobe in enumerate(problem.lobes):
+        local = layout.local_params(params, j)
+        mine = [slot for slot in layout.lobe_slots(j) if slot.name in names]
+        zero = dict(local, **{slot.local: jnp.zeros(problem.channels) for slot in mine})
+        base = jnp.broadcast_to(lobe(zero, pair), shape)
+        f0 = f0 + base
+        for slot in mine:
+            unit = dict(zero, **{slot.local: jnp.ones(problem.channels)})
+            columns[slot.name] = jnp.broadcast_to(lobe(unit, pair), shape) - base
+    above = pair.above[..., None]
+    basis = jnp.stack([columns[a] for a in names], axis=-1)
+    return jnp.where(above, f0, 0.0), jnp.where(above[..., None], basis, 0.0)
+
+
+@functools.lru_cache(maxsize=64)
+def box_patterns(lower: tuple, upper: tuple) -> np.ndarray:
+    """Every active-set pattern of a box: code 0 free, 1 at the lower bound, 2 at the upper bound.
+
+    Arguments:
+        lower, upper: the bounds of each amplitude (infinite for none).
+
+    Returns:
+        ``(P, K)`` integer codes.
+    """
+    states = [[0] + ([1] if math.isfinite(lo) else []) + ([2] if math.isfinite(hi) else [])
+              for lo, hi in zip(lower, upper)]
+    return np.array(list(itertools.product(*states)), dtype=int).reshape(-1, len(states))
+
+
+def _spd_solve(a, b):
+    """Solve a x = b for small symmetric positive definite ``a`` ``(..., K, K)`` by a Cholesky factorisation
+    unrolled over K (batched over the leading axes). For the few amplitudes of a model this compiles in a
+    fraction of the time of `jnp.linalg.solve`'s pivoted LU, which dominated a fit's compilation."""
+    k = a.shape[-1]
+    low = [[None] * k for _ in range(k)]
+    for j in range(k):
+        diag = a[..., j, j] - sum(low[j][m] ** 2 for m in range(j))
+        low[j][j] = jnp.sqrt(jnp.maximum(diag, 1e-300))
+        for i in range(j + 1, k):
+            low[i][j] = (a[..., i, j] - sum(low[i][m] * low[j][m] for m in range(j))) / low[j][j]
+    z = []
+    for i in range(k):
+        z.append((b[..., i] - sum(low[i][m] * z[m] for m in range(i))) / low[i][i])
+    x = [None] * k
+    for i in reversed(range(k)):
+        x[i] = (z[i] - sum(low[m][i] * x[m] for m in range(i + 1, k))) / low[i][i]
+    return jnp.stack(x, axis=-1)
+
+
+def _enumerate_box_qp(gram, rhs, lower, upper, patterns):
+    """argmin ½ aᵀ G a − bᵀ a over lower <= a <= upper, by enumerating the active sets (see the module doc).
+
+    Arguments:
+        gram: G ``(K, K)``, symmetric positive semi-definite.
+        rhs: b ``(K,)``.
+        lower, upper: ``(K,)`` NumPy bounds (±inf for none).
+        patterns: `box_patterns` of the bounds.
+
+    Returns:
+        ``(a, free)``: the optimum ``(K,)`` and the mask of its amplitudes off their bounds.
+    """
+    k = gram.shape[0]
+    # Jacobi scaling: the basis functions of a diffuse and a sharp lobe differ by decades in magnitude.
+    scale = jnp.sqrt(jnp.maximum(jnp.diag(gram), 1e-300))
+    g = gram / jnp.outer(scale, scale) + _RIDGE * jnp.eye(k)
+    b = rhs / scale
+    lo = np.where(np.isfinite(lower), lower, 0.0)
+    hi = np.where(np.isfinite(upper), upper, 0.0)
+    codes = np.asarray(patterns)
+    free = (codes == 0).astype(float)  # (P, K)
+    held = jnp.asarray(np.where(codes == 1, lo, np.where(codes == 2, hi, 0.0))) * scale  # held values, scaled
+    # Each pattern's system: the free rows of G (its free block plus the ridge, positive definite) and identity
+    # rows that hold the others; all P systems solved at once.
+    lhs = free[:, :, None] * g[None] * free[:, None, :] + np.eye(k)[None] * (1.0 - free)[:, :, None]
+    cand = _spd_solve(lhs, free * (b[None] - held @ g) + held)  # (P, K) scaled
+    a = cand / scale
+    slack = 1e-10 * (1.0 + jnp.abs(a))
+    feasible = jnp.all((a >= lower - slack) & (a <= upper + slack), axis=1)
+    objective = 0.5 * jnp.sum(cand * (cand @ g), axis=-1) - cand @ b
+    best = jnp.argmin(jnp.where(feasible, objective, jnp.inf))
+    return jnp.clip(a[best], lower, upper), jnp.asarray(free)[best]
+
+
+def _box_qp(lower: tuple, upper: tuple):
+    """The bounded solve for these bounds as a function of (G, b), with its derivative on the optimum's active
+    set: da = G_FF⁻¹ (db − dG a) on the free amplitudes F, 0 on those held by a bound. Differentiating the
+    enumeration itself would carry every candidate system through every tangent (it doubled a fit's
+    compilation time). Made anew for each trace: a cached custom_jvp kept the float64 trace of its rule for a
+    later float32 fit (`jax.enable_x64(False)`)."""
+    lo, hi = np.asarray(lower), np.asarray(upper)
+    patterns = box_patterns(lower, upper)
+
+    @jax.custom_jvp
+    def solve(gram, rhs):
+        return _enumerate_box_qp(gram, rhs, lo, hi, patterns)[0]
+
+    @solve.defjvp
+    def solve_jvp(primals, tangents):
+        gram, rhs = primals
+        d_gram, d_rhs = tangents
+        a, free = _enumerate_box_qp(gram, rhs, lo, hi, patterns)
+        k = gram.shape[0]
+        scale = jnp.sqrt(jnp.maximum(jnp.diag(gram), 1e-300))
+        g = gram / jnp.outer(scale, scale) + _RIDGE * jnp.eye(k)
+        lhs = free[:, None] * g * free[None, :] + jnp.diag(1.0 - free)
+        right = free * (d_rhs - d_gram @ a) / scale
+        return a, _spd_solve(lhs, right) / scale
+
+    return solve
+
+
+def solve_amplitudes(problem: Problem, names: tuple, f0, basis, weight, data: FitData) -> dict:
+    """The best amplitudes per channel for residuals ``weight · (f₀ + B a − f_d)`` within their bounds.
+
+    Arguments:
+        problem: the `Problem`.
+        names: the amplitudes (K names).
+        f0, basis: from `amplitude_basis`.
+        weight: ``(N, C)`` the residual weights (0 for missing samples).
+        data: the `FitData`.
+
+    Returns:
+        name -> ``(C,)`` amplitudes.
+    """
+    specs = problem.specs
+    lower = tuple(float(specs[a].lower) for a in names)
+    upper = tuple(float(specs[a].upper) for a in names)
+    weighted = basis * weight[..., None]  # (N, C, K)
+    target = (data.values - f0) * weight  # (N, C)
+    gram = jnp.einsum("nck,ncl->ckl", weighted, weighted)
+    rhs = jnp.einsum("nck,nc->ck", weighted, target)
+    amplitudes = jax.vmap(_box_qp(lower, upper))(gram, rhs)  # (C, K)
+    return {a: amplitudes[:, k] for k, a in enumerate(names)}
+
+
+def project(problem: Problem, params: dict, data: FitData, names: tuple | None = None, weight=None):
+    """The parameters with the amplitudes ``names`` solved exactly, and the model values there.
+
+    Arguments:
+        problem: the `Problem`.
+        params: physical values of every parameter (those of ``names`` are replaced).
+        data: the `FitData`.
+        names: the amplitudes to solve; default ``problem.linear``.
+        weight: ``(N, C)`` residual weights; default the loss's own (`Loss.weight`), exact for a linear loss and
+            the linearisation at the data for a nonlinear one.
+
+    Returns:
+        ``(params, f_model)``: the completed parameters and the model values ``(N, C)`` at them.
+    """
+    names = problem.linear if names is None else tuple(names)
+    if not names:
+        return params, evaluate_pair(problem.model(params), data.pair)
+    if weight is None:
+        weight = get_loss(problem.loss).weight(data.values, data.cos_i, data.sqrt_weight, data.sigma, data.eps)
+    weight = jnp.where(data.mask, weight, 0.0)
+    f0, basis = amplitude_basis(problem, params, names, data)
+    amplitudes = solve_amplitudes(problem, names, f0, basis, weight, data)
+    stacked = jnp.stack([amplitudes[a] for a in names], axis=-1)  # (C, K)
+    return dict(params, **amplitudes), f0 + jnp.einsum("nck,ck->nc", basis, stacked)
+
+
+@functools.partial(jax.jit, static_argnums=(2, 3))
+def _box_qp_jit(gram, rhs, lower: tuple, upper: tuple):
+    return _box_qp(lower, upper)(gram, rhs)
+
+
+def solve_box(gram, rhs, lower, upper) -> np.ndarray:
+    """argmin ½ aᵀ G a − bᵀ a over the box [lower, upper] (the same exact active-set solve as the fits use).
+
+    Arguments:
+        gram: G ``(K, K)``; rhs: b ``(K,)``; lower, upper: sequences of K bounds (±inf for none).
+
+    Returns:
+        The optimum as a NumPy array ``(K,)``.
+    """
+    lower = tuple(float(v) for v in lower)
+    upper = tuple(float(v) for v in upper)
+    return np.asarray(_box_qp_jit(jnp.asarray(gram, dtype=float), jnp.asarray(rhs, dtype=float), lower, upper))
+
+
+def _weights(problem: Problem, data: FitData):
+    w = get_loss(problem.loss).weight(data.values, data.cos_i, data.sqrt_weight, data.sigma, data.eps)
+    return jnp.where(data.mask, w, 0.0)
+
+
+def projected_residuals(problem: Problem, to_params, y, data: FitData):
+    """The residuals of the projected problem, r(θ) = w (f₀(θ) + B(θ) a*(θ) − f_d), with Kaufman's derivative.
+
+    The derivative is Kaufman's (BIT 15, 1975, Eq. 8): dr = P⊥ ∂r/∂θ|_a dθ, with P⊥ the projection off the span
+    of the weighted basis columns of the free amplitudes, channel by channel. It drops the term of the exact
+    Golub-Pereyra derivative that vanishes with the residual, and keeps a Gauss-Newton solver converging as
+    fast in practice while the basis evaluation and the bounded solve stay out of every tangent.
+
+    Arguments:
+        problem: the `Problem` (its `linear` names are projected; it needs a linear loss).
+        to_params: ``(y, data) -> params``, the physical values of every parameter from the solver's variables.
+        y: the solver's variables.
+        data: the `FitData`.
+
+    Returns:
+        ``(N, C)`` residuals.
+    """
+
+    def primal(y, data):
+        params = to_params(y, data)
+        names = problem.linear
+        weight = _weights(problem, data)
+        f0, basis = amplitude_basis(problem, params, names, data)
+        amplitudes = solve_amplitudes(problem, names, f0, basis, weight, data)
+        stacked = jnp.stack([amplitudes[a] for a in names], axis=-1)  # (C, K)
+        f = f0 + jnp.einsum("nck,ck->nc", basis, stacked)
+        return dict(params, **amplitudes), basis * weight[..., None], weight * (f - data.values)
+
+    @jax.custom_jvp
+    def residuals(y, data):
+        return jnp.where(data.mask, primal(y, data)[2], 0.0).astype(data.values.dtype)
+
+    @residuals.defjvp
+    def residuals_jvp(primals, tangents):
+        y, data = primals
+        dy = tangents[0]
+        params, weighted, r = primal(y, data)
+        names = problem.linear
+        held = {a: params[a] for a in names}
+
+        def plain(y):  # the residuals with the amplitudes held at their optimum
+            p = dict(to_params(y, data), **held)
+            return jnp.where(data.mask, _weights(problem, data) * (evaluate_pair(problem.model(p), data.pair)
+                                                                   - data.values), 0.0)
+
+        t = jax.jvp(plain, (y,), (dy,))[1]  # (N, C)
+        specs = problem.specs
+        lower = jnp.asarray([specs[a].lower for a in names])
+        upper = jnp.asarray([specs[a].upper for a in names])
+        values = jnp.stack([params[a] for a in names], axis=-1)  # (C, K)
+        free = ((values > lower + 1e-12) & (values < upper - 1e-12)).astype(r.dtype)
+        gram = jnp.einsum("nck,ncl->ckl", weighted, weighted)
+        scale = jnp.sqrt(jnp.maximum(jnp.einsum("ckk->ck", gram), 1e-300))
+        g = gram / (scale[:, :, None] * scale[:, None, :]) + _RIDGE * jnp.eye(len(names))
+        lhs = free[:, :, None] * g * free[:, None, :] + jnp.eye(len(names)) * (1.0 - free)[:, :, None]
+        coefficient = _spd_solve(lhs, free * jnp.einsum("nck,nc->ck", weighted, t) / scale) / scale
+        dr = t - jnp.einsum("nck,ck->nc", weighted, free * coefficient)
+        dtype = data.values.dtype  # the working precision (float32 inside jax.enable_x64(False))
+        return jnp.where(data.mask, r, 0.0).astype(dtype), jnp.where(data.mask, dr, 0.0).astype(dtype)
+
+    return residuals(y, data)

@@ -1,0 +1,139 @@
+"""Diagnosis of a fit: its status, the bounds it ended on, and the warnings a user should read.
+
+A status is one of `STATUSES` (docs/fitting.md explains each):
+
+- ``converged``: the solver's termination test passed and a further Gauss-Newton step predicts no decrease;
+- ``converged-at-bound``: the same, with parameters on a bound (named in ``bounds_hit``); at a bound the
+  Karush-Kuhn-Tucker condition is what is tested: the descent direction points out of the box;
+- ``max-steps``: the step limit was reached first;
+- ``stalled``: the solver stopped where a Gauss-Newton step still predicts a decrease above `STALL_TOLERANCE` of
+  the cost (undamped Gauss-Newton thrown far away, a bound transform saturated on the way);
+- ``nonfinite``: the cost is not finite.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from ..params import at_bound
+from .problem import Problem
+
+__all__ = ["STATUSES", "STALL_TOLERANCE", "bounds_hit", "predicted_decrease", "diagnose", "warnings_of",
+           "information_criteria"]
+
+STATUSES = ("converged", "converged-at-bound", "max-steps", "stalled", "nonfinite")
+# A fit whose final point still leaves a predicted Gauss-Newton decrease above this fraction of the cost is
+# "stalled", not converged. Converged fits leave ~1e-12; the stalls the stability study found (docs/stability.md)
+# leave more than the cost itself.
+STALL_TOLERANCE = 1e-4
+_CORRELATION_WARNING = 0.99
+
+
+def bounds_hit(problem: Problem, params: dict) -> list[str]:
+    """Labels of the free scalars that lie on a bound (`brdffit.params.at_bound`)."""
+    layout = problem.layout
+    hit = []
+    for name in problem.free:
+        flags = np.atleast_1d(at_bound(params[name], layout[name].spec))
+        hit.extend(label for label, flag in zip(layout[name].labels(), flags) if flag)
+    return hit
+
+
+def predicted_decrease(problem: Problem, params: dict, jtj, jtr) -> float:
+    """The decrease of Σr² that a Gauss-Newton step from ``params`` predicts, moving only the way the bounds
+    allow: rᵀJ (JᵀJ)⁺ Jᵀr over the free scalars, leaving out those at a bound whose descent direction −Jᵀr
+    points out of the box (Karush-Kuhn-Tucker: there the bound is active). Near 0 at a true (constrained)
+    optimum.
+
+    Arguments:
+        problem: the `Problem`.
+        params: physical values.
+        jtj, jtr: JᵀJ and Jᵀr in the physical free parameters at ``params``.
+
+    Returns:
+        The predicted decrease (>= 0).
+    """
+    layout = problem.layout
+    values = layout.flatten(params, problem.free)
+    lower = np.concatenate([np.full(layout[n].size, layout[n].spec.lower) for n in problem.free])
+    upper = np.concatenate([np.full(layout[n].size, layout[n].spec.upper) for n in problem.free])
+    near = np.concatenate([np.ravel(at_bound(params[n], layout[n].spec)) for n in problem.free])
+    at_lower = near & (np.abs(values - lower) <= np.abs(values - upper))
+    at_upper = near & ~at_lower
+    g = np.asarray(jtr, dtype=float)
+    moving = ~((at_lower & (g > 0)) | (at_upper & (g < 0)))
+    if not moving.any() or not np.all(np.isfinite(jtj)):  # nothing can move, or nothing to linearise
+        return 0.0
+    h = np.asarray(jtj, dtype=float)[np.ix_(moving, moving)]
+    g = g[moving]
+    scale = np.sqrt(np.maximum(np.diag(h), 1e-300))  # Jacobi scaling: physical units span many decades
+    step = np.linalg.lstsq(h / np.outer(scale, scale), g / scale, rcond=1e-12)[0]
+    return float(max((g / scale) @ step, 0.0))
+
+
+def diagnose(problem: Problem, params: dict, cost: float, max_steps: bool, nonfinite: bool, jtj, jtr):
+    """The status of a fit and the decrease a further step predicts.
+
+    Arguments:
+        problem: the `Problem`.
+        params: the final physical values.
+        cost: the final cost.
+        max_steps, nonfinite: the solver's flags.
+        jtj, jtr: the physical normal matrices at ``params``.
+
+    Returns:
+        ``(status, hit, decrease)``.
+    """
+    hit = bounds_hit(problem, params)
+    decrease = predicted_decrease(problem, params, jtj, jtr) if problem.free else 0.0
+    if nonfinite or not np.isfinite(cost):
+        return "nonfinite", hit, decrease
+    if max_steps:
+        return "max-steps", hit, decrease
+    if decrease > STALL_TOLERANCE * max(cost, 1e-300):
+        return "stalled", hit, decrease
+    return ("converged-at-bound" if hit else "converged"), hit, decrease
+
+
+def warnings_of(problem: Problem, labels: list, uncertainty, hit: list, status: str, decrease: float,
+                cost: float) -> list[str]:
+    """The human-readable warnings of a fit: non-uniform noise, undetermined or correlated parameters, bounds,
+    dead lobes, a stall."""
+    warnings = []
+    std, std_sandwich = uncertainty.stderr, uncertainty.stderr_robust
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = std_sandwich / std
+    if np.any(np.isfinite(ratio) & ((ratio > 2.0) | (ratio < 0.5))):
+        warnings.append("Laplace and sandwich standard errors differ by more than 2x: the residuals' variance "
+                        "is not uniform (use loss='sigma' with known sigma, or read stderr_robust)")
+    if uncertainty.undetermined.any():
+        names = [label for label, u in zip(labels, uncertainty.undetermined) if u]
+        warnings.append(f"JᵀJ is singular: {', '.join(names)} not determined by these data (stderr = inf)")
+    correlation = uncertainty.correlation
+    for a, b in itertools.combinations(range(len(labels)), 2):
+        rho = correlation[a, b]
+        if np.isfinite(rho) and abs(rho) > _CORRELATION_WARNING:
+            warnings.append(f"{labels[a]} and {labels[b]} are correlated (ρ = {rho:+.4f}): not separately "
+                            "identifiable from these data")
+    if hit:
+        warnings.append(f"parameters at a bound: {', '.join(hit)}")
+    layout = problem.layout
+    for name in problem.free:
+        spec = layout[name].spec
+        if spec.linear and spec.lower == 0 and all(label in hit for label in layout[name].labels()):
+            warnings.append(f"{name} went to 0 in every channel: its lobe contributes nothing, a model without "
+                            "it suffices")
+    if status == "stalled":
+        warnings.append(f"the solver stopped where a Gauss-Newton step still predicts a cost decrease of "
+                        f"{decrease:.3g} ({decrease / max(cost, 1e-300):.2g} of the cost): not a minimum "
+                        "(try solver='lm', init='auto' or multistart)")
+    return warnings
+
+
+def information_criteria(loss: str, cost: float, n: int, k: int) -> tuple[float, float]:
+    """AIC and BIC of a least-squares fit (docs/fitting.md): from χ² with known σ, else from the profile
+    Gaussian likelihood n ln(RSS/n)."""
+    base = cost if loss == "sigma" else n * np.log(max(cost, 1e-300) / max(n, 1))
+    return float(base + 2 * k), float(base + k * np.log(max(n, 1)))

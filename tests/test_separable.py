@@ -1,0 +1,124 @@
+"""The separable core (`brdffit.fitting.separable`) and the parts of the engine declared once: amplitude
+declarations, the bounded amplitude solve, the loss registry and the status ranking."""
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+import pytest
+from scipy.optimize import lsq_linear
+
+from brdffit import fit, models, synth
+from brdffit.fitting.api import _SEVERITY
+from brdffit.fitting.losses import LOSSES, loss_table
+from brdffit.fitting.separable import box_patterns, solve_box
+from brdffit.fitting.status import STATUSES
+from brdffit.geometry import LocalPair, spherical_to_vector
+
+
+def _pair(n=200, seed=0):
+    rng = np.random.default_rng(seed)
+    u = rng.random((4, n))
+    wi = spherical_to_vector(np.arccos(u[0]) * 0.98, 2 * np.pi * u[1])
+    wo = spherical_to_vector(np.arccos(u[2]) * 0.98, 2 * np.pi * u[3])
+    return LocalPair.from_dirs(jnp.asarray(wi), jnp.asarray(wo))
+
+
+@pytest.mark.parametrize("name", models.names())
+def test_declared_linear_amplitudes_are_affine_and_the_others_are_not_claimed(name):
+    # A parameter declared linear must enter every lobe affinely, channel by channel: f(a) = f(0) + a (f(1) −
+    # f(0)) for a = 0.37 and 2.5, each channel on its own (the separable solve relies on it).
+    lobe = models.lobe_class(name)()
+    pair = _pair()
+    base = {spec.name: spec.initial(3) for spec in lobe.param_specs()}
+    for spec in lobe.param_specs():
+        if not spec.linear:
+            continue
+        assert spec.colour, spec.name
+
+        def value(a, spec=spec):
+            return np.asarray(jnp.broadcast_to(lobe(dict(base, **{spec.name: jnp.asarray(a)}), pair), (200, 3)))
+
+        f0, f1 = value(np.zeros(3)), value(np.ones(3))
+        for a in (0.37, 2.5):
+            np.testing.assert_allclose(value(np.array([a, 0.0, 1.0])), f0 + np.array([a, 0.0, 1.0]) * (f1 - f0),
+                                       rtol=1e-10, atol=1e-12)
+
+
+def test_the_amplitude_declarations_are_the_ones_the_engine_projects():
+    declared = {s.name for lobe in models.names() for s in models.lobe_class(lobe)().param_specs() if s.linear}
+    assert declared == {"rho_d", "ks", "rs", "rho_shade"} | {f"ks_{j}" for j in (1,)}
+    conductor = models.get("cook-torrance(fresnel=conductor)").param_specs
+    assert not conductor["eta"].linear and not conductor["k"].linear  # colour, but not affine
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_bounded_amplitude_solve_matches_scipy_bvls(seed):
+    # The exact active-set enumeration against scipy's bounded-variable least squares (Stark & Parker 1995) on
+    # the same problem written as ‖A a − y‖²: random sizes, bounds finite, one-sided or absent.
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(1, 5))
+    a = rng.standard_normal((30, k)) * rng.uniform(0.01, 10.0, k)
+    if k > 1 and seed % 3 == 0:
+        a[:, -1] = a[:, 0] * 2.0 + 1e-3 * rng.standard_normal(30)  # nearly collinear columns
+    y = rng.standard_normal(30) * 3.0
+    lower = rng.choice([0.0, -1.0, -np.inf], k)
+    upper = np.where(rng.random(k) < 0.5, np.inf, np.where(np.isfinite(lower), lower, 0.0) + 1.0)
+    got = solve_box(a.T @ a, a.T @ y, lower, upper)
+    want = lsq_linear(a, y, bounds=(lower, upper), method="bvls", tol=1e-14).x
+    cost = lambda x: float(np.sum((a @ x - y) ** 2))  # noqa: E731
+    assert np.all(got >= lower - 1e-12) and np.all(got <= upper + 1e-12)
+    assert cost(got) <= cost(want) * (1 + 1e-9) + 1e-12
+
+
+def test_box_patterns_enumerate_every_active_set():
+    patterns = box_patterns((0.0, -math.inf, 0.0), (1.0, math.inf, math.inf))
+    assert patterns.shape == (3 * 1 * 2, 3)
+    assert {tuple(p) for p in patterns} == {(f, 0, g) for f in (0, 1, 2) for g in (0, 1)}
+
+
+def test_lambert_is_one_linear_solve_with_the_closed_form_answer():
+    # Cosine loss, ρ/π against f with weights c² w: ρ = π Σ c² w f / Σ c² w per channel (normal equations of one
+    # unknown), inside the bounds here.
+    truth = models.get("lambert", rho_d=[0.2, 0.5, 0.8])
+    data = synth.generate(truth, pattern="uniform", n=800, noise="relative:0.05", seed=1)
+    result = fit(data, "lambert")
+    c2w = np.cos(data.theta_i)[:, None] ** 2 * (1.0 if data.weights is None else data.weights[:, None])
+    closed = np.pi * np.sum(c2w * data.values, axis=0) / np.sum(c2w * np.ones_like(data.values), axis=0)
+    assert result.steps == 0 and result.status == "converged"
+    np.testing.assert_allclose(result.params["rho_d"], closed, rtol=1e-10)
+
+
+def test_an_amplitude_the_data_push_below_zero_ends_exactly_on_its_bound():
+    # A diffuse-free glossy material fitted with lambert + ward: the best ρd is negative, so its bound is active
+    # and the projection puts it exactly at 0 (no transform approaching it without end).
+    truth = models.get("ward", ks=[0.5, 0.4, 0.3], alpha=0.2)
+    data = synth.generate(truth, pattern="half-diff", n=1500, noise="relative:0.01", seed=2)
+    result = fit(data, "lambert+ward")
+    assert result.status == "converged-at-bound"
+    assert np.any(np.asarray(result.params["rho_d"]) == 0.0)
+    assert all(label.startswith("rho_d") for label in result.bounds_hit)
+
+
+def test_independent_channels_rank_every_status():
+    # The status ranking of independent-channel fits once lacked "stalled" and raised TypeError when a channel
+    # stalled (issue 14). Every status is ranked, and a careless solver's stall is reported.
+    assert set(_SEVERITY) == set(STATUSES)
+    truth = models.get("lambert+cook-torrance", rho_d=[0.3, 0.2, 0.1], ks=[0.8, 0.7, 0.6], m=0.15, f0=0.04)
+    data = synth.generate(truth, pattern="half-diff", n=1000, noise="relative:0.01", seed=0)
+    careless = optx.BFGS(rtol=0.5, atol=0.5)
+    result = fit(data, "lambert+cook-torrance", fixed={"f0": 0.04}, solver=careless, init="model",
+                 channel_mode="independent")
+    assert result.status == "stalled"
+
+
+def test_the_loss_table_in_the_docs_is_generated_from_the_registry():
+    import pathlib
+
+    root = pathlib.Path(__file__).resolve().parent.parent
+    assert loss_table() in (root / "docs" / "fitting.md").read_text(encoding="utf-8"), \
+        "docs/fitting.md's loss table is stale: paste brdffit.fitting.losses.loss_table()"
+    cli = (root / "docs" / "cli.md").read_text(encoding="utf-8")
+    for name in LOSSES:
+        assert f"`{name}`" in cli
