@@ -53,6 +53,9 @@ COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
 # An outer scalar closer than this fraction of its range to a bound, at the end of a polish that did not
 # converge, is held on the bound (step 4 of the pipeline).
 HOLD_FRACTION = 1e-3
+# A lobe is pruned only if zeroing it raises the cost by at most this fraction (and by AIC's price,
+# `_dead_amplitudes`): the tolerance within which issue 14 asks fits to reach the optimum.
+PRUNE_COST_FRACTION = 1e-3
 # Rounds of holding and releasing bounds (an active-set iteration) before the pipeline reports what it has.
 HOLD_ROUNDS = 3
 
@@ -286,7 +289,8 @@ def _held_start(problem: Problem, params: dict, held: dict) -> dict:
 def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData) -> list[str]:
     """Projected amplitudes whose lobe does not pay for its parameters: setting the amplitude to 0 raises χ² (the
     cost over the noise variance, cost/dof or 1 for ``loss="sigma"``) by at most twice the lobe's number of free
-    scalars, AIC's price of those parameters (a useless lobe of k parameters fits away about k of χ² of noise).
+    scalars, AIC's price of those parameters (a useless lobe of k parameters fits away about k of χ² of noise),
+    and by at most `PRUNE_COST_FRACTION` of the cost, so that a pruned fit stays that close to the optimum.
     Only amplitudes not already 0 everywhere are tested, and never the only lobe's."""
     if len(problem.lobes) < 2 or not problem.linear:
         return []
@@ -303,7 +307,7 @@ def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData)
             size = layout[slot.name].size + layout.size([n for n in partners if n in problem.outer])
             trial = dict(params, **{slot.name: np.zeros(layout[slot.name].shape)})
             increase = _cost_fn(problem)({k_: jnp.asarray(v) for k_, v in trial.items()}, data) - cost
-            if float(increase) <= 2.0 * size * variance:
+            if float(increase) <= min(2.0 * size * variance, PRUNE_COST_FRACTION * cost):
                 dead.append(slot.name)
     return dead
 

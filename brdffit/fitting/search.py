@@ -61,12 +61,13 @@ def interior(value, spec):
 
 
 def search_range(spec) -> tuple[float, float]:
-    """Interval searched for a parameter: its bounds, narrowed to 1/100..100 times the default for an unbounded
-    scale parameter (an exponent n in (0, ∞) with default 20 is searched over 0.2..2000) and to ±10 scales around
-    the default for an unbounded other one."""
+    """Interval searched for a parameter: its bounds, narrowed to 1/100..10⁴ times the default for an unbounded
+    scale parameter (an exponent n in (0, ∞) with default 20 is searched over 0.2..2·10⁵: misspecified lobes
+    often fit best as a spike far sharper than any default) and to ±10 scales around the default for an
+    unbounded other one."""
     if spec.scale:
         lo = spec.lower if spec.lower > 0 else spec.default / 100.0
-        hi = spec.upper if math.isfinite(spec.upper) else spec.default * 100.0
+        hi = spec.upper if math.isfinite(spec.upper) else spec.default * 1e4
     else:
         width = 10.0 * max(abs(spec.default), 1.0)
         lo = spec.lower if math.isfinite(spec.lower) else spec.default - width

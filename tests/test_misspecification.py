@@ -1,0 +1,130 @@
+"""Misspecification matrix: does `brdffit.fit` reach the global least-squares optimum when the model is wrong?
+
+Five truths (Lambert plus a Cook-Torrance, Ward, Blinn-Phong, Ashikhmin-Shirley or two-lobe Lafortune specular
+lobe, with plausible RGB values) are sampled on the half-diff pattern with 1 % relative noise and each is fitted
+with every standard candidate of model selection (`brdffit.select.DEFAULT_CANDIDATES`) using the default options
+(cosine loss, init="auto"). Model selection compares the candidates' costs, so a candidate that stops in a local
+minimum can lose to a worse model: only on the diagonal (candidate = truth) does a good cost follow from
+recovering the truth, and the other 45 pairs are where a fit has no truth to fall into.
+
+Each fit is compared with an independent reference, `tests/brute_force.py`, that finds the global optimum by a
+dense grid (or Sobol points and nested starts) over the shape parameters with the amplitudes solved exactly, then
+polished by scipy.optimize.least_squares; it shares no fitting code with brdffit. A fit passes when it converged
+(status not max-steps, stalled or nonfinite), its reported cost is the cost of the model it returns, and that
+cost is within 1e-3 relative of the reference's. The reference itself is checked on the diagonal: its optimum
+costs no more than the truth and lands near the truth's shape parameters.
+
+The data are built once per truth and the reference once per (truth, candidate) pair (`functools.lru_cache`).
+"""
+
+import functools
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit import models, synth
+from brdffit.select import DEFAULT_CANDIDATES
+
+import brute_force as bf
+
+pytestmark = pytest.mark.slow
+
+# Truth parameters: a plastic-like diffuse colour under a weaker, less saturated specular lobe.
+TRUTHS = {
+    # Beckmann width 0.15 and Schlick f0 0.04 (a dielectric, n ~ 1.5), as in test_fit_recovery.
+    "lambert+cook-torrance": dict(rho_d=[0.5, 0.35, 0.2], ks=[0.9, 0.8, 0.7], m=0.15, f0=0.04),
+    # Ward's (1992) fits of painted and plastic samples have α 0.05-0.2 and specular albedo 0.03-0.2.
+    "lambert+ward": dict(rho_d=[0.45, 0.3, 0.15], ks=[0.08, 0.07, 0.06], alpha=0.12),
+    "lambert+blinn-phong": dict(rho_d=[0.4, 0.25, 0.1], ks=[0.15, 0.15, 0.15], n=80.0),
+    "lambert+ashikhmin-shirley": dict(rho_d=[0.5, 0.35, 0.2], rs=[0.15, 0.1, 0.05], n=150.0),
+    # A broad retro-reflective lobe (cxy = +cz) and a forward specular one (cxy = −cz), listed in the canonical
+    # order of increasing exponent (Lafortune.canonical).
+    "lambert+lafortune(lobes=2)": dict(rho_d=[0.4, 0.3, 0.2], ks_1=[0.1, 0.08, 0.06], cxy_1=1.0, n_1=5.0,
+                                       ks_2=[0.25, 0.22, 0.2], cxy_2=-1.0, n_2=30.0),
+}
+CANDIDATES = tuple(DEFAULT_CANDIDATES)
+# Samples per data set: enough that every candidate's shape is determined, few enough that the 50 fits and
+# their references stay within minutes.
+N_SAMPLES = 500
+# The engine's cost may exceed the global optimum by this fraction (and by an absolute 1e-15 for an exact fit);
+# the reference itself is good to 5e-5 (tests/brute_force.py).
+COST_RTOL = 1e-3
+
+
+@functools.lru_cache(maxsize=None)
+def truth_and_data(truth_spec: str):
+    """The truth model and its noisy half-diff samples (seeded per truth)."""
+    truth = models.get(truth_spec, **TRUTHS[truth_spec])
+    seed = 11 + list(TRUTHS).index(truth_spec)
+    data = synth.generate(truth, pattern="half-diff", n=N_SAMPLES, noise="relative:0.01", seed=seed)
+    return truth, data
+
+
+@functools.lru_cache(maxsize=None)
+def reference(truth_spec: str, candidate: str):
+    """The brute-force global optimum ``(cost, params)`` of ``candidate`` on the truth's data."""
+    return bf.brute_force_optimum(truth_and_data(truth_spec)[1], candidate)
+
+
+def _shape_values(params: dict, spec: str) -> dict:
+    """Free shape parameters of a fitted or true model, Lafortune sub-lobes as (cxy, n) pairs sorted by n (the
+    sum does not depend on the order of its sub-lobes)."""
+    declared = models.get(spec).param_specs
+    values = {s.name: float(np.asarray(params[s.name])) for s in declared if not s.colour and not s.fixed}
+    lobes = sorted((values.pop(f"n_{j}"), values.pop(f"cxy_{j}")) for j in range(1, 4) if f"n_{j}" in values)
+    for j, (n, cxy) in enumerate(lobes, start=1):
+        values[f"n_{j}"], values[f"cxy_{j}"] = n, cxy
+    return values
+
+
+@pytest.mark.parametrize("truth_spec", TRUTHS)
+def test_reference_at_or_below_truth(truth_spec):
+    """The reference on the diagonal: a global optimum costs no more than the truth (a feasible point), and with
+    1 % noise on 500 samples it lies near the truth's shape parameters (5 % relative, 0.05 absolute for
+    parameters whose truth is 0 or ±1 such as f0 and cxy)."""
+    truth, data = truth_and_data(truth_spec)
+    cost, params = reference(truth_spec, truth_spec)
+    assert cost <= bf.cost_of(data, truth), f"reference {cost:.6g} above the truth's {bf.cost_of(data, truth):.6g}"
+    found, true = _shape_values(params, truth_spec), _shape_values(truth.params, truth_spec)
+    for name, value in true.items():
+        np.testing.assert_allclose(found[name], value, rtol=0.05, atol=0.05 if abs(value) <= 1 else 0.0,
+                                   err_msg=f"{name} of the reference optimum for {truth_spec}")
+
+
+# Pairs the engine does not solve yet (issue 14 stays open for them), each strict so that a fix shows up:
+# - an Ashikhmin-Shirley lobe whose global optimum is a spike on a single sample (n = 2e7 on Blinn-Phong data,
+#   2.1e6 on the Lafortune data), beyond the search range of 1e4 times the default exponent;
+# - multi-lobe Lafortune candidates, whose cost landscape in (cxy_j, n_j) is nearly piecewise constant: the
+#   polish of the best search candidates ends at max-steps, stalls, or in a basin 1e-3 to 1e-2 above the optimum.
+KNOWN_FAILURES = {
+    ("lambert+blinn-phong", "lambert+ashikhmin-shirley"): "spike optimum at n = 2e7",
+    ("lambert+lafortune(lobes=2)", "lambert+ashikhmin-shirley"): "spike optimum at n = 2.1e6",
+    ("lambert+cook-torrance", "lambert+lafortune(lobes=2)"): "multi-lobe Lafortune landscape",
+    ("lambert+cook-torrance", "lambert+lafortune(lobes=3)"): "multi-lobe Lafortune landscape",
+    ("lambert+blinn-phong", "lambert+lafortune(lobes=2)"): "multi-lobe Lafortune landscape",
+    ("lambert+blinn-phong", "lambert+lafortune(lobes=3)"): "multi-lobe Lafortune landscape",
+}
+PAIRS = [pytest.param(t, c, marks=pytest.mark.xfail(reason=KNOWN_FAILURES[(t, c)], strict=True))
+         if (t, c) in KNOWN_FAILURES else (t, c) for t in TRUTHS for c in CANDIDATES]
+
+
+@pytest.mark.parametrize("truth_spec, candidate", PAIRS)
+def test_fit_reaches_global_optimum(truth_spec, candidate):
+    """A default fit of ``candidate`` to the truth's data converges to the global optimum (within COST_RTOL)."""
+    truth, data = truth_and_data(truth_spec)
+    brute_cost, brute_params = reference(truth_spec, candidate)
+    if candidate == truth_spec:
+        # Not the claim under test, but a reference above the truth would make the comparison meaningless.
+        assert brute_cost <= bf.cost_of(data, truth)
+    result = brdffit.fit(data, candidate)
+    summary = result.summary()
+    assert result.status not in ("max-steps", "stalled", "nonfinite"), summary
+    # The cost a fit reports must be what the model it returns achieves (Σ r² of the cosine loss).
+    achieved = bf.cost_of(data, result.model)
+    np.testing.assert_allclose(result.cost, achieved, rtol=1e-6, atol=1e-15,
+                               err_msg=f"reported cost vs. cost of the returned model\n{summary}")
+    assert result.cost <= brute_cost * (1 + COST_RTOL) + 1e-15, (
+        f"{candidate} on {truth_spec} data: fit cost {result.cost:.8g} is {result.cost / brute_cost - 1:.3g} "
+        f"above the global optimum {brute_cost:.8g} at "
+        f"{ {k: np.round(np.asarray(v), 4).tolist() for k, v in brute_params.items()} }\n{summary}")
