@@ -13,6 +13,7 @@ channels are a batch of single-channel materials):
    saturates) or a lobe whose amplitudes all went to 0 leaves its shape drifting is solved again with those
    parameters held (on the bound, or where they are); the better answer is kept, and the bound stays visible in
    the status;
+   a fit still not converged then has its least useful lobe pruned if that lobe does not pay for itself;
 5. **refine**: large data are refined on all samples (`brdffit.fitting.refine`);
 6. **diagnose and report**: canonical lobe order, the status with its Karush-Kuhn-Tucker test, standard errors
    (`brdffit.fitting.uncertainty`), warnings, metrics and information criteria.
@@ -291,14 +292,15 @@ def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData)
     cost over the noise variance, cost/dof or 1 for ``loss="sigma"``) by at most twice the lobe's number of free
     scalars, AIC's price of those parameters (a useless lobe of k parameters fits away about k of χ² of noise),
     and by at most `PRUNE_COST_FRACTION` of the cost, so that a pruned fit stays that close to the optimum.
-    Only amplitudes not already 0 everywhere are tested, and never the only lobe's."""
+    Only amplitudes not already 0 everywhere are tested, and never the only lobe's; of those that qualify, the
+    one whose removal costs least."""
     if len(problem.lobes) < 2 or not problem.linear:
         return []
     layout = problem.layout
     n_valid = int(np.sum(np.asarray(data.mask)))
     k = layout.size(problem.free)
     variance = 1.0 if problem.loss == "sigma" else cost / max(n_valid - k, 1)
-    dead = []
+    increases = {}
     for j, lobe in enumerate(problem.lobes):
         for slot in layout.lobe_slots(j):
             if slot.name not in problem.linear or np.all(np.asarray(params[slot.name]) == 0.0):
@@ -308,8 +310,10 @@ def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData)
             trial = dict(params, **{slot.name: np.zeros(layout[slot.name].shape)})
             increase = _cost_fn(problem)({k_: jnp.asarray(v) for k_, v in trial.items()}, data) - cost
             if float(increase) <= min(2.0 * size * variance, PRUNE_COST_FRACTION * cost):
-                dead.append(slot.name)
-    return dead
+                increases[slot.name] = float(increase)
+    # One lobe at a time, the one that matters least: two copies of a lobe each look dispensable while the other
+    # is there.
+    return [min(increases, key=increases.get)] if increases else []
 
 
 @functools.lru_cache(maxsize=64)
@@ -475,7 +479,10 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
 
     problems = [problem] * len(items)
     for m in range(len(items)):
-        dead = _dead_amplitudes(problem, kept[m]["params"], kept[m]["cost"], solve_items[m])
+        # Pruning is for a solve that still did not converge with a lobe drifting: a converged fit's spare lobe
+        # is the least-squares answer, and selection, not the fit, decides whether it is worth its parameters.
+        dead = _dead_amplitudes(problem, kept[m]["params"], kept[m]["cost"], solve_items[m]) \
+            if statuses[m] in ("max-steps", "stalled") else []
         if dead:
             bar.update(2, f"pruning {', '.join(dead)}")
             problems[m], pruned, c_time, r_time = _prune(problem, solve_problem, kept[m], dead, solve_items[m],

@@ -190,7 +190,9 @@ def read_hdf5_group(path, group_name: str, read_fn: Callable[[Any], Any]):
             if name not in f or not isinstance(f[name], h5py.Group):
                 groups = []
                 f.visit(lambda n: groups.append(n) if isinstance(f[n], h5py.Group) else None)
-                raise FormatError(path, f"no group /{name} (groups: {', '.join('/' + g for g in groups) or 'none'})")
+                # A damaged file can hand back a name as undecodable bytes: show it as such, never fail on it.
+                names = [g if isinstance(g, str) else repr(g) for g in groups]
+                raise FormatError(path, f"no group /{name} (groups: {', '.join('/' + g for g in names) or 'none'})")
             return read_fn(f[name])
         except (FormatError, MeasurementError):
             raise
