@@ -251,11 +251,10 @@ def _to_hold(problem: Problem, params: dict) -> dict:
         if near.any():
             nearest = np.where(np.abs(value - spec.lower) <= np.abs(value - spec.upper), spec.lower, spec.upper)
             held[name] = np.where(near, nearest, np.nan)
-    for j, lobe in enumerate(problem.lobes):
+    for j in range(len(problem.lobes)):
         for slot in layout.lobe_slots(j):
             if slot.name in problem.linear and np.all(np.asarray(params[slot.name]) == 0.0):
-                for partner in lobe.amplitude_partners(slot.local):
-                    name = layout.global_names(j, {partner: None}).popitem()[0]
+                for name in layout.partners(j, slot.local):
                     if name in problem.outer:
                         held[name] = np.asarray(params[name], dtype=float)
     return held
@@ -301,11 +300,11 @@ def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData)
     k = layout.size(problem.free)
     variance = 1.0 if problem.loss == "sigma" else cost / max(n_valid - k, 1)
     increases = {}
-    for j, lobe in enumerate(problem.lobes):
+    for j in range(len(problem.lobes)):
         for slot in layout.lobe_slots(j):
             if slot.name not in problem.linear or np.all(np.asarray(params[slot.name]) == 0.0):
                 continue
-            partners = {layout.global_names(j, {p: None}).popitem()[0] for p in lobe.amplitude_partners(slot.local)}
+            partners = layout.partners(j, slot.local)
             size = layout[slot.name].size + layout.size([n for n in partners if n in problem.outer])
             trial = dict(params, **{slot.name: np.zeros(layout[slot.name].shape)})
             increase = _cost_fn(problem)({k_: jnp.asarray(v) for k_, v in trial.items()}, data) - cost
@@ -326,11 +325,10 @@ def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, dat
     them (`Lobe.amplitude_partners`) held where they are: a problem with fewer free parameters."""
     layout = problem.layout
     held = {name: np.zeros(layout[name].shape) for name in dead}
-    for j, lobe in enumerate(problem.lobes):
+    for j in range(len(problem.lobes)):
         for slot in layout.lobe_slots(j):
             if slot.name in dead:
-                for partner in lobe.amplitude_partners(slot.local):
-                    name = layout.global_names(j, {partner: None}).popitem()[0]
+                for name in layout.partners(j, slot.local):
                     if name in problem.free and name not in dead:
                         held[name] = np.asarray(kept["params"][name], dtype=float)
     free = tuple(n for n in problem.free if n not in held)

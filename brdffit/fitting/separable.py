@@ -199,30 +199,35 @@ def solve_amplitudes(problem: Problem, names: tuple, f0, basis, weight, data: Fi
     return {a: amplitudes[:, k] for k, a in enumerate(names)}
 
 
-def project(problem: Problem, params: dict, data: FitData, names: tuple | None = None, weight=None):
-    """The parameters with the amplitudes ``names`` solved exactly, and the model values there.
+def _projection(problem: Problem, params: dict, data: FitData):
+    """The parameters with `Problem.linear` solved, the model values there, the weighted basis and the weights."""
+    names = problem.linear
+    weight = _weights(problem, data)
+    f0, basis = amplitude_basis(problem, params, names, data)
+    amplitudes = solve_amplitudes(problem, names, f0, basis, weight, data)
+    stacked = jnp.stack([amplitudes[a] for a in names], axis=-1)  # (C, K)
+    f = f0 + jnp.einsum("nck,ck->nc", basis, stacked)
+    return dict(params, **amplitudes), f, basis * weight[..., None], weight
+
+
+def project(problem: Problem, params: dict, data: FitData):
+    """The parameters with the amplitudes `Problem.linear` solved exactly, and the model values there.
+
+    The weights are the loss's own (`Loss.weight`): exact for a linear loss, the linearisation at the data for a
+    nonlinear one.
 
     Arguments:
         problem: the `Problem`.
-        params: physical values of every parameter (those of ``names`` are replaced).
+        params: physical values of every parameter (those of the amplitudes are replaced).
         data: the `FitData`.
-        names: the amplitudes to solve; default ``problem.linear``.
-        weight: ``(N, C)`` residual weights; default the loss's own (`Loss.weight`), exact for a linear loss and
-            the linearisation at the data for a nonlinear one.
 
     Returns:
         ``(params, f_model)``: the completed parameters and the model values ``(N, C)`` at them.
     """
-    names = problem.linear if names is None else tuple(names)
-    if not names:
+    if not problem.linear:
         return params, evaluate_pair(problem.model(params), data.pair)
-    if weight is None:
-        weight = get_loss(problem.loss).weight(data.values, data.cos_i, data.sqrt_weight, data.sigma, data.eps)
-    weight = jnp.where(data.mask, weight, 0.0)
-    f0, basis = amplitude_basis(problem, params, names, data)
-    amplitudes = solve_amplitudes(problem, names, f0, basis, weight, data)
-    stacked = jnp.stack([amplitudes[a] for a in names], axis=-1)  # (C, K)
-    return dict(params, **amplitudes), f0 + jnp.einsum("nck,ck->nc", basis, stacked)
+    params, f, _, _ = _projection(problem, params, data)
+    return params, f
 
 
 @functools.partial(jax.jit, static_argnums=(2, 3))
@@ -268,14 +273,8 @@ def projected_residuals(problem: Problem, to_params, y, data: FitData):
     """
 
     def primal(y, data):
-        params = to_params(y, data)
-        names = problem.linear
-        weight = _weights(problem, data)
-        f0, basis = amplitude_basis(problem, params, names, data)
-        amplitudes = solve_amplitudes(problem, names, f0, basis, weight, data)
-        stacked = jnp.stack([amplitudes[a] for a in names], axis=-1)  # (C, K)
-        f = f0 + jnp.einsum("nck,ck->nc", basis, stacked)
-        return dict(params, **amplitudes), basis * weight[..., None], weight * (f - data.values)
+        params, f, weighted, weight = _projection(problem, to_params(y, data), data)
+        return params, weighted, weight * (f - data.values)
 
     @jax.custom_jvp
     def residuals(y, data):

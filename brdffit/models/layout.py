@@ -102,6 +102,12 @@ class Layout:
         mapping = {slot.local: slot.name for slot in self.lobe_slots(j)}
         return {mapping[k]: v for k, v in local.items()}
 
+    def partners(self, j: int, local: str) -> tuple[str, ...]:
+        """Model-level names of the parameters of lobe ``j`` that act only through its amplitude ``local``
+        (`Lobe.amplitude_partners`)."""
+        mapping = {slot.local: slot.name for slot in self.lobe_slots(j)}
+        return tuple(mapping[p] for p in self.lobes[j].amplitude_partners(local))
+
     def linear(self, names) -> tuple[str, ...]:
         """The names among ``names`` declared linear (amplitudes), in model order."""
         names = set(names)
