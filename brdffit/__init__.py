@@ -1,7 +1,8 @@
 """brdffit: fit analytic BRDF models to measured reflectance.
 
 Importing brdffit enables JAX's 64-bit mode (``jax_enable_x64``): fitted parameters, covariances and the
-quadratures of `brdffit.properties` need double precision; fits run in float64.
+quadratures of `brdffit.properties` need double precision; fits run in float64. The public names below are
+imported on first use (`brdffit._lazy`), so that the command line's light commands never load JAX.
 
 Public API:
 
@@ -14,23 +15,30 @@ Public API:
 - previews and renderer export: `render`, `export`.
 """
 
-import jax
+import os as _os
+import sys as _sys
 
-jax.config.update("jax_enable_x64", True)
+from ._lazy import exports as _exports
 
-from . import geometry, io, models, params, properties, render, scene, synth  # noqa: E402
-from .fitting import FitError, FitResult, fit, fit_lobes, fit_many  # noqa: E402
-from .measurements import MeasurementError, Measurements  # noqa: E402
-from .posterior import Posterior, posterior  # noqa: E402
-from .scene import Scene  # noqa: E402
-from .select import Selection, select  # noqa: E402
-from .models import Model, evaluate, evaluate_dirs  # noqa: E402
-from .params import ParamSpec  # noqa: E402
+# 64-bit JAX: through the environment when JAX is not imported yet (it reads JAX_ENABLE_X64 on import), else at
+# once.
+if "jax" in _sys.modules:
+    _sys.modules["jax"].config.update("jax_enable_x64", True)
+else:
+    _os.environ["JAX_ENABLE_X64"] = "True"
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "Model", "ParamSpec", "evaluate", "evaluate_dirs", "Measurements", "MeasurementError", "fit", "fit_many",
-    "FitResult", "FitError", "posterior", "Posterior", "select", "Selection", "fit_lobes", "Scene",
-    "geometry", "io", "models", "params", "properties", "render", "scene", "synth", "__version__",
-]
+_PUBLIC = {
+    "geometry": "geometry", "io": "io", "models": "models", "params": "params", "properties": "properties",
+    "render": "render", "scene": "scene", "synth": "synth", "export": "export",
+    "FitError": "fitting:FitError", "FitResult": "fitting:FitResult", "fit": "fitting:fit",
+    "fit_lobes": "fitting:fit_lobes", "fit_many": "fitting:fit_many",
+    "MeasurementError": "measurements:MeasurementError", "Measurements": "measurements:Measurements",
+    "Posterior": "posterior:Posterior", "posterior": "posterior:posterior", "Scene": "scene:Scene",
+    "Selection": "select:Selection", "select": "select:select", "Model": "models:Model",
+    "evaluate": "models:evaluate", "evaluate_dirs": "models:evaluate_dirs", "ParamSpec": "params:ParamSpec",
+}
+_exports(__name__, _PUBLIC)
+
+__all__ = sorted(_PUBLIC) + ["__version__"]

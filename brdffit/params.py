@@ -28,7 +28,8 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["ParamSpec", "ParamTable", "to_unconstrained", "from_unconstrained", "at_bound", "bound_margin"]
+__all__ = ["ParamSpec", "ParamTable", "to_unconstrained", "from_unconstrained", "transform_slope", "at_bound",
+           "bound_margin"]
 
 @dataclasses.dataclass(frozen=True)
 class ParamSpec:
@@ -93,13 +94,18 @@ class ParamSpec:
             return jnp.full((channels,), self.default, dtype=float)
         return jnp.asarray(self.default, dtype=float)
 
-    def to_unconstrained(self, value):
-        """Map a value within the bounds to the unconstrained fitting variable (inverse of `from_unconstrained`)."""
-        return to_unconstrained(value, self.lower, self.upper)
+    def to_unconstrained(self, value, xp=jnp):
+        """Map a value within the bounds to the unconstrained fitting variable (inverse of `from_unconstrained`);
+        ``xp`` is the array module (``numpy`` on the host, `jax.numpy` by default)."""
+        return to_unconstrained(value, self.lower, self.upper, xp)
 
-    def from_unconstrained(self, u):
-        """Map the unconstrained fitting variable to a value within the bounds."""
-        return from_unconstrained(u, self.lower, self.upper)
+    def from_unconstrained(self, u, xp=jnp):
+        """Map the unconstrained fitting variable to a value within the bounds (``xp`` as above)."""
+        return from_unconstrained(u, self.lower, self.upper, xp)
+
+    def transform_slope(self, u):
+        """dp/du of `from_unconstrained` at ``u`` (NumPy)."""
+        return transform_slope(u, self.lower, self.upper)
 
 
 class ParamTable(tuple):
@@ -119,28 +125,49 @@ class ParamTable(tuple):
         return tuple(spec.name for spec in self)
 
 
-def from_unconstrained(u, lower: float, upper: float):
+def from_unconstrained(u, lower: float, upper: float, xp=jnp):
     """Map an unconstrained value to the closed interval [lower, upper] (the module doc's transforms).
 
     Arguments:
         u: unconstrained value(s), any shape.
         lower: lower bound or ``-inf``.
         upper: upper bound or ``inf``.
+        xp: the array module: `jax.numpy` (default, traceable) or ``numpy`` (host arithmetic, no dispatch).
 
     Returns:
         The constrained value(s), same shape as ``u``.
     """
     lo_finite, up_finite = math.isfinite(lower), math.isfinite(upper)
     if lo_finite and up_finite:
-        return lower + (upper - lower) * 0.5 * (1.0 + jnp.sin(u))
+        return lower + (upper - lower) * 0.5 * (1.0 + xp.sin(u))
     if lo_finite:
-        return lower - 1.0 + jnp.sqrt(u * u + 1.0)
+        return lower - 1.0 + xp.sqrt(u * u + 1.0)
     if up_finite:
-        return upper + 1.0 - jnp.sqrt(u * u + 1.0)
+        return upper + 1.0 - xp.sqrt(u * u + 1.0)
     return u
 
 
-def to_unconstrained(value, lower: float, upper: float):
+def transform_slope(u, lower: float, upper: float) -> np.ndarray:
+    """dp/du of `from_unconstrained` at ``u``, in closed form (NumPy): (upper − lower)/2 · cos u for two bounds,
+    ±u/√(u² + 1) for one, 1 for none. It is 0 on a bound, where the transform turns.
+
+    Arguments:
+        u: unconstrained value(s).
+        lower, upper: the bounds (``±inf`` for none).
+
+    Returns:
+        The slopes, same shape as ``u``.
+    """
+    u = np.asarray(u, dtype=float)
+    lo_finite, up_finite = math.isfinite(lower), math.isfinite(upper)
+    if lo_finite and up_finite:
+        return 0.5 * (upper - lower) * np.cos(u)
+    if lo_finite or up_finite:
+        return (1.0 if lo_finite else -1.0) * u / np.sqrt(u * u + 1.0)
+    return np.ones_like(u)
+
+
+def to_unconstrained(value, lower: float, upper: float, xp=jnp):
     """An inverse of `from_unconstrained` (the branch with u >= 0 for a one-sided bound, |u| <= π/2 for two);
     values beyond a bound map to the bound.
 
@@ -148,18 +175,19 @@ def to_unconstrained(value, lower: float, upper: float):
         value: constrained value(s).
         lower: lower bound or ``-inf``.
         upper: upper bound or ``inf``.
+        xp: the array module (see `from_unconstrained`).
 
     Returns:
         The unconstrained value(s).
     """
-    value = jnp.asarray(value, dtype=float)
+    value = xp.asarray(value, dtype=float)
     lo_finite, up_finite = math.isfinite(lower), math.isfinite(upper)
     if lo_finite and up_finite:
-        return jnp.arcsin(jnp.clip(2.0 * (value - lower) / (upper - lower) - 1.0, -1.0, 1.0))
+        return xp.arcsin(xp.clip(2.0 * (value - lower) / (upper - lower) - 1.0, -1.0, 1.0))
     if lo_finite:
-        return jnp.sqrt(jnp.square(jnp.maximum(value - lower, 0.0) + 1.0) - 1.0)
+        return xp.sqrt(xp.square(xp.maximum(value - lower, 0.0) + 1.0) - 1.0)
     if up_finite:
-        return jnp.sqrt(jnp.square(jnp.maximum(upper - value, 0.0) + 1.0) - 1.0)
+        return xp.sqrt(xp.square(xp.maximum(upper - value, 0.0) + 1.0) - 1.0)
     return value
 
 

@@ -11,6 +11,7 @@ import pytest
 from brdffit import FitError, FitResult, Measurements, fit, fit_many, io, models, synth
 from brdffit.fitting.losses import loss_epsilon, relative_epsilon, residuals, robust_residuals
 from brdffit.fitting.problem import make_fit_data
+from brdffit.fitting.marquardt import Marquardt
 from brdffit.fitting.solvers import coarse_solver
 
 PLASTIC = dict(rho_d=[0.5, 0.35, 0.2], ks=[0.9, 0.8, 0.7], m=0.15, f0=0.04)
@@ -145,7 +146,7 @@ def test_multistart_records_every_start_and_keeps_the_best(plastic):
     assert result.cost == pytest.approx(min(costs), rel=1e-12)
 
 
-@pytest.mark.parametrize("solver", ["lm", "gauss-newton", "dogleg", "indirect-lm", "bfgs",
+@pytest.mark.parametrize("solver", ["lm", "optx-lm", "gauss-newton", "dogleg", "indirect-lm", "bfgs",
                                     optx.LevenbergMarquardt(rtol=1e-8, atol=1e-10)])
 def test_every_solver_reaches_the_same_optimum(plastic, solver):
     truth, data = plastic
@@ -290,20 +291,21 @@ def test_fit_data_holds_the_per_sample_arrays_written_out_in_numpy():
     np.testing.assert_array_equal(plain.sqrt_weight, np.ones(n))
 
 
-def test_coarse_stage_of_lm_solves_normal_equations_in_float64_only():
+def test_coarse_stage_of_optimistix_lm_solves_normal_equations_in_float64_only():
     import lineax as lx
 
-    solver = coarse_solver("lm", 1e-5, 1e-8)
+    solver = coarse_solver("optx-lm", 1e-5, 1e-8)
     assert isinstance(solver, optx.LevenbergMarquardt) and isinstance(solver.descent.linear_solver, lx.Normal)
     assert (solver.rtol, solver.atol) == (1e-5, 1e-8)
     with jax.enable_x64(False):
-        single = coarse_solver("lm", 1e-5, 1e-8)
+        single = coarse_solver("optx-lm", 1e-5, 1e-8)
     assert isinstance(single.descent.linear_solver, lx.QR)  # float32 cannot afford the squared condition number
     assert isinstance(coarse_solver("dogleg", 1e-5, 1e-8), optx.Dogleg)
+    assert coarse_solver("lm", 1e-5, 1e-8) == Marquardt(rtol=1e-5, atol=1e-8)  # the engine's own: no linear solver
 
 
 def test_coarse_to_fine_gives_the_full_data_answer():
-    # Above COARSE_SAMPLES samples a fit may solve on a subsample and refine on all data (brdffit.fitting.refine); the
+    # Above COARSE_SAMPLES samples a fit may solve on a subsample and refine on all data (brdffit.fitting.marquardt); the
     # optimum, its cost and its covariance must be those of the plain full-data solve.
     truth = models.get("lambert+ward", rho_d=[0.4, 0.3, 0.2], ks=[0.5, 0.4, 0.3], alpha=0.2)
     data = synth.generate(truth, pattern="half-diff", n=120_000, noise="relative:0.01", seed=9)

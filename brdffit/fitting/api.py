@@ -14,7 +14,7 @@ channels are a batch of single-channel materials):
    parameters held (on the bound, or where they are); the better answer is kept, and the bound stays visible in
    the status;
    a fit still not converged then has its least useful lobe pruned if that lobe does not pay for itself;
-5. **refine**: large data are refined on all samples (`brdffit.fitting.refine`);
+5. **refine**: large data are refined on all samples (`brdffit.fitting.marquardt`, from next to the optimum);
 6. **diagnose and report**: canonical lobe order, the status with its Karush-Kuhn-Tucker test, standard errors
    (`brdffit.fitting.uncertainty`), warnings, metrics and information criteria.
 """
@@ -35,8 +35,9 @@ from ..models.registry import get as get_model
 from ..params import at_bound
 from ..progress import Progress
 from .losses import ROBUST, get_loss, loss_epsilon
+from . import marquardt
+from .normal_equations import chunks, compile_seconds
 from .problem import FitData, Problem, make_fit_data, residual_fn, stack_data
-from .refine import refine
 from .result import FitResult
 from .search import SEARCH_SAMPLES, canonical, interior, quasi_random_starts, score, search
 from .solvers import coarse_solver, compiled_solve, make_solver, no_pins, solver_name, working_tolerances
@@ -47,7 +48,7 @@ __all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
 
 CHANNEL_MODES = ("shared-shape", "independent")
 # Data with more (sample, channel) values than this is first solved on a subsample of COARSE_SAMPLES samples and
-# then refined on all of it (`brdffit.fitting.refine`).
+# then refined on all of it (`brdffit.fitting.marquardt`).
 COARSE_RESIDUALS = 150_000
 COARSE_SAMPLES = 10_000
 COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
@@ -57,6 +58,9 @@ HOLD_FRACTION = 1e-3
 # A lobe is pruned only if zeroing it raises the cost by at most this fraction (and by AIC's price,
 # `_dead_amplitudes`): the tolerance within which issue 14 asks fits to reach the optimum.
 PRUNE_COST_FRACTION = 1e-3
+# The full-data refinement (step 5): its step limit and initial damping (it starts within the subsample's
+# statistical error of the optimum; three passes on a MERL table).
+REFINE_STEPS, REFINE_DAMPING = 20, 1e-6
 # Rounds of holding and releasing bounds (an active-set iteration) before the pipeline reports what it has.
 HOLD_ROUNDS = 3
 
@@ -191,7 +195,8 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
 
     Returns:
         ``(outcomes, compile_seconds, run_seconds)``: for each material a list of per-start dicts ``params``
-        (physical, every parameter), ``cost``, ``steps``, ``max_steps``, ``nonfinite``.
+        (physical, every parameter), ``cost``, ``steps``, ``max_steps``, ``nonfinite`` and, from the default
+        solver, ``normal`` (the normal equations at the answer).
     """
     specs = problem.specs
     if not problem.outer:  # nothing nonlinear is free: the projection is the whole solve
@@ -203,12 +208,18 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
             out.append([{"params": params, "cost": float(costs[m, 0]), "steps": 0, "max_steps": False,
                          "nonfinite": not np.isfinite(costs[m, 0])}])
         return out, 0.0, time.perf_counter() - t0
-    y0 = {name: jnp.asarray(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
-                                                for s in material]) for material in starts]))
-          for name in problem.outer}
     solve_data = data._replace(fixed={k: jnp.asarray(np.stack([np.asarray(material[0][k], dtype=float)
                                                                for material in starts]))
                                       for k in problem.layout.names if k not in problem.free})
+    if isinstance(problem.solver, marquardt.Marquardt):
+        t0, compiled = time.perf_counter(), compile_seconds()
+        out = marquardt.solve(problem, starts, [solve_data], rtol=problem.solver.rtol, atol=problem.solver.atol,
+                              max_steps=problem.max_steps, damping=problem.solver.damping, held=held)
+        compile_time = compile_seconds() - compiled
+        return out, compile_time, time.perf_counter() - t0 - compile_time
+    y0 = {name: jnp.asarray(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
+                                                for s in material]) for material in starts]))
+          for name in problem.outer}
     executable, compile_time = compiled_solve(problem, y0, solve_data)
     pins = no_pins(problem, y0)
     if held:
@@ -225,6 +236,15 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
                           "steps": int(out["steps"][m, i]), "max_steps": bool(out["max_steps"][m, i]),
                           "nonfinite": bool(out["nonfinite"][m, i])} for i in range(len(material))])
     return outcomes, compile_time, run_time
+
+
+def _normal(problem: Problem, outcome: dict, data: FitData):
+    """The normal equations at an outcome: the solver's own when it gave them, else a pass over ``data``."""
+    if not problem.free:
+        return None
+    if outcome.get("normal") is not None:
+        return outcome["normal"]
+    return normal_equations_at(problem, outcome["params"], data)
 
 
 def _start_status(outcome: dict) -> str:
@@ -439,8 +459,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
     records = [[{"init": _json_params(s), "cost": o["cost"], "status": _start_status(o), "steps": o["steps"]}
                 for s, o in zip(starts[m], outcomes[m])] for m in range(len(items))]
     kept = [dict(_best(o), notes=[]) for o in outcomes]
-    normals = [normal_equations_at(problem, b["params"], d) if problem.free else None
-               for b, d in zip(kept, solve_items)]
+    normals = [_normal(problem, b, d) for b, d in zip(kept, solve_items)]
     statuses = [diagnose(problem, b["params"], b["cost"], b["max_steps"], b["nonfinite"], n.jtj, n.jtr)[0]
                 if problem.free else "converged" for b, n in zip(kept, normals)]
     holds = [_to_hold(problem, b["params"]) if st in ("max-steps", "stalled") else {}
@@ -458,7 +477,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             if not held:
                 continue
             retry = dict(again[m][0])
-            retry_normal = normal_equations_at(problem, retry["params"], solve_items[m])
+            retry_normal = _normal(problem, retry, solve_items[m])
             retry_status = diagnose(problem, retry["params"], retry["cost"], retry["max_steps"], retry["nonfinite"],
                                     retry_normal.jtj, retry_normal.jtr)[0]
             records[m].append({"init": _json_params(_held_start(problem, kept[m]["params"], held)),
@@ -490,7 +509,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             records[m].append({"init": _json_params(pruned["params"]), "cost": pruned["cost"],
                                "status": _start_status(pruned), "steps": pruned["steps"], "pruned": dead})
             kept[m] = pruned
-            normals[m] = normal_equations_at(problems[m], pruned["params"], solve_items[m])
+            normals[m] = _normal(problems[m], pruned, solve_items[m])
 
     results = []
     for m, measurements in enumerate(items):
@@ -500,12 +519,17 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             bar.update(3, f"refining on all {measurements.n} samples")
             t0 = time.perf_counter()
             data = full[m]._replace(fixed={k: jnp.asarray(v) for k, v in params.items() if k not in problem.free})
-            refined_params, refined = refine(problem, params, data, rtol=rtol, atol=atol)
-            run_time += time.perf_counter() - t0
-            best = dict(best, params=refined_params, cost=refined["cost"], steps=best["steps"] + refined["steps"],
+            compiled = compile_seconds()
+            # The full-data refinement: the default solver's steps from next to the optimum (small initial λ),
+            # whatever solver polished.
+            refined = marquardt.solve(problem, [[params]], chunks(data), rtol=rtol, atol=atol,
+                                      max_steps=REFINE_STEPS, damping=REFINE_DAMPING)[0][0]
+            compile_time += compile_seconds() - compiled
+            run_time += time.perf_counter() - t0 - (compile_seconds() - compiled)
+            best = dict(best, params=refined["params"], cost=refined["cost"], steps=best["steps"] + refined["steps"],
                         max_steps=refined["max_steps"], nonfinite=refined["nonfinite"])
             normal = refined["normal"]
-            params = canonical(problem, refined_params)
+            params = canonical(problem, refined["params"])
         if not problem.free:
             r = residual_fn(problem, {k: jnp.asarray(v) for k, v in params.items()}, full[m])
             best = dict(best, cost=float(jnp.sum(r * r)))
@@ -549,7 +573,7 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
             working precision can meet (`brdffit.fitting.solvers.working_tolerances`; changes nothing in float64).
         seed: seed of the subsamples and of the quasi-random starts.
         coarse: ``"auto"`` solves data with more than `COARSE_RESIDUALS` values on a seeded subsample of
-            `COARSE_SAMPLES` samples first and then refines on all of it (`brdffit.fitting.refine`); True forces
+            `COARSE_SAMPLES` samples first and then refines on all of it (`brdffit.fitting.marquardt`); True forces
             and False disables this. The answer is the full-data optimum either way; only the time differs.
         strict: raise `FitError` instead of returning a non-converged result.
         progress: report the stages (search, polish, hold, refinement, uncertainty) on a progress line on stderr

@@ -1,8 +1,10 @@
-"""Normal matrices of a fit's residual Jacobian: JᵀJ, Jᵀr, rᵀr and Jᵀ diag(r²) J, accumulated over chunks.
+"""Normal matrices of a fit's residual Jacobian: JᵀJ, Jᵀr, rᵀr and Jᵀ diag(r²) J, for a batch of points.
 
-J is taken with respect to the free physical parameters. Used by the full-data refinement
-(`brdffit.fitting.refine`, which maps the outer parameters' columns to the solver's unconstrained variables by the
-chain rule) and by the covariance of a fit (`brdffit.fitting.uncertainty`).
+J is taken with respect to the free physical parameters. One compiled *pass* evaluates, for every point of a
+batch (materials × starts), the residuals and their tangents; the sums are formed on the host. The passes serve
+the default solver (`brdffit.fitting.marquardt`, every step of the polish and of the full-data refinement) and
+the covariance of a fit (`brdffit.fitting.uncertainty`): one compiled program per model structure and data
+shape, whatever the stage or the solver's options.
 
 Colour parameters hold one value per channel, and channel c of the residuals depends on channel c of a colour
 parameter only (a model evaluates its channels independently; only shape parameters are shared). One
@@ -10,98 +12,127 @@ forward-mode tangent per parameter *name*, seeded with ones in every channel, th
 parameter's Jacobian columns at once: the tangent's channel c is ∂r[:, c]/∂p[c]. A fit with Q free names and
 P free scalars needs Q Jacobian-vector products instead of P (Lambert + Cook-Torrance in RGB: 3 instead of 7).
 `accumulate` forms the per-channel sums S[q, s, c] = Σ_n t_q[n, c] t_s[n, c] chunk by chunk and expands them
-into the P × P matrices. `tests/test_normal_equations.py` checks the result against
-``jax.jacfwd`` for every lobe.
+into the P × P matrices. `tests/test_normal_equations.py` checks the result against ``jax.jacfwd`` for every
+lobe.
 """
 
 from __future__ import annotations
 
 import functools
+import time
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .problem import FitData, Problem, chunk_data, physical_params, residual_fn
+from .problem import FitData, Problem, chunk_data, physical_params, residual_fn, stack_data
 
-__all__ = ["NormalEquations", "chunk_tangents", "chunks", "accumulate", "CHUNK_SAMPLES"]
+__all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "CHUNK_SAMPLES"]
 
 CHUNK_SAMPLES = 65536
 
 
 class NormalEquations(NamedTuple):
-    """The sums `accumulate` returns, as NumPy float64, in `brdffit.problem.flatten_free` order.
+    """The sums `accumulate` returns, as NumPy float64, in `Layout.flatten` order of the free parameters, with
+    the batch's leading axes (materials, starts) on every field (none for `at_point`).
 
     Fields:
-        jtj: JᵀJ ``(P, P)``.
-        jtr: Jᵀr ``(P,)``.
-        cost: rᵀr.
-        meat: Jᵀ diag(r²) J ``(P, P)`` (the sandwich covariance's middle).
-        channel_cost: rᵀr of each channel ``(C,)``.
+        jtj: JᵀJ ``(..., P, P)``.
+        jtr: Jᵀr ``(..., P)``.
+        cost: rᵀr ``(...)``.
+        meat: Jᵀ diag(r²) J ``(..., P, P)`` (the sandwich covariance's middle).
+        channel_cost: rᵀr of each channel ``(..., C)``.
     """
 
     jtj: np.ndarray
     jtr: np.ndarray
-    cost: float
+    cost: np.ndarray
     meat: np.ndarray
     channel_cost: np.ndarray
 
+    def at_point(self, m: int, s: int) -> "NormalEquations":
+        """The sums of point ``(m, s)`` of the batch."""
+        return NormalEquations(self.jtj[m, s], self.jtr[m, s], float(self.cost[m, s]), self.meat[m, s],
+                               self.channel_cost[m, s])
+
+
+def _tangents(problem: Problem, tree: dict, data: FitData):
+    """``(C, Q + 1, N)``: row q the tangent of free name q (in ``problem.free`` order) in each channel, row Q the
+    residuals, for one point and one material."""
+    def r(values):
+        return residual_fn(problem, physical_params(problem, {}, dict(data.fixed, **values)), data)
+
+    rows = []
+    for name in problem.free:
+        seed = {k: (jnp.ones_like(v) if k == name else jnp.zeros_like(v)) for k, v in tree.items()}
+        rows.append(jax.jvp(r, (tree,), (seed,))[1])
+    rows.append(r(tree))
+    return jnp.transpose(jnp.stack(rows), (2, 0, 1))
+
+
+_COMPILE_SECONDS = [0.0]
+
 
 @functools.lru_cache(maxsize=64)
-def chunk_tangents(problem: Problem):
-    """The jitted tangents and residuals of one chunk, laid out for the per-channel Gram matrices.
+def pass_program(structure: Problem):
+    """The jitted pass of a problem structure (`Problem.structure`): ``fn(trees, data) -> A`` with ``trees`` free
+    name -> value ``(M, S) + shape`` (materials, points of each), ``data`` a `FitData` with a leading material
+    axis, and ``A`` ``(M, S, C, Q + 1, N)`` the tangents and residuals of `_tangents`. Its first call for a
+    shape compiles; the seconds are added to `compile_seconds`."""
+    per_point = jax.vmap(lambda tree, data: _tangents(structure, tree, data), in_axes=(0, None))
+    jitted = jax.jit(jax.vmap(per_point, in_axes=(0, 0)))
+    seen = set()
 
-    Arguments:
-        problem: the `Problem`; the tangents are taken with respect to its free physical parameters (the other
-            parameters come from ``data.fixed``).
+    def fn(trees, data):
+        key = jax.tree_util.tree_structure((trees, data)), tuple(
+            (np.shape(leaf), str(jnp.result_type(leaf))) for leaf in jax.tree_util.tree_leaves((trees, data)))
+        if key in seen:
+            return jitted(trees, data)
+        start = time.perf_counter()
+        out = jax.block_until_ready(jitted(trees, data))
+        seen.add(key)
+        _COMPILE_SECONDS[0] += time.perf_counter() - start
+        return out
 
-    Returns:
-        ``fn(tree, data) -> A`` with ``tree`` the free name -> value dict and ``A`` of shape ``(C, Q + 1, N)``:
-        ``A[c, q]`` the tangent of free name q (in ``problem.free`` order) in channel c, ``A[c, Q]`` the
-        residuals.
-    """
+    return fn
 
-    def fn(tree: dict, data: FitData):
-        def r(values):
-            return residual_fn(problem, physical_params(problem, {}, dict(data.fixed, **values)), data)
 
-        rows = []
-        for name in problem.free:
-            seed = {k: (jnp.ones_like(v) if k == name else jnp.zeros_like(v)) for k, v in tree.items()}
-            rows.append(jax.jvp(r, (tree,), (seed,))[1])
-        rows.append(r(tree))
-        return jnp.transpose(jnp.stack(rows), (2, 0, 1))
-
-    return jax.jit(fn)
+def compile_seconds() -> float:
+    """Seconds this process has spent in the first calls of passes (compilation, or loading it from JAX's
+    persistent cache, and the call itself); the pipeline reports the difference over a fit."""
+    return _COMPILE_SECONDS[0]
 
 
 def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
-    """``data`` in equally shaped chunks of ``size`` samples (bounds the memory of the tangents); split once and
-    reuse the list when accumulating repeatedly."""
-    return chunk_data(data, size)
+    """One material's ``data`` in equally shaped chunks of ``size`` samples, each with a leading material axis of
+    1 (bounds the memory of the tangents; split once and reuse the list when accumulating repeatedly)."""
+    return [stack_data([piece]) for piece in chunk_data(data, size)]
 
 
-def accumulate(problem: Problem, tree: dict, pieces: list[FitData]) -> NormalEquations:
-    """JᵀJ, Jᵀr, rᵀr, Jᵀ diag(r²) J and the per-channel rᵀr over all of the data.
+def accumulate(problem: Problem, trees: dict, pieces: list[FitData]) -> NormalEquations:
+    """JᵀJ, Jᵀr, rᵀr, Jᵀ diag(r²) J and the per-channel rᵀr over all of the data, for every point of a batch.
 
     Arguments:
         problem: the `Problem`.
-        tree: free name -> physical value, no batch axis.
-        pieces: the `FitData` in chunks (`chunks`).
+        trees: free name -> physical values ``(M, S) + shape``: S points for each of M materials.
+        pieces: the data of the M materials (leading material axis), whole or in chunks (`chunks`).
 
     Returns:
-        The `NormalEquations`.
+        The `NormalEquations`, each field with leading axes ``(M, S)``.
 
     Raises:
         ValueError: a value of the wrong shape.
     """
+    batch = None
     for name in problem.free:
         want = problem.layout[name].shape
-        if np.shape(tree[name]) != want:
-            raise ValueError(f"parameter {name!r} has shape {np.shape(tree[name])}; expected {want}")
+        got = np.shape(trees[name])
+        if len(got) < 2 or got[2:] != want or (batch is not None and got[:2] != batch):
+            raise ValueError(f"parameter {name!r} has shape {got}; expected (materials, points) + {want}")
+        batch = got[:2]
     index, incidence = problem.layout.channel_incidence(problem.free)
-    fn = chunk_tangents(problem)
+    fn = pass_program(problem.structure)
     q = len(problem.free)
     gram, meat = 0.0, 0.0
     # A diverged solver (undamped Gauss-Newton far away) can overflow the products: inf/NaN then reach the
@@ -109,18 +140,19 @@ def accumulate(problem: Problem, tree: dict, pieces: list[FitData]) -> NormalEqu
     with np.errstate(over="ignore", invalid="ignore"):
         for piece in pieces:
             # The per-channel Gram matrices with BLAS on the host: measured 3x faster on the CPU than the same
-            # reductions in XLA, and a (C, Q + 1, N) transfer per chunk on a GPU.
-            a = np.asarray(fn(tree, piece))
-            gram = gram + a @ a.transpose(0, 2, 1)  # (C, Q+1, Q+1): tangents and residuals
-            weighted = a[:, :q] * a[:, q:]
-            meat = meat + weighted @ weighted.transpose(0, 2, 1)
+            # reductions in XLA, and a (M, S, C, Q + 1, N) transfer per chunk on a GPU.
+            a = np.asarray(fn(trees, piece))
+            gram = gram + a @ np.swapaxes(a, -1, -2)  # (M, S, C, Q+1, Q+1): tangents and residuals
+            weighted = a[..., :q, :] * a[..., q:, :]
+            meat = meat + weighted @ np.swapaxes(weighted, -1, -2)
         both = incidence[:, None, :] * incidence[None, :, :]  # (P, P, C): channels shared by scalars i and j
-        gram = np.moveaxis(np.asarray(gram), 0, -1)  # (Q+1, Q+1, C)
-        meat = np.moveaxis(np.asarray(meat), 0, -1)
+        gram = np.moveaxis(np.asarray(gram), 2, -1)  # (M, S, Q+1, Q+1, C)
+        meat = np.moveaxis(np.asarray(meat), 2, -1)
 
         def expand(sums):
-            return np.sum(both * sums[index][:, index], axis=-1)
+            return np.sum(both * sums[..., index, :, :][..., :, index, :], axis=-1)
 
-        jtr = np.sum(incidence * gram[index, q], axis=-1)
-        return NormalEquations(jtj=expand(gram[:q, :q]), jtr=jtr, cost=float(np.sum(gram[q, q])),
-                               meat=expand(meat), channel_cost=np.array(gram[q, q], dtype=float))
+        jtr = np.sum(incidence * gram[..., index, q, :], axis=-1)
+        channel_cost = np.array(gram[..., q, q, :], dtype=float)
+        return NormalEquations(jtj=expand(gram[..., :q, :q, :]), jtr=jtr, cost=np.sum(channel_cost, axis=-1),
+                               meat=expand(meat), channel_cost=channel_cost)

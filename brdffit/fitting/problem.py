@@ -67,6 +67,12 @@ class Problem:
         return isinstance(other, Problem) and self._key() == other._key()
 
     @property
+    def structure(self) -> "Problem":
+        """This problem without its solver and step limit: what a compiled evaluation of its residuals depends on
+        (the key of the compiled passes and of the search's scoring, shared by every solver and stage)."""
+        return dataclasses.replace(self, solver=None, max_steps=0)
+
+    @property
     def layout(self) -> Layout:
         """The model's parameter layout."""
         return layout(self.lobes, self.channels)

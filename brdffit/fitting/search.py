@@ -171,7 +171,7 @@ def score(problem: Problem, candidates: list[dict], data: FitData):
     Returns:
         ``(costs (M, B), amplitudes)``: amplitudes name -> ``(M, B, C)``.
     """
-    fn = _score_fn(problem)
+    fn = _score_fn(problem.structure)
     costs, amps = [], []
     for start in range(0, len(candidates), _CHUNK):
         chunk = candidates[start:start + _CHUNK]

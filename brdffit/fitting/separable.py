@@ -93,15 +93,16 @@ def box_patterns(lower: tuple, upper: tuple) -> np.ndarray:
     return np.array(list(itertools.product(*states)), dtype=int).reshape(-1, len(states))
 
 
-def _spd_solve(a, b):
+def _spd_solve(a, b, xp=jnp):
     """Solve a x = b for small symmetric positive definite ``a`` ``(..., K, K)`` by a Cholesky factorisation
-    unrolled over K (batched over the leading axes). For the few amplitudes of a model this compiles in a
-    fraction of the time of `jnp.linalg.solve`'s pivoted LU, which dominated a fit's compilation."""
+    unrolled over K (batched over the leading axes; ``xp`` is `jax.numpy` or ``numpy``). For the few amplitudes
+    of a model this compiles in a fraction of the time of `jnp.linalg.solve`'s pivoted LU, which dominated a
+    fit's compilation."""
     k = a.shape[-1]
     low = [[None] * k for _ in range(k)]
     for j in range(k):
         diag = a[..., j, j] - sum(low[j][m] ** 2 for m in range(j))
-        low[j][j] = jnp.sqrt(jnp.maximum(diag, 1e-300))
+        low[j][j] = xp.sqrt(xp.maximum(diag, 1e-300))
         for i in range(j + 1, k):
             low[i][j] = (a[..., i, j] - sum(low[i][m] * low[j][m] for m in range(j))) / low[j][j]
     z = []
@@ -110,41 +111,43 @@ def _spd_solve(a, b):
     x = [None] * k
     for i in reversed(range(k)):
         x[i] = (z[i] - sum(low[m][i] * x[m] for m in range(i + 1, k))) / low[i][i]
-    return jnp.stack(x, axis=-1)
+    return xp.stack(x, axis=-1)
 
 
-def _enumerate_box_qp(gram, rhs, lower, upper, patterns):
+def _enumerate_box_qp(gram, rhs, lower, upper, patterns, xp=jnp):
     """argmin ½ aᵀ G a − bᵀ a over lower <= a <= upper, by enumerating the active sets (see the module doc).
 
     Arguments:
-        gram: G ``(K, K)``, symmetric positive semi-definite.
-        rhs: b ``(K,)``.
+        gram: G ``(..., K, K)``, symmetric positive semi-definite (leading axes batch independent problems).
+        rhs: b ``(..., K)``.
         lower, upper: ``(K,)`` NumPy bounds (±inf for none).
         patterns: `box_patterns` of the bounds.
+        xp: `jax.numpy` (traced, differentiated through `_box_qp`) or ``numpy`` (host solves, `solve_box`).
 
     Returns:
-        ``(a, free)``: the optimum ``(K,)`` and the mask of its amplitudes off their bounds.
+        ``(a, free)``: the optima ``(..., K)`` and the masks of their amplitudes off their bounds.
     """
-    k = gram.shape[0]
+    k = gram.shape[-1]
     # Jacobi scaling: the basis functions of a diffuse and a sharp lobe differ by decades in magnitude.
-    scale = jnp.sqrt(jnp.maximum(jnp.diag(gram), 1e-300))
-    g = gram / jnp.outer(scale, scale) + _RIDGE * jnp.eye(k)
+    scale = xp.sqrt(xp.maximum(xp.diagonal(gram, axis1=-2, axis2=-1), 1e-300))  # (..., K)
+    g = gram / (scale[..., :, None] * scale[..., None, :]) + _RIDGE * np.eye(k)
     b = rhs / scale
     lo = np.where(np.isfinite(lower), lower, 0.0)
     hi = np.where(np.isfinite(upper), upper, 0.0)
     codes = np.asarray(patterns)
     free = (codes == 0).astype(float)  # (P, K)
-    held = jnp.asarray(np.where(codes == 1, lo, np.where(codes == 2, hi, 0.0))) * scale  # held values, scaled
+    held = np.where(codes == 1, lo, np.where(codes == 2, hi, 0.0)) * scale[..., None, :]  # (..., P, K) scaled
     # Each pattern's system: the free rows of G (its free block plus the ridge, positive definite) and identity
     # rows that hold the others; all P systems solved at once.
-    lhs = free[:, :, None] * g[None] * free[:, None, :] + np.eye(k)[None] * (1.0 - free)[:, :, None]
-    cand = _spd_solve(lhs, free * (b[None] - held @ g) + held)  # (P, K) scaled
-    a = cand / scale
-    slack = 1e-10 * (1.0 + jnp.abs(a))
-    feasible = jnp.all((a >= lower - slack) & (a <= upper + slack), axis=1)
-    objective = 0.5 * jnp.sum(cand * (cand @ g), axis=-1) - cand @ b
-    best = jnp.argmin(jnp.where(feasible, objective, jnp.inf))
-    return jnp.clip(a[best], lower, upper), jnp.asarray(free)[best]
+    lhs = free[:, :, None] * g[..., None, :, :] * free[:, None, :] + np.eye(k) * (1.0 - free)[:, :, None]
+    cand = _spd_solve(lhs, free * (b[..., None, :] - held @ g) + held, xp)  # (..., P, K) scaled
+    a = cand / scale[..., None, :]
+    slack = 1e-10 * (1.0 + xp.abs(a))
+    feasible = xp.all((a >= lower - slack) & (a <= upper + slack), axis=-1)
+    objective = 0.5 * xp.sum(cand * (cand @ g), axis=-1) - xp.sum(cand * b[..., None, :], axis=-1)
+    best = xp.argmin(xp.where(feasible, objective, np.inf), axis=-1)
+    chosen = xp.take_along_axis(a, best[..., None, None], axis=-2)[..., 0, :]
+    return xp.clip(chosen, lower, upper), xp.asarray(free)[best]
 
 
 def _box_qp(lower: tuple, upper: tuple):
@@ -230,23 +233,21 @@ def project(problem: Problem, params: dict, data: FitData):
     return params, f
 
 
-@functools.partial(jax.jit, static_argnums=(2, 3))
-def _box_qp_jit(gram, rhs, lower: tuple, upper: tuple):
-    return _box_qp(lower, upper)(gram, rhs)
-
-
 def solve_box(gram, rhs, lower, upper) -> np.ndarray:
-    """argmin ½ aᵀ G a − bᵀ a over the box [lower, upper] (the same exact active-set solve as the fits use).
+    """argmin ½ aᵀ G a − bᵀ a over the box [lower, upper]: the same exact active-set solve as the fits use, in
+    NumPy on the host (the full-data passes of `brdffit.fitting.marquardt` re-solve the amplitudes from their
+    sums this way, batched over points and channels).
 
     Arguments:
-        gram: G ``(K, K)``; rhs: b ``(K,)``; lower, upper: sequences of K bounds (±inf for none).
+        gram: G ``(..., K, K)``; rhs: b ``(..., K)``; lower, upper: sequences of K bounds (±inf for none).
 
     Returns:
-        The optimum as a NumPy array ``(K,)``.
+        The optima as a NumPy array ``(..., K)``.
     """
     lower = tuple(float(v) for v in lower)
     upper = tuple(float(v) for v in upper)
-    return np.asarray(_box_qp_jit(jnp.asarray(gram, dtype=float), jnp.asarray(rhs, dtype=float), lower, upper))
+    return _enumerate_box_qp(np.asarray(gram, dtype=float), np.asarray(rhs, dtype=float), np.asarray(lower),
+                             np.asarray(upper), box_patterns(lower, upper), xp=np)[0]
 
 
 def _weights(problem: Problem, data: FitData):

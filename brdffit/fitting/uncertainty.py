@@ -25,8 +25,9 @@ __all__ = ["normal_equations_at", "covariances", "Uncertainty"]
 
 def normal_equations_at(problem: Problem, params: dict, data: FitData) -> NormalEquations:
     """JᵀJ, Jᵀ diag(r²) J, Jᵀr and the costs at physical ``params`` over the free parameters (chunked pass)."""
-    data = data._replace(fixed={k: v for k, v in params.items() if k not in problem.free})
-    return accumulate(problem, {k: jnp.asarray(params[k]) for k in problem.free}, chunks(data))
+    data = data._replace(fixed={k: jnp.asarray(v) for k, v in params.items() if k not in problem.free})
+    trees = {k: np.asarray(params[k], dtype=float)[None, None] for k in problem.free}
+    return accumulate(problem, trees, chunks(data)).at_point(0, 0)
 
 
 class Uncertainty:

@@ -1,0 +1,273 @@
+r"""The default solver (``"lm"``): Levenberg-Marquardt on the separable problem's normal equations, stepped on the
+host over compiled passes, for a whole batch of points at once.
+
+Each step of every point (materials × starts) is one compiled pass over the data
+(`brdffit.fitting.normal_equations.accumulate`): JᵀJ, Jᵀr and the cost at the point, J in the physical free
+parameters. Because the residuals are affine in the amplitudes, those sums give the cost as a function of the
+amplitudes exactly: each pass first moves the amplitudes to their bounded optimum for the current outer parameters
+(the projection of `brdffit.fitting.separable`, here from the pass's own sums: cost(a') = cost + 2 gᵀΔ + Δᵀ G Δ,
+Δ = a' − a, with the same exact active-set solve; a second pass at the moved point when Δ was large, so that the
+outer tangents are those at the projected amplitudes, as variable projection wants), then takes a Levenberg-Marquardt step
+
+    (JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr        (Marquardt 1963, Eq. 29's scaling)
+
+over the outer parameters, in their unconstrained variables (`brdffit.params`; the chain rule maps their
+columns), and the amplitudes off their bounds: Kaufman's joint step (BIT 15, 1975). A step is accepted only if
+the projected cost does not increase; λ then shrinks tenfold, else it grows tenfold (Marquardt's schedule). A
+point has converged when its next step and its amplitude change are below ``rtol·|x| + atol`` (optimistix's
+Cauchy test on the variables) with λ ≤ 1, so that damping cannot fake a small step, or with its last trial
+changing the cost by at most ``rtol·cost + atol`` (the Cauchy test on the cost: at the optimum, rounding rejects
+every trial and λ grows); it ends without converging
+at ``max_steps`` or when λ exceeds 1e12 (no step of any length decreases the cost). A problem without outer
+parameters (Lambert) converges after one projection. Parameters the pipeline holds (on a bound, or where a dead
+lobe left them) simply do not move.
+
+Why the engine has its own solver: its only compiled program is the pass, one per model structure and data
+shape (a straight-line program of the residuals and Q tangents), which the polish, the full-data refinement and
+the covariance share. An optimistix solve compiles the whole iteration (the solver's loop, its linear solves and
+the transposed tangents of the projection) for each model and option: 5–12 s per model on the project's 2-core
+CPU against ~0.4 s for the pass (docs/benchmarks.md, issue 15). The optimistix solvers stay available by name
+(`brdffit.fitting.solvers.SOLVERS`) and as objects, and `tests/test_marquardt.py` checks that both reach the
+same optimum.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .normal_equations import NormalEquations, accumulate
+from .problem import FitData, Problem
+from .separable import solve_box
+
+__all__ = ["Marquardt", "solve", "MAX_DAMPING"]
+
+# λ beyond which a point is stuck: no step, however short, lowers its cost (a kink, or rounding at the optimum
+# of a loose problem); it ends without converging.
+MAX_DAMPING = 1e12
+_MIN_DAMPING = 1e-12
+# A projection that moves an amplitude by more than this fraction of its value is followed by a pass at the moved
+# point (`_Batch.evaluate`). Near the optimum the joint step predicts the amplitudes far better: one pass a step.
+_REPASS = 1e-3
+
+
+@dataclasses.dataclass(frozen=True)
+class Marquardt:
+    """The engine's Levenberg-Marquardt (solver name ``"lm"``, `brdffit.fitting.solvers.SOLVERS`).
+
+    Attributes:
+        rtol, atol: the step test's tolerances (see the module doc).
+        damping: the initial λ, relative to diag(JᵀJ) (Marquardt's 1e-3; the full-data refinement, which starts
+            next to the optimum, uses 1e-6).
+    """
+
+    rtol: float = 1e-8
+    atol: float = 1e-12
+    damping: float = 1e-3
+
+
+class _State:
+    """The batch's current points: physical values ``x (M, S, P)`` with their amplitudes projected, and the
+    pass's sums moved with them (see the module doc)."""
+
+    def __init__(self, x, sums: NormalEquations, delta):
+        self.x, self.sums, self.delta = x, sums, delta
+
+    def where(self, take, other: "_State") -> "_State":
+        """This state where ``take (M, S)`` is True, ``other`` elsewhere."""
+        def pick(a, b):
+            return np.where(np.reshape(take, take.shape + (1,) * (np.ndim(a) - take.ndim)), a, b)
+
+        return _State(pick(self.x, other.x), NormalEquations(*(pick(a, b) for a, b in zip(self.sums, other.sums))),
+                      pick(self.delta, other.delta))
+
+
+class _Batch:
+    """The flat layout of a problem's free parameters and the passes over a batch's data."""
+
+    def __init__(self, problem: Problem, pieces: list[FitData]):
+        layout = problem.layout
+        self.problem, self.pieces, self.layout = problem, pieces, layout
+        free = problem.free
+        self.offsets = layout.offsets(free)
+        self.lower = np.concatenate([np.full(layout[n].size, layout[n].spec.lower) for n in free])
+        self.upper = np.concatenate([np.full(layout[n].size, layout[n].spec.upper) for n in free])
+        self.size = self.lower.size
+        self.is_outer = np.zeros(self.size, bool)
+        for name in problem.outer:
+            self.is_outer[self.offsets[name]] = True
+        linear = problem.linear
+        # (C, K): the flat index of amplitude k in channel c.
+        self.amplitudes = np.array([[self.offsets[n].start + c for n in linear] for c in range(problem.channels)],
+                                   dtype=int).reshape(problem.channels, len(linear))
+
+    def trees(self, x) -> dict:
+        batch = x.shape[:2]
+        return {n: np.reshape(x[..., self.offsets[n]], batch + self.layout[n].shape) for n in self.problem.free}
+
+    def evaluate(self, x) -> _State:
+        """A pass at ``x`` with the amplitudes then moved to their optimum; when that moved an amplitude by more
+        than `_REPASS` of its value, a second pass at the moved point. The sums predict the cost at the moved
+        amplitudes exactly, but the tangents of the outer parameters are those at ``x``: a lobe whose trial
+        amplitudes were clipped to 0 has none at all, and its shape could never move again."""
+        state = self._project(x)
+        moved = np.abs(state.delta) > _REPASS * np.abs(state.x) + 1e-300
+        return self._project(state.x) if moved.any() else state
+
+    def _project(self, x) -> _State:
+        sums = accumulate(self.problem, self.trees(x), self.pieces)
+        delta = np.zeros(x.shape)
+        if not self.amplitudes.size:
+            return _State(x, sums, delta)
+        index = self.amplitudes
+        jtj, jtr = sums.jtj, sums.jtr
+        with np.errstate(invalid="ignore", over="ignore"):
+            gram = jtj[..., index[:, :, None], index[:, None, :]]  # (M, S, C, K, K)
+            gradient = jtr[..., index]  # (M, S, C, K)
+            a = x[..., index]
+            finite = np.all(np.isfinite(gram), axis=(-1, -2)) & np.all(np.isfinite(gradient), axis=-1)
+            gram = np.where(finite[..., None, None], gram, np.eye(index.shape[1]))
+            rhs = np.where(finite[..., None], np.einsum("...kl,...l->...k", gram, a) - gradient, a)
+            best = solve_box(gram, rhs, self.lower[index[0]], self.upper[index[0]])
+            best = np.where(finite[..., None], best, a)
+            step = best - a
+            change = 2.0 * np.sum(gradient * step, axis=-1) + np.einsum("...k,...kl,...l->...", step, gram, step)
+            change = np.where(finite, change, 0.0)
+            x = x.copy()
+            x[..., index] = best
+            delta[..., index] = step
+            channel_cost = np.maximum(sums.channel_cost + change, 0.0)
+            moved = NormalEquations(jtj=jtj, jtr=jtr + np.einsum("...pq,...q->...p", jtj, delta),
+                                    cost=np.where(np.isfinite(sums.cost), np.sum(channel_cost, axis=-1), sums.cost),
+                                    meat=sums.meat, channel_cost=channel_cost)
+        return _State(x, moved, delta)
+
+    def unconstrained(self, x):
+        """The outer scalars' unconstrained variables ``(M, S, P)`` (amplitude entries: the physical values)."""
+        u = x.copy()
+        for name in self.problem.outer:
+            spec = self.layout[name].spec
+            u[..., self.offsets[name]] = spec.to_unconstrained(x[..., self.offsets[name]], xp=np)
+        return u
+
+    def physical(self, u, x):
+        """``x`` with its outer scalars replaced by those of the unconstrained ``u``."""
+        out = x.copy()
+        for name in self.problem.outer:
+            spec = self.layout[name].spec
+            out[..., self.offsets[name]] = spec.from_unconstrained(u[..., self.offsets[name]], xp=np)
+        return out
+
+    def slopes(self, u):
+        """dp/du ``(M, S, P)``: the transforms' slopes on the outer scalars, 1 on the amplitudes."""
+        out = np.ones(u.shape)
+        for name in self.problem.outer:
+            out[..., self.offsets[name]] = self.layout[name].spec.transform_slope(u[..., self.offsets[name]])
+        return out
+
+
+def _step(batch: _Batch, state: _State, damping, held):
+    """The damped step of every point in the unconstrained variables ``(M, S, P)`` (0 where a scalar does not
+    move: held, or an amplitude on its bound) and the unconstrained variables it starts from."""
+    x = state.x
+    u = batch.unconstrained(x)
+    slope = batch.slopes(u)
+    moving = batch.is_outer & ~held
+    if batch.amplitudes.size:
+        on_box = (x > batch.lower + 1e-12) & (x < batch.upper - 1e-12)
+        amplitude = np.zeros(batch.size, bool)
+        amplitude[batch.amplitudes.ravel()] = True
+        moving = moving | (amplitude & on_box)
+    with np.errstate(invalid="ignore", over="ignore"):
+        jtj = state.sums.jtj * slope[..., :, None] * slope[..., None, :]
+        jtr = state.sums.jtr * slope
+        # Jacobi scaling (diag(JᵀJ) as Marquardt's metric): the scaled system J̃ᵀJ̃ + λI is positive definite.
+        scale = np.sqrt(np.maximum(np.einsum("...ii->...i", jtj), 1e-300))
+        both = moving[..., :, None] & moving[..., None, :]
+        eye = np.eye(batch.size)
+        lhs = np.where(both, jtj / (scale[..., :, None] * scale[..., None, :]) + damping[..., None, None] * eye, eye)
+        rhs = np.where(moving, -jtr / scale, 0.0)
+        finite = np.all(np.isfinite(lhs), axis=(-1, -2)) & np.all(np.isfinite(rhs), axis=-1)
+        lhs = np.where(finite[..., None, None], lhs, eye)
+        step = np.linalg.solve(lhs, np.where(finite[..., None], rhs, 0.0)[..., None])[..., 0] / scale
+    return np.where(moving, step, 0.0), u
+
+
+def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, rtol: float, atol: float,
+          max_steps: int, damping: float = 1e-3, held: list[dict] | None = None) -> list[list[dict]]:
+    """Solve every start of every material (the module doc's iteration, all points together).
+
+    Arguments:
+        problem: the `Problem` (its `linear` amplitudes are projected at every pass, its `outer` ones stepped).
+        starts: for each of M materials, S dicts of physical values of every parameter.
+        pieces: the data of the M materials with a leading material axis, whole or in chunks
+            (`brdffit.fitting.normal_equations.chunks`); ``fixed`` holds the values of the parameters that are not
+            free.
+        rtol, atol: the step test's tolerances.
+        max_steps: the most steps (passes after the first) of each point.
+        damping: the initial λ.
+        held: for each material, outer name -> physical value to hold (NaN: free), the same for each start.
+
+    Returns:
+        For each material, a list of S dicts: ``params`` (physical, every parameter), ``cost``, ``steps``,
+        ``max_steps`` (ended without converging), ``nonfinite`` and ``normal`` (the `NormalEquations` at the
+        returned point, in the physical free parameters).
+    """
+    batch = _Batch(problem, pieces)
+    layout, free = problem.layout, problem.free
+    materials, count = len(starts), len(starts[0])
+    x = np.stack([np.stack([layout.flatten(s, free) for s in material]) for material in starts]).astype(float)
+    x = x.reshape(materials, count, batch.size)
+    hold = np.zeros(x.shape, bool)
+    for m, holds in enumerate(held or []):
+        for name, value in holds.items():
+            value = np.ravel(np.broadcast_to(np.asarray(value, dtype=float), layout[name].shape))
+            mask = np.isfinite(value)
+            hold[m, :, batch.offsets[name]] = mask
+            x[m, :, batch.offsets[name]] = np.where(mask, value, x[m, :, batch.offsets[name]])
+    state = batch.evaluate(x)
+    lam = np.full(x.shape[:2], float(damping))
+    steps = np.zeros(x.shape[:2], int)
+    done = ~np.isfinite(state.sums.cost)
+    converged = np.zeros(x.shape[:2], bool)
+    change = np.full(x.shape[:2], np.inf)  # |Δcost| of each point's last trial
+    while True:
+        active = ~done & (steps < max_steps)
+        if not active.any():
+            break
+        step, u = _step(batch, state, lam, hold)
+        outer = batch.is_outer
+        small = (np.linalg.norm(np.where(outer, step, 0.0), axis=-1)
+                 <= rtol * np.linalg.norm(np.where(outer, u, 0.0), axis=-1) + atol)
+        small &= np.linalg.norm(state.delta, axis=-1) <= rtol * np.linalg.norm(state.x, axis=-1) + atol
+        # Damping cannot fake a small step: λ <= 1, or the last trial changed the cost by no more than the
+        # tolerance (at the optimum rounding rejects every trial and λ grows).
+        finished = active & small & ((lam <= 1.0) | (change <= rtol * np.abs(state.sums.cost) + atol))
+        converged |= finished
+        done |= finished
+        active &= ~finished
+        if not active.any():
+            break
+        trial = batch.physical(u + step, state.x)
+        trial = np.where(outer, trial, np.clip(state.x + step, batch.lower, batch.upper))
+        trial = np.where(active[..., None], trial, state.x)
+        candidate = batch.evaluate(trial)
+        change = np.where(active, np.abs(candidate.sums.cost - state.sums.cost), change)
+        steps += active
+        better = active & np.isfinite(candidate.sums.cost) & (candidate.sums.cost <= state.sums.cost)
+        state = candidate.where(better, state)
+        lam = np.where(better, np.maximum(lam / 10.0, _MIN_DAMPING), np.where(active, lam * 10.0, lam))
+        done |= active & (lam > MAX_DAMPING)
+    finite = np.isfinite(state.sums.cost)
+    out = []
+    for m, material in enumerate(starts):
+        row = []
+        for s, start in enumerate(material):
+            values = layout.unflatten(state.x[m, s], free, xp=np)
+            params = dict(start, **{k: np.asarray(v) for k, v in values.items()})
+            row.append({"params": params, "cost": float(state.sums.cost[m, s]), "steps": int(steps[m, s]),
+                        "max_steps": bool(finite[m, s] and not converged[m, s]), "nonfinite": not finite[m, s],
+                        "normal": state.sums.at_point(m, s)})
+        out.append(row)
+    return out
