@@ -9,7 +9,7 @@ import os
 import sys
 from pathlib import Path
 
-from . import __version__, models
+from . import __version__
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 DEFAULT_MODEL = "auto"
@@ -66,6 +66,8 @@ def _default_out(path: Path) -> Path:
 
 
 def _cmd_models(args) -> int:
+    from . import models
+
     for name in models.names():
         cls = models.lobe_class(name)
         model = models.get(name, channels=1)
@@ -114,6 +116,8 @@ def _cmd_info(args) -> int:
 
 def _with_lobes(spec: str, k: int) -> str:
     """The spec with every Lafortune lobe set to k sub-lobes."""
+    from . import models
+
     tokens = []
     found = False
     for name, options in models.parse_spec(spec):
@@ -258,7 +262,7 @@ def _cmd_posterior(args) -> int:
 
 
 def _cmd_synth(args) -> int:
-    from . import io, synth
+    from . import io, models, synth
 
     values = _parse_fixed(args.param)
     model = models.get(args.model, channels=args.channels, **values)
@@ -515,9 +519,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Entry point of the ``brdffit`` console script; returns the exit code."""
-    from .io import FormatError
-    from .measurements import MeasurementError
-
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -526,6 +527,10 @@ def main(argv=None) -> int:
     if not getattr(args, "run", None):
         parser.print_help()
         return EXIT_BAD_INPUT
+    # Imported after parsing: --help and usage errors load nothing but the parser (issue 15).
+    from .io import FormatError
+    from .measurements import MeasurementError
+
     try:
         return args.run(args)
     except (UsageError, FormatError, MeasurementError, FileNotFoundError, IsADirectoryError, KeyError,

@@ -102,7 +102,6 @@ KNOWN_FAILURES = {
     ("lambert+lafortune(lobes=2)", "lambert+ashikhmin-shirley"): "spike optimum at n = 2.1e6",
     ("lambert+cook-torrance", "lambert+lafortune(lobes=2)"): "multi-lobe Lafortune landscape",
     ("lambert+cook-torrance", "lambert+lafortune(lobes=3)"): "multi-lobe Lafortune landscape",
-    ("lambert+blinn-phong", "lambert+lafortune(lobes=2)"): "multi-lobe Lafortune landscape",
     ("lambert+blinn-phong", "lambert+lafortune(lobes=3)"): "multi-lobe Lafortune landscape",
 }
 PAIRS = [pytest.param(t, c, marks=pytest.mark.xfail(reason=KNOWN_FAILURES[(t, c)], strict=True))

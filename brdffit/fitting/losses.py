@@ -15,8 +15,12 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable
 
-import jax.numpy as jnp
-import numpy as np
+from .._lazy import module
+
+# NumPy and JAX are loaded when a residual is first computed, not when the registry is read (the CLI's help
+# lists it, and answers within half a second).
+np = module("numpy")
+jnp = module("jax.numpy")
 
 __all__ = ["Loss", "LOSSES", "ROBUST", "get_loss", "loss_table", "residuals", "robust_residuals", "relative_epsilon",
            "loss_epsilon", "residual_scale"]

@@ -7,7 +7,8 @@ parameters. Because the residuals are affine in the amplitudes, those sums give 
 amplitudes exactly: each pass first moves the amplitudes to their bounded optimum for the current outer parameters
 (the projection of `brdffit.fitting.separable`, here from the pass's own sums: cost(a') = cost + 2 gᵀΔ + Δᵀ G Δ,
 Δ = a' − a, with the same exact active-set solve; a second pass at the moved point when Δ was large, so that the
-outer tangents are those at the projected amplitudes, as variable projection wants), then takes a Levenberg-Marquardt step
+outer tangents are those at the projected amplitudes, as variable projection wants), then takes a
+Levenberg-Marquardt step
 
     (JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr        (Marquardt 1963, Eq. 29's scaling)
 
@@ -17,10 +18,10 @@ the projected cost does not increase; λ then shrinks tenfold, else it grows ten
 point has converged when its next step and its amplitude change are below ``rtol·|x| + atol`` (optimistix's
 Cauchy test on the variables) with λ ≤ 1, so that damping cannot fake a small step, or with its last trial
 changing the cost by at most ``rtol·cost + atol`` (the Cauchy test on the cost: at the optimum, rounding rejects
-every trial and λ grows); it ends without converging
-at ``max_steps`` or when λ exceeds 1e12 (no step of any length decreases the cost). A problem without outer
-parameters (Lambert) converges after one projection. Parameters the pipeline holds (on a bound, or where a dead
-lobe left them) simply do not move.
+every trial and λ grows). It stops at ``max_steps``, or when λ exceeds 1e12 (no step of any length lowers the
+cost: a kink, or the optimum itself); the pipeline's Karush-Kuhn-Tucker test (`brdffit.fitting.status`) then
+tells a stall from an optimum. A problem without outer parameters (Lambert) converges after one projection.
+Parameters the pipeline holds (on a bound, or where a dead lobe left them) simply do not move.
 
 Why the engine has its own solver: its only compiled program is the pass, one per model structure and data
 shape (a straight-line program of the residuals and Q tangents), which the polish, the full-data refinement and
@@ -44,7 +45,7 @@ from .separable import solve_box
 __all__ = ["Marquardt", "solve", "MAX_DAMPING"]
 
 # λ beyond which a point is stuck: no step, however short, lowers its cost (a kink, or rounding at the optimum
-# of a loose problem); it ends without converging.
+# of a loose problem); it ends there and the diagnosis decides between stalled and converged.
 MAX_DAMPING = 1e12
 _MIN_DAMPING = 1e-12
 # A projection that moves an amplitude by more than this fraction of its value is followed by a pass at the moved
@@ -211,7 +212,7 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
 
     Returns:
         For each material, a list of S dicts: ``params`` (physical, every parameter), ``cost``, ``steps``,
-        ``max_steps`` (ended without converging), ``nonfinite`` and ``normal`` (the `NormalEquations` at the
+        ``max_steps`` (the step limit ended it), ``nonfinite`` and ``normal`` (the `NormalEquations` at the
         returned point, in the physical free parameters).
     """
     batch = _Batch(problem, pieces)
@@ -267,7 +268,8 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
             values = layout.unflatten(state.x[m, s], free, xp=np)
             params = dict(start, **{k: np.asarray(v) for k, v in values.items()})
             row.append({"params": params, "cost": float(state.sums.cost[m, s]), "steps": int(steps[m, s]),
-                        "max_steps": bool(finite[m, s] and not converged[m, s]), "nonfinite": not finite[m, s],
+                        "max_steps": bool(finite[m, s] and not converged[m, s] and steps[m, s] >= max_steps),
+                        "nonfinite": not finite[m, s],
                         "normal": state.sums.at_point(m, s)})
         out.append(row)
     return out

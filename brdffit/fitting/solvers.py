@@ -4,18 +4,24 @@ optimistix solve of a problem's outer parameters."""
 
 from __future__ import annotations
 
-import functools
+import importlib
 import time
+from typing import TYPE_CHECKING
 
-import jax
-import jax.numpy as jnp
-import lineax as lx
-import optimistix as optx
+from .._lazy import module
 
-from ..models.model import evaluate_pair
-from .marquardt import Marquardt
-from .problem import FitData, Problem, physical_params, residuals_of
-from .separable import project, projected_residuals
+# The table is read by the CLI's help, which must not load JAX or optimistix (issue 15); they are imported when
+# a solver is made or a solve compiled.
+jax = module("jax")
+jnp = module("jax.numpy")
+lx = module("lineax")
+optx = module("optimistix")
+problem_module = module("brdffit.fitting.problem")
+separable = module("brdffit.fitting.separable")
+model_module = module("brdffit.models.model")
+
+if TYPE_CHECKING:
+    from .problem import FitData, Problem
 
 __all__ = ["SOLVERS", "make_solver", "coarse_solver", "solver_name", "working_tolerances", "compiled_solve",
            "outer_params", "no_pins"]
@@ -30,14 +36,22 @@ ATOL_FLOOR_EPS = 1.0
 # name -> (constructor, description). Every constructor takes rtol and atol. The solver moves the outer
 # parameters only (`Problem.outer`); the linear amplitudes are projected out (`brdffit.fitting.separable`).
 SOLVERS = {
-    "lm": (Marquardt, "Levenberg-Marquardt on the separable normal equations, stepped on the host over one "
-                      "compiled pass per model (default; brdffit.fitting.marquardt)"),
-    "optx-lm": (optx.LevenbergMarquardt, "optimistix's Levenberg-Marquardt, the whole solve compiled"),
-    "gauss-newton": (optx.GaussNewton, "Gauss-Newton, undamped; fast near the optimum, fragile far from it"),
-    "dogleg": (optx.Dogleg, "Powell's dogleg trust-region method"),
-    "indirect-lm": (optx.IndirectLevenbergMarquardt, "Levenberg-Marquardt with an iterative damping search"),
-    "bfgs": (optx.BFGS, "BFGS quasi-Newton minimiser of the summed squares"),
+    "lm": ("brdffit.fitting.marquardt:Marquardt",
+           "Levenberg-Marquardt on the separable normal equations, stepped on the host over one compiled pass per "
+           "model (default; brdffit.fitting.marquardt)"),
+    "optx-lm": ("optimistix:LevenbergMarquardt", "optimistix's Levenberg-Marquardt, the whole solve compiled"),
+    "gauss-newton": ("optimistix:GaussNewton", "Gauss-Newton, undamped; fast near the optimum, fragile far from it"),
+    "dogleg": ("optimistix:Dogleg", "Powell's dogleg trust-region method"),
+    "indirect-lm": ("optimistix:IndirectLevenbergMarquardt",
+                    "Levenberg-Marquardt with an iterative damping search"),
+    "bfgs": ("optimistix:BFGS", "BFGS quasi-Newton minimiser of the summed squares"),
 }
+
+
+def constructor(name: str):
+    """The class behind a `SOLVERS` name (imported on first use)."""
+    where, _, attribute = SOLVERS[name][0].partition(":")
+    return getattr(importlib.import_module(where), attribute)
 
 
 def make_solver(solver, rtol: float, atol: float):
@@ -56,12 +70,12 @@ def make_solver(solver, rtol: float, atol: float):
     """
     if isinstance(solver, str):
         try:
-            constructor = SOLVERS[solver][0]
+            make = constructor(solver)
         except KeyError:
             raise ValueError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)} or pass an "
                              "optimistix solver object") from None
-        return constructor(rtol=rtol, atol=atol)
-    if isinstance(solver, (Marquardt, optx.AbstractLeastSquaresSolver, optx.AbstractMinimiser)):
+        return make(rtol=rtol, atol=atol)
+    if isinstance(solver, (constructor("lm"), optx.AbstractLeastSquaresSolver, optx.AbstractMinimiser)):
         return solver
     raise ValueError(f"solver must be a name ({', '.join(SOLVERS)}) or an optimistix least-squares solver or "
                      f"minimiser, got {type(solver).__name__}")
@@ -111,8 +125,8 @@ def working_tolerances(rtol: float, atol: float) -> tuple[float, float]:
 
 def solver_name(solver) -> str:
     """A readable name of a solver object: its table name when it came from the table, else its class name."""
-    for name, (constructor, _) in SOLVERS.items():
-        if type(solver) is constructor:
+    for name in SOLVERS:
+        if type(solver) is constructor(name):
             return name
     return type(solver).__name__
 
@@ -130,7 +144,7 @@ def outer_params(problem: Problem, y: dict, data: FitData, pins: dict | None = N
             another program.
     """
     placeholders = {a: jnp.zeros(problem.channels) for a in problem.linear}
-    params = physical_params(problem, y, dict(placeholders, **data.fixed))
+    params = problem_module.physical_params(problem, y, dict(placeholders, **data.fixed))
     for name, (mask, value) in (pins or {}).items():
         params[name] = jnp.where(mask, value, params[name])
     return params
@@ -147,12 +161,13 @@ def _solve_one(y0: dict, data: FitData, pins: dict, problem: Problem):
 
     def fn(y, args):
         if problem.linear:
-            return projected_residuals(problem, to_params, y, data)
-        return residuals_of(problem, evaluate_pair(problem.model(to_params(y, data)), data.pair), data)
+            return separable.projected_residuals(problem, to_params, y, data)
+        return problem_module.residuals_of(problem, model_module.evaluate_pair(problem.model(to_params(y, data)),
+                                                                               data.pair), data)
 
     sol = optx.least_squares(fn, problem.solver, y0, max_steps=problem.max_steps, throw=False)
-    params, f = project(problem, to_params(sol.value, data), data)
-    r = residuals_of(problem, f, data)
+    params, f = separable.project(problem, to_params(sol.value, data), data)
+    r = problem_module.residuals_of(problem, f, data)
     cost = jnp.sum(r * r)
     return {
         "params": params,

@@ -1,0 +1,102 @@
+"""Latency of what a user runs once per material, in fresh processes (issue 15).
+
+Each figure is the wall time of a new ``brdffit`` process, as a user starts it: the light commands (``--help``,
+``models``, ``info``), a single-model fit of a 20,000-sample CSV with an empty and with a warm persistent
+compilation cache (and a 17,000-sample file after the 20,000-sample one: another size), the default fit (model
+selection over the standard candidates) with an empty and a warm cache, and the README's Quick start job. The
+host is shared, so each light command is run ``--repeats`` times and the median reported, and ``python -c
+"import jax"`` is timed in the same run as the machine's baseline.
+
+Usage: ``python scripts/bench_latency.py [--repeats 3] [--skip-selection]``; prints a Markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+BRDFFIT = [sys.executable, "-m", "brdffit.cli"]
+
+# (what, target seconds or None)
+TARGETS = {
+    "brdffit --help": 0.5, "brdffit models": 0.5, "brdffit info FILE": 0.5,
+    "single fit, 20,000 samples, empty cache": 5.0, "single fit, 20,000 samples, warm cache": None,
+    "single fit, 17,000 samples, warm cache (another size)": 3.0,
+    "default fit (selection), 20,000 samples, empty cache": 20.0,
+    "default fit (selection), 20,000 samples, warm cache": 8.0,
+    "Quick start job (plastic.h5), empty cache": 30.0,
+}
+
+
+def _run(command: list[str], env: dict) -> float:
+    start = time.perf_counter()
+    done = subprocess.run(command, env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    seconds = time.perf_counter() - start
+    if done.returncode not in (0, 1):  # 1: a fit that did not converge still timed the path
+        raise SystemExit(f"{' '.join(command)} failed ({done.returncode}):\n{done.stderr[-2000:]}")
+    return seconds
+
+
+def _data(folder: Path) -> tuple[Path, Path]:
+    """The benchmark's CSV files: Lambert + Cook-Torrance, uniform directions, 1% noise."""
+    import brdffit
+
+    paths = []
+    for n in (20_000, 17_000):
+        path = folder / f"lambert-ct-{n}.csv"
+        m = brdffit.synth.generate("lambert+cook-torrance", n=n, noise="relative:0.01", seed=5, max_theta=1.4)
+        brdffit.io.save(m, path)
+        paths.append(path)
+    return paths[0], paths[1]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3, help="runs of each light command (median reported)")
+    parser.add_argument("--skip-selection", action="store_true", help="leave out the two selection runs")
+    args = parser.parse_args(argv)
+    if args.repeats < 1:
+        parser.error("--repeats must be at least 1")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        big, other = _data(tmp)
+        env = dict(os.environ, BRDFFIT_CACHE_DIR=str(tmp / "cache"))
+        rows = {}
+        rows["python -c 'import jax' (baseline)"] = statistics.median(
+            _run([sys.executable, "-c", "import jax"], env) for _ in range(args.repeats))
+        for what, command in [("brdffit --help", ["--help"]), ("brdffit models", ["models"]),
+                              ("brdffit info FILE", ["info", str(big)])]:
+            rows[what] = statistics.median(_run(BRDFFIT + command, env) for _ in range(args.repeats))
+        single = ["fit", "--model", "lambert+cook-torrance", "--no-report", "--quiet", "--out"]
+        rows["single fit, 20,000 samples, empty cache"] = _run(BRDFFIT + ["fit", str(big)] + single[2:]
+                                                                + [str(tmp / "o1")], env)
+        rows["single fit, 20,000 samples, warm cache"] = _run(BRDFFIT + ["fit", str(big)] + single[2:]
+                                                               + [str(tmp / "o2")], env)
+        rows["single fit, 17,000 samples, warm cache (another size)"] = _run(
+            BRDFFIT + ["fit", str(other)] + single[2:] + [str(tmp / "o3")], env)
+        if not args.skip_selection:
+            cold = dict(env, BRDFFIT_CACHE_DIR=str(tmp / "cache-selection"))
+            selection = BRDFFIT + ["fit", str(big), "--no-report", "--quiet", "--out"]
+            rows["default fit (selection), 20,000 samples, empty cache"] = _run(selection + [str(tmp / "s1")], cold)
+            rows["default fit (selection), 20,000 samples, warm cache"] = _run(selection + [str(tmp / "s2")], cold)
+        quick = dict(env, BRDFFIT_CACHE_DIR=str(tmp / "cache-quick"))
+        rows["Quick start job (plastic.h5), empty cache"] = _run(
+            BRDFFIT + ["fit", "data/synthetic/plastic.h5", "--out", str(tmp / "quick")], quick)
+    print("| what | seconds | target | met |")
+    print("|---|---|---|---|")
+    for what, seconds in rows.items():
+        target = TARGETS.get(what)
+        met = "" if target is None else ("yes" if seconds <= target else "**no**")
+        print(f"| {what} | {seconds:.2f} | {'' if target is None else f'≤ {target:g}'} | {met} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
