@@ -74,13 +74,13 @@ def main(argv=None) -> int:
         for what, command in [("brdffit --help", ["--help"]), ("brdffit models", ["models"]),
                               ("brdffit info FILE", ["info", str(big)])]:
             rows[what] = statistics.median(_run(BRDFFIT + command, env) for _ in range(args.repeats))
-        single = ["fit", "--model", "lambert+cook-torrance", "--no-report", "--quiet", "--out"]
-        rows["single fit, 20,000 samples, empty cache"] = _run(BRDFFIT + ["fit", str(big)] + single[2:]
-                                                                + [str(tmp / "o1")], env)
-        rows["single fit, 20,000 samples, warm cache"] = _run(BRDFFIT + ["fit", str(big)] + single[2:]
-                                                               + [str(tmp / "o2")], env)
-        rows["single fit, 17,000 samples, warm cache (another size)"] = _run(
-            BRDFFIT + ["fit", str(other)] + single[2:] + [str(tmp / "o3")], env)
+        def single(path, out):
+            return BRDFFIT + ["fit", str(path), "--model", "lambert+cook-torrance", "--no-report", "--quiet",
+                              "--out", str(tmp / out)]
+
+        rows["single fit, 20,000 samples, empty cache"] = _run(single(big, "o1"), env)
+        rows["single fit, 20,000 samples, warm cache"] = _run(single(big, "o2"), env)
+        rows["single fit, 17,000 samples, warm cache (another size)"] = _run(single(other, "o3"), env)
         if not args.skip_selection:
             cold = dict(env, BRDFFIT_CACHE_DIR=str(tmp / "cache-selection"))
             selection = BRDFFIT + ["fit", str(big), "--no-report", "--quiet", "--out"]
