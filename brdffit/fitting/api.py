@@ -212,11 +212,9 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
                                                                for material in starts]))
                                       for k in problem.layout.names if k not in problem.free})
     if isinstance(problem.solver, marquardt.Marquardt):
-        t0, compiled = time.perf_counter(), compile_seconds()
-        out = marquardt.solve(problem, starts, [solve_data], rtol=problem.solver.rtol, atol=problem.solver.atol,
-                              max_steps=problem.max_steps, damping=problem.solver.damping, held=held)
-        compile_time = compile_seconds() - compiled
-        return out, compile_time, time.perf_counter() - t0 - compile_time
+        return _timed(lambda: marquardt.solve(problem, starts, [solve_data], rtol=problem.solver.rtol,
+                                              atol=problem.solver.atol, max_steps=problem.max_steps,
+                                              damping=problem.solver.damping, held=held))
     y0 = {name: jnp.asarray(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
                                                 for s in material]) for material in starts]))
           for name in problem.outer}
@@ -236,6 +234,14 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
                           "steps": int(out["steps"][m, i]), "max_steps": bool(out["max_steps"][m, i]),
                           "nonfinite": bool(out["nonfinite"][m, i])} for i in range(len(material))])
     return outcomes, compile_time, run_time
+
+
+def _timed(call):
+    """``call()``, the seconds its passes spent compiling (`compile_seconds`) and the rest of its time."""
+    start, compiled = time.perf_counter(), compile_seconds()
+    out = call()
+    compile_time = compile_seconds() - compiled
+    return out, compile_time, time.perf_counter() - start - compile_time
 
 
 def _normal(problem: Problem, outcome: dict, data: FitData):
@@ -517,15 +523,14 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         params = canonical(problem, best["params"])
         if two_stage:
             bar.update(3, f"refining on all {measurements.n} samples")
-            t0 = time.perf_counter()
             data = full[m]._replace(fixed={k: jnp.asarray(v) for k, v in params.items() if k not in problem.free})
-            compiled = compile_seconds()
             # The full-data refinement: the default solver's steps from next to the optimum (small initial λ),
             # whatever solver polished.
-            refined = marquardt.solve(problem, [[params]], chunks(data), rtol=rtol, atol=atol,
-                                      max_steps=REFINE_STEPS, damping=REFINE_DAMPING)[0][0]
-            compile_time += compile_seconds() - compiled
-            run_time += time.perf_counter() - t0 - (compile_seconds() - compiled)
+            refined, c_time, r_time = _timed(lambda: marquardt.solve(
+                problem, [[params]], chunks(data), rtol=rtol, atol=atol, max_steps=REFINE_STEPS,
+                damping=REFINE_DAMPING)[0][0])
+            compile_time += c_time
+            run_time += r_time
             best = dict(best, params=refined["params"], cost=refined["cost"], steps=best["steps"] + refined["steps"],
                         max_steps=refined["max_steps"], nonfinite=refined["nonfinite"])
             normal = refined["normal"]

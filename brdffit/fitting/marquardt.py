@@ -102,6 +102,8 @@ class _Batch:
         # (C, K): the flat index of amplitude k in channel c.
         self.amplitudes = np.array([[self.offsets[n].start + c for n in linear] for c in range(problem.channels)],
                                    dtype=int).reshape(problem.channels, len(linear))
+        self.is_amplitude = np.zeros(self.size, bool)
+        self.is_amplitude[self.amplitudes.ravel()] = True
 
     def trees(self, x) -> dict:
         batch = x.shape[:2]
@@ -177,9 +179,7 @@ def _step(batch: _Batch, state: _State, damping, held):
     moving = batch.is_outer & ~held
     if batch.amplitudes.size:
         on_box = (x > batch.lower + 1e-12) & (x < batch.upper - 1e-12)
-        amplitude = np.zeros(batch.size, bool)
-        amplitude[batch.amplitudes.ravel()] = True
-        moving = moving | (amplitude & on_box)
+        moving = moving | (batch.is_amplitude & on_box)
     with np.errstate(invalid="ignore", over="ignore"):
         jtj = state.sums.jtj * slope[..., :, None] * slope[..., None, :]
         jtr = state.sums.jtr * slope

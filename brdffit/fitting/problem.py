@@ -36,7 +36,7 @@ class Problem:
         free: names of the fitted parameters, in model order; all others are held at values in `FitData.fixed`.
         loss: residual definition (a name in `brdffit.fitting.losses.LOSSES`).
         robust: None, ``"huber"`` or ``"cauchy"``.
-        solver: the optimistix solver object.
+        solver: the solver object (`brdffit.fitting.solvers.make_solver`).
         max_steps: the solver's step limit.
         separable: True to solve the free linear amplitudes exactly for each value of the other parameters
             (`brdffit.fitting.separable`); the solver then sees only `outer`.
