@@ -144,11 +144,11 @@ def _progress(args) -> bool:
 
 
 def _cmd_fit(args) -> int:
+    path = Path(args.file)
+    measurements = _load(path)  # first: a file that cannot be read is reported before JAX is loaded
     from . import fit, io, select
 
     enable_compilation_cache()
-    path = Path(args.file)
-    measurements = _load(path)
     selection = None
     if args.model == "auto":
         from .select import DEFAULT_CANDIDATES
@@ -366,11 +366,11 @@ def _add_posterior_options(p):
 
 
 def _cmd_select(args) -> int:
+    measurements = _load(args.file)  # first: a file that cannot be read is reported before JAX is loaded
     from . import select
     from .select import DEFAULT_CANDIDATES
 
     enable_compilation_cache()
-    measurements = _load(args.file)
     candidates = [c.strip() for c in args.candidates.split(";")] if args.candidates else list(DEFAULT_CANDIDATES)
     selection = select(measurements, candidates, criterion=args.criterion, folds=args.folds,
                        progress=_progress(args), **_fit_options(args))

@@ -66,14 +66,20 @@ def fit_metrics(model: Model, measurements, pair: LocalPair | None = None) -> di
     Arguments:
         model: the model to score.
         measurements: `brdffit.Measurements` with the same number of channels.
-        pair: the data's precomputed `LocalPair`, if at hand.
+        pair: the data's precomputed `LocalPair`, if at hand; it may hold more rows than the measurements (a fit's
+            padded data, `brdffit.fitting.problem.bucket`), which count as missing.
 
     Returns:
         name -> NumPy array ``(C,)``.
     """
     if pair is None:
         pair = LocalPair.from_dirs(jnp.asarray(measurements.wi()), jnp.asarray(measurements.wo()))
+    extra = pair.wi.shape[0] - measurements.n
     weights = np.ones(measurements.n) if measurements.weights is None else measurements.weights
-    out = _metrics(model, pair, jnp.asarray(measurements.values, dtype=float),
-                   jnp.cos(jnp.asarray(measurements.theta_i, dtype=float)), jnp.asarray(weights, dtype=float))
+    values, cos_i = np.asarray(measurements.values, dtype=float), np.cos(np.asarray(measurements.theta_i, float))
+    if extra:
+        values = np.concatenate([values, np.full((extra, values.shape[1]), np.nan)])
+        cos_i = np.concatenate([cos_i, np.ones(extra)])
+        weights = np.concatenate([np.asarray(weights, dtype=float), np.ones(extra)])
+    out = _metrics(model, pair, jnp.asarray(values), jnp.asarray(cos_i), jnp.asarray(weights, dtype=float))
     return {k: np.asarray(out[k], dtype=float) for k in METRICS}

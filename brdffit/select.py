@@ -23,7 +23,7 @@ from .geometry import spherical_to_vector
 from .fitting.losses import loss_epsilon
 from .models.model import evaluate_dirs
 from .fitting.progressive import new_lobe_candidates
-from .fitting.problem import Problem, make_fit_data, residual_fn
+from .fitting.problem import Problem, make_fit_data, residuals_at
 from .progress import Progress
 
 __all__ = ["select", "Selection", "DEFAULT_CANDIDATES", "CRITERIA", "DEFAULT_MARGIN"]
@@ -122,8 +122,8 @@ def _loss_rmse(result: FitResult, measurements, rows: np.ndarray) -> float:
     held = measurements.take(rows)
     problem = Problem(lobes=model.lobes, channels=model.channels, free=(), loss=result.loss, robust=None,
                       solver=None, max_steps=0)
-    data = make_fit_data(held, {}, loss_epsilon(result.loss, measurements.values))
-    r = np.asarray(residual_fn(problem, dict(model.params), data))
+    data = make_fit_data(held, {}, loss_epsilon(result.loss, measurements.values), pad=True)
+    r = np.asarray(residuals_at(problem, dict(model.params), data))
     mask = np.asarray(data.mask)
     return float(np.sqrt(np.sum(r[mask] ** 2) / max(mask.sum(), 1)))
 
@@ -236,8 +236,11 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
         result, init = _fit_candidate(spec, measurements, done, options)
         done[spec] = result
         errors = []
+        # The held-out fits start from the full-data optimum (same shapes, so the same compiled programs): the
+        # training optimum lies within the held-out rows' influence of it, and the global search has been done.
+        start = result.model if result.model is not None else init
         for held in fold_rows:
-            train = fit(_masked(measurements, held), spec, init=init, **options)
+            train = fit(_masked(measurements, held), spec, init=start, **options)
             errors.append(_loss_rmse(train, measurements, held))
         rows.append({
             "spec": spec,

@@ -92,3 +92,27 @@ def test_misshaped_parameter_is_rejected():
     bad = {"rho_d": jnp.ones((1, 1, 2))}
     with pytest.raises(ValueError, match="rho_d"):
         accumulate(problem, bad, chunks(data))
+
+
+def test_padding_to_a_bucket_changes_no_sum():
+    # make_fit_data(pad=True) appends masked samples up to bucket(n) (shared compiled programs across file sizes):
+    # the sums are those of the unpadded data, and so are the metrics computed with the padded pair.
+    from brdffit.fitting.problem import bucket
+    from brdffit.fitting.uncertainty import normal_equations_at
+    from brdffit.metrics import fit_metrics
+
+    assert [bucket(n) for n in (1, 512, 513, 3072, 3073, 20_000, 65_536, 65_537)] == \
+        [512, 512, 768, 3072, 4096, 24_576, 65_536, 131_072]
+    truth = models.get("lambert+cook-torrance", channels=3)
+    data = synth.generate(truth, pattern="uniform", n=700, noise="relative:0.05", seed=3)
+    problem, model, fixed, _ = api._prepare(data, truth, loss="cosine", solver="lm", fixed=None, free=None,
+                                            robust=None, max_steps=10, rtol=1e-8, atol=1e-12)
+    plain = make_fit_data(data, fixed, np.full(3, 1e-3))
+    padded = make_fit_data(data, fixed, np.full(3, 1e-3), pad=True)
+    assert padded.values.shape[0] == 768 and not np.asarray(padded.mask)[700:].any()
+    params = dict(model.params)
+    for got, want in zip(normal_equations_at(problem, params, padded), normal_equations_at(problem, params, plain)):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-300)
+    with_pad, without = fit_metrics(model, data, pair=padded.pair), fit_metrics(model, data)
+    for name in without:
+        np.testing.assert_allclose(with_pad[name], without[name], rtol=1e-12)

@@ -22,7 +22,6 @@ channels are a batch of single-channel materials):
 from __future__ import annotations
 
 import dataclasses
-import functools
 import time
 
 import jax
@@ -37,9 +36,9 @@ from ..progress import Progress
 from .losses import ROBUST, get_loss, loss_epsilon
 from . import marquardt
 from .normal_equations import chunks, compile_seconds
-from .problem import FitData, Problem, make_fit_data, residual_fn, stack_data
+from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data
 from .result import FitResult
-from .search import SEARCH_SAMPLES, canonical, interior, quasi_random_starts, score, search
+from .search import POLISH_STARTS, SEARCH_SAMPLES, canonical, interior, quasi_random_starts, score, search
 from .solvers import coarse_solver, compiled_solve, make_solver, no_pins, solver_name, working_tolerances
 from .status import diagnose, information_criteria, warnings_of
 from .uncertainty import Uncertainty, normal_equations_at
@@ -47,9 +46,9 @@ from .uncertainty import Uncertainty, normal_equations_at
 __all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
 
 CHANNEL_MODES = ("shared-shape", "independent")
-# Data with more (sample, channel) values than this is first solved on a subsample of COARSE_SAMPLES samples and
-# then refined on all of it (`brdffit.fitting.marquardt`).
-COARSE_RESIDUALS = 150_000
+# Data with more samples than this is first solved on a seeded subsample of that many and then refined on all of
+# it (`brdffit.fitting.marquardt`): every start's steps cost passes over the subsample only, and the refinement
+# takes a few passes over all of it from next to the optimum.
 COARSE_SAMPLES = 10_000
 COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
 # An outer scalar closer than this fraction of its range to a bound, at the end of a polish that did not
@@ -58,9 +57,9 @@ HOLD_FRACTION = 1e-3
 # A lobe is pruned only if zeroing it raises the cost by at most this fraction (and by AIC's price,
 # `_dead_amplitudes`): the tolerance within which issue 14 asks fits to reach the optimum.
 PRUNE_COST_FRACTION = 1e-3
-# The full-data refinement (step 5): its step limit and initial damping (it starts within the subsample's
-# statistical error of the optimum; three passes on a MERL table).
-REFINE_STEPS, REFINE_DAMPING = 20, 1e-6
+# The full-data refinement (step 5) starts within the subsample's statistical error of the optimum (three passes
+# on a MERL table): a small initial damping. Its step limit is the fit's.
+REFINE_DAMPING = 1e-6
 # Rounds of holding and releasing bounds (an active-set iteration) before the pipeline reports what it has.
 HOLD_ROUNDS = 3
 
@@ -131,7 +130,7 @@ def _use_coarse(coarse, measurements) -> bool:
     if coarse not in ("auto", True, False):
         raise ValueError(f"coarse must be 'auto', True or False, got {coarse!r}")
     if coarse == "auto":
-        return measurements.n * measurements.n_channels > COARSE_RESIDUALS and measurements.n > COARSE_SAMPLES
+        return measurements.n > COARSE_SAMPLES
     return bool(coarse) and measurements.n > COARSE_SAMPLES
 
 
@@ -177,7 +176,7 @@ def _starts(problem: Problem, model: Model, fixed_values: dict, init, multistart
 def _robust_scale(problem: Problem, start: dict, data: FitData) -> float:
     """1.4826 times the median absolute residual at the start (the robust loss's default scale)."""
     plain = dataclasses.replace(problem, robust=None)
-    r = np.asarray(residual_fn(plain, {k: jnp.asarray(v) for k, v in start.items()}, data))
+    r = np.asarray(residuals_at(plain, {k: jnp.asarray(v) for k, v in start.items()}, data))
     mask = np.asarray(data.mask)
     return float(max(1.4826 * np.median(np.abs(r[mask])), 1e-12)) if mask.any() else 1.0
 
@@ -212,9 +211,15 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
                                                                for material in starts]))
                                       for k in problem.layout.names if k not in problem.free})
     if isinstance(problem.solver, marquardt.Marquardt):
-        return _timed(lambda: marquardt.solve(problem, starts, [solve_data], rtol=problem.solver.rtol,
-                                              atol=problem.solver.atol, max_steps=problem.max_steps,
-                                              damping=problem.solver.damping, held=held))
+        # Starts padded to a multiple of POLISH_STARTS (repeating the last): one compiled pass serves a search's
+        # starts, a given start and the hold rounds alike.
+        count = len(starts[0])
+        width = -(-count // POLISH_STARTS) * POLISH_STARTS
+        padded = [material + [material[-1]] * (width - count) for material in starts]
+        out, compile_time, run_time = _timed(lambda: marquardt.solve(
+            problem, padded, [solve_data], rtol=problem.solver.rtol, atol=problem.solver.atol,
+            max_steps=problem.max_steps, damping=problem.solver.damping, held=held))
+        return [material[:count] for material in out], compile_time, run_time
     y0 = {name: jnp.asarray(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
                                                 for s in material]) for material in starts]))
           for name in problem.outer}
@@ -333,17 +338,13 @@ def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData)
             partners = layout.partners(j, slot.local)
             size = layout[slot.name].size + layout.size([n for n in partners if n in problem.outer])
             trial = dict(params, **{slot.name: np.zeros(layout[slot.name].shape)})
-            increase = _cost_fn(problem)({k_: jnp.asarray(v) for k_, v in trial.items()}, data) - cost
-            if float(increase) <= min(2.0 * size * variance, PRUNE_COST_FRACTION * cost):
+            r = residuals_at(problem, {k_: jnp.asarray(v) for k_, v in trial.items()}, data)
+            increase = float(jnp.sum(r * r)) - cost
+            if increase <= min(2.0 * size * variance, PRUNE_COST_FRACTION * cost):
                 increases[slot.name] = float(increase)
     # One lobe at a time, the one that matters least: two copies of a lobe each look dispensable while the other
     # is there.
     return [min(increases, key=increases.get)] if increases else []
-
-
-@functools.lru_cache(maxsize=64)
-def _cost_fn(problem: Problem):
-    return jax.jit(lambda params, data: jnp.sum(residual_fn(problem, params, data) ** 2))
 
 
 def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, data: FitData, starts: int):
@@ -439,7 +440,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
 
     bar.update(0, "search")
     t0 = time.perf_counter()
-    search_data = stack_data([make_fit_data(_subsample(m, SEARCH_SAMPLES, seed), fixed_values, e, 1.0)
+    search_data = stack_data([make_fit_data(_subsample(m, SEARCH_SAMPLES, seed), fixed_values, e, 1.0, pad=True)
                               for m, e in zip(items, eps)])
     starts = _starts(problem, base_model, fixed_values, init, multistart, seed, search_data)
     if problem.robust is not None and robust_scale is None:
@@ -449,9 +450,9 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         scales = [robust_scale if robust_scale is not None else 1.0] * len(items)
     init_time = time.perf_counter() - t0
 
-    full = [make_fit_data(m, fixed_values, e, s) for m, e, s in zip(items, eps, scales)]
+    full = [make_fit_data(m, fixed_values, e, s, pad=True) for m, e, s in zip(items, eps, scales)]
     if two_stage:
-        solve_items = [make_fit_data(m.subsample(COARSE_SAMPLES, seed=seed), fixed_values, e, s)
+        solve_items = [make_fit_data(m.subsample(COARSE_SAMPLES, seed=seed), fixed_values, e, s, pad=True)
                        for m, e, s in zip(items, eps, scales)]
         loose = coarse_solver(solver, max(COARSE_RTOL, rtol), max(COARSE_ATOL, atol)) \
             if isinstance(solver, str) else problem.solver
@@ -527,7 +528,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             # The full-data refinement: the default solver's steps from next to the optimum (small initial λ),
             # whatever solver polished.
             refined, c_time, r_time = _timed(lambda: marquardt.solve(
-                problem, [[params]], chunks(data), rtol=rtol, atol=atol, max_steps=REFINE_STEPS,
+                problem, [[params]], chunks(data), rtol=rtol, atol=atol, max_steps=problem.max_steps,
                 damping=REFINE_DAMPING)[0][0])
             compile_time += c_time
             run_time += r_time
@@ -536,7 +537,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             normal = refined["normal"]
             params = canonical(problem, refined["params"])
         if not problem.free:
-            r = residual_fn(problem, {k: jnp.asarray(v) for k, v in params.items()}, full[m])
+            r = residuals_at(problem, {k: jnp.asarray(v) for k, v in params.items()}, full[m])
             best = dict(best, cost=float(jnp.sum(r * r)))
         elif any(not np.array_equal(np.asarray(params[k]), np.asarray(best["params"][k])) for k in problem.free):
             normal = normal_equations_at(problem, params, full[m])  # the canonical order moved the columns
@@ -577,8 +578,8 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
         rtol, atol: the solver's convergence tolerances (optimistix's Cauchy termination), raised to what the
             working precision can meet (`brdffit.fitting.solvers.working_tolerances`; changes nothing in float64).
         seed: seed of the subsamples and of the quasi-random starts.
-        coarse: ``"auto"`` solves data with more than `COARSE_RESIDUALS` values on a seeded subsample of
-            `COARSE_SAMPLES` samples first and then refines on all of it (`brdffit.fitting.marquardt`); True forces
+        coarse: ``"auto"`` solves data with more than `COARSE_SAMPLES` samples on a seeded subsample of that
+            many first and then refines on all of it (`brdffit.fitting.marquardt`); True forces
             and False disables this. The answer is the full-data optimum either way; only the time differs.
         strict: raise `FitError` instead of returning a non-converged result.
         progress: report the stages (search, polish, hold, refinement, uncertainty) on a progress line on stderr

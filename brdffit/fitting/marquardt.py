@@ -6,8 +6,9 @@ Each step of every point (materials × starts) is one compiled pass over the dat
 parameters. Because the residuals are affine in the amplitudes, those sums give the cost as a function of the
 amplitudes exactly: each pass first moves the amplitudes to their bounded optimum for the current outer parameters
 (the projection of `brdffit.fitting.separable`, here from the pass's own sums: cost(a') = cost + 2 gᵀΔ + Δᵀ G Δ,
-Δ = a' − a, with the same exact active-set solve; a second pass at the moved point when Δ was large, so that the
-outer tangents are those at the projected amplitudes, as variable projection wants), then takes a
+Δ = a' − a, with the same exact active-set solve; a second pass at the moved point when Δ jumped off a bound or
+beyond the amplitude's own size, so that the outer tangents and the cost are those of the projected point), then
+takes a
 Levenberg-Marquardt step
 
     (JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr        (Marquardt 1963, Eq. 29's scaling)
@@ -48,9 +49,12 @@ __all__ = ["Marquardt", "solve", "MAX_DAMPING"]
 # of a loose problem); it ends there and the diagnosis decides between stalled and converged.
 MAX_DAMPING = 1e12
 _MIN_DAMPING = 1e-12
-# A projection that moves an amplitude by more than this fraction of its value is followed by a pass at the moved
-# point (`_Batch.evaluate`). Near the optimum the joint step predicts the amplitudes far better: one pass a step.
+# A projection that jumps an amplitude (off a bound, or by more than its value) by more than this fraction of the
+# new value is followed by a pass at the moved point (`_Batch.evaluate`).
 _REPASS = 1e-3
+# A projection whose predicted cost differs from the pass's own by more than this fraction is evaluated by a
+# second pass: the prediction is exact in exact arithmetic, but not for a lobe whose Gram matrix is near 0.
+_TRUSTED_CHANGE = 0.1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,8 +76,9 @@ class _State:
     """The batch's current points: physical values ``x (M, S, P)`` with their amplitudes projected, and the
     pass's sums moved with them (see the module doc)."""
 
-    def __init__(self, x, sums: NormalEquations, delta):
+    def __init__(self, x, sums: NormalEquations, delta, evaluated=None):
         self.x, self.sums, self.delta = x, sums, delta
+        self.evaluated = sums.cost if evaluated is None else evaluated  # the pass's own cost, before projecting
 
     def where(self, take, other: "_State") -> "_State":
         """This state where ``take (M, S)`` is True, ``other`` elsewhere."""
@@ -81,7 +86,7 @@ class _State:
             return np.where(np.reshape(take, take.shape + (1,) * (np.ndim(a) - take.ndim)), a, b)
 
         return _State(pick(self.x, other.x), NormalEquations(*(pick(a, b) for a, b in zip(self.sums, other.sums))),
-                      pick(self.delta, other.delta))
+                      pick(self.delta, other.delta), pick(self.evaluated, other.evaluated))
 
 
 class _Batch:
@@ -110,13 +115,21 @@ class _Batch:
         return {n: np.reshape(x[..., self.offsets[n]], batch + self.layout[n].shape) for n in self.problem.free}
 
     def evaluate(self, x) -> _State:
-        """A pass at ``x`` with the amplitudes then moved to their optimum; when that moved an amplitude by more
-        than `_REPASS` of its value, a second pass at the moved point. The sums predict the cost at the moved
-        amplitudes exactly, but the tangents of the outer parameters are those at ``x``: a lobe whose trial
-        amplitudes were clipped to 0 has none at all, and its shape could never move again."""
+        """A pass at ``x`` with the amplitudes then moved to their optimum; when that moved an amplitude off a
+        bound or by more than its own value (and by more than `_REPASS` of the result), a second pass at the
+        moved point. The sums predict the cost at the moved amplitudes exactly in exact arithmetic, but the
+        tangents of the outer parameters are those at ``x``: a lobe whose trial amplitudes were clipped to 0 has
+        none at all, and its shape could never move again. And a lobe that sees almost no sample has a Gram
+        matrix near 0, whose solve can jump to 1e118 with a predicted cost that rounding made meaningless: the
+        second pass evaluates it, as it does whenever the projection predicts a cost change beyond `_TRUSTED_CHANGE`.
+        Smaller moves keep the predicted cost and the slightly older tangents, which
+        the damped step absorbs (one pass a step)."""
         state = self._project(x)
-        moved = np.abs(state.delta) > _REPASS * np.abs(state.x) + 1e-300
-        return self._project(state.x) if moved.any() else state
+        jump = (x <= self.lower) | (x >= self.upper) | (np.abs(state.delta) > np.abs(x))
+        moved = jump & (np.abs(state.delta) > _REPASS * np.abs(state.x) + 1e-300)
+        with np.errstate(invalid="ignore"):
+            predicted = np.abs(state.sums.cost - state.evaluated) > _TRUSTED_CHANGE * np.abs(state.evaluated)
+        return self._project(state.x) if moved.any() or predicted.any() else state
 
     def _project(self, x) -> _State:
         sums = accumulate(self.problem, self.trees(x), self.pieces)
@@ -144,7 +157,7 @@ class _Batch:
             moved = NormalEquations(jtj=jtj, jtr=jtr + np.einsum("...pq,...q->...p", jtj, delta),
                                     cost=np.where(np.isfinite(sums.cost), np.sum(channel_cost, axis=-1), sums.cost),
                                     meat=sums.meat, channel_cost=channel_cost)
-        return _State(x, moved, delta)
+        return _State(x, moved, delta, sums.cost)
 
     def unconstrained(self, x):
         """The outer scalars' unconstrained variables ``(M, S, P)`` (amplitude entries: the physical values)."""

@@ -26,11 +26,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .problem import FitData, Problem, chunk_data, physical_params, residual_fn, stack_data
+from .problem import BUCKET_CHUNK, FitData, Problem, chunk_data, physical_params, residual_fn, stack_data
 
 __all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "CHUNK_SAMPLES"]
 
-CHUNK_SAMPLES = 65536
+CHUNK_SAMPLES = BUCKET_CHUNK  # padded data then splits into whole chunks
 
 
 class NormalEquations(NamedTuple):

@@ -20,7 +20,8 @@ from ..models.model import Model, evaluate_pair
 from ..params import ParamTable
 from .losses import get_loss, robust_residuals
 
-__all__ = ["Problem", "FitData", "make_fit_data", "physical_params", "residual_fn", "stack_data", "chunk_data",
+__all__ = ["Problem", "FitData", "make_fit_data", "bucket", "BUCKET_CHUNK", "physical_params", "residual_fn", "residuals_at", "stack_data",
+           "chunk_data",
            "flatten_free"]
 
 _PER_SAMPLE = ("pair", "values", "mask", "cos_i", "sqrt_weight", "sigma")
@@ -124,7 +125,21 @@ class FitData(NamedTuple):
     fixed: dict
 
 
-def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0) -> FitData:
+# Sample counts are padded to one of a few sizes (`bucket`) so that files of different sizes share compiled
+# programs, in one process and through JAX's persistent cache: 2^k and 3·2^(k−1) samples from 512 up to one chunk
+# of the passes (at most half as many again, a quarter on average), whole chunks beyond.
+BUCKET_CHUNK = 65536
+_BUCKETS = sorted(size for k in range(9, 17) for size in (2 ** k, 3 * 2 ** (k - 1)) if 512 <= size <= BUCKET_CHUNK)
+
+
+def bucket(n: int) -> int:
+    """The padded sample count of ``n`` samples (see `BUCKET_CHUNK`)."""
+    if n > BUCKET_CHUNK:
+        return -(-n // BUCKET_CHUNK) * BUCKET_CHUNK
+    return next(size for size in _BUCKETS if size >= n)
+
+
+def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad: bool = False) -> FitData:
     """Build `FitData` from `brdffit.Measurements`.
 
     Arguments:
@@ -132,14 +147,24 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0) -> 
         fixed: name -> value of the parameters held fixed.
         eps: ``(C,)`` the relative loss's ε.
         robust_scale: scale of the robust loss.
+        pad: append missing samples (at normal incidence and exitance, masked) up to `bucket` of the count.
 
     Returns:
         The `FitData`.
     """
-    host = lambda a: None if a is None else np.asarray(a, dtype=float)  # noqa: E731
+    n = measurements.n
+    extra = bucket(n) - n if pad else 0
+
+    def host(a, fill=0.0):
+        if a is None:
+            return None
+        a = np.asarray(a, dtype=float)
+        return np.concatenate([a, np.full((extra,) + a.shape[1:], fill)]) if extra else a
+
     pair, values, mask, cos_i, sqrt_weight, sigma = _sample_arrays(
-        host(measurements.values), *(host(getattr(measurements, k)) for k in ("theta_i", "phi_i", "theta_o", "phi_o")),
-        host(measurements.weights), host(measurements.sigma))
+        host(measurements.values, np.nan), *(host(getattr(measurements, k))
+                                             for k in ("theta_i", "phi_i", "theta_o", "phi_o")),
+        host(measurements.weights, 1.0), host(measurements.sigma, 1.0))
     as_array = lambda a: jnp.asarray(a, dtype=float)  # noqa: E731
     return FitData(
         pair=pair, values=values, mask=mask, cos_i=cos_i, sqrt_weight=sqrt_weight, sigma=sigma, eps=as_array(eps),
@@ -229,6 +254,11 @@ def physical_params(problem: Problem, y: dict, fixed: dict) -> dict:
 def residual_fn(problem: Problem, params: dict, data: FitData):
     """Residuals ``(N, C)`` of the model with physical ``params`` against ``data``; missing samples give 0."""
     return residuals_of(problem, evaluate_pair(problem.model(params), data.pair), data)
+
+
+# `residual_fn` compiled (the problem is static): for evaluations outside a solve, which would otherwise run
+# operation by operation, each compiled on its own for every new model (seconds per selection candidate).
+residuals_at = jax.jit(residual_fn, static_argnums=0)
 
 
 def residuals_of(problem: Problem, f_model, data: FitData):

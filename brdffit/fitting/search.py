@@ -26,7 +26,6 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.stats import qmc
 
 from ..params import bound_margin
 from .problem import FitData, Problem, residuals_of
@@ -101,6 +100,8 @@ def _grid_units(d: int, seed: int) -> np.ndarray:
     if per_axis >= 5:
         axes = [(np.arange(per_axis) + 0.5) / per_axis for _ in range(d)]
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
+    from scipy.stats import qmc  # here, not at import: scipy.stats takes ~1 s to import
+
     return qmc.Sobol(d, scramble=True, seed=seed).random(MAX_CANDIDATES)
 
 
@@ -143,6 +144,8 @@ def quasi_random_starts(problem: Problem, count: int, seed: int) -> list[dict]:
     if not specs or count <= 0:
         return []
     # A power-of-two draw keeps Sobol's balance (and scipy quiet); the first `count` points are used.
+    from scipy.stats import qmc
+
     units = qmc.Sobol(len(specs), scramble=True, seed=seed + 1).random_base2(max(count - 1, 0).bit_length())[:count]
     return [{s.name: _from_unit(u[k], s) for k, s in enumerate(specs)} for u in units]
 
