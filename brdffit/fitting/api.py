@@ -46,9 +46,10 @@ from .uncertainty import Uncertainty, normal_equations_at
 __all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
 
 CHANNEL_MODES = ("shared-shape", "independent")
-# Data with more samples than this is first solved on a seeded subsample of that many and then refined on all of
-# it (`brdffit.fitting.marquardt`): every start's steps cost passes over the subsample only, and the refinement
-# takes a few passes over all of it from next to the optimum.
+# Data with more (sample, channel) values than COARSE_RESIDUALS is first solved on a seeded subsample of
+# COARSE_SAMPLES samples and then refined on all of it (`brdffit.fitting.marquardt`). Below it one stage is
+# faster from a new process: the refinement's pass is a second compiled shape (measured, issue 15).
+COARSE_RESIDUALS = 150_000
 COARSE_SAMPLES = 10_000
 COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
 # An outer scalar closer than this fraction of its range to a bound, at the end of a polish that did not
@@ -130,7 +131,7 @@ def _use_coarse(coarse, measurements) -> bool:
     if coarse not in ("auto", True, False):
         raise ValueError(f"coarse must be 'auto', True or False, got {coarse!r}")
     if coarse == "auto":
-        return measurements.n > COARSE_SAMPLES
+        return measurements.n * measurements.n_channels > COARSE_RESIDUALS and measurements.n > COARSE_SAMPLES
     return bool(coarse) and measurements.n > COARSE_SAMPLES
 
 
@@ -578,8 +579,8 @@ def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", 
         rtol, atol: the solver's convergence tolerances (optimistix's Cauchy termination), raised to what the
             working precision can meet (`brdffit.fitting.solvers.working_tolerances`; changes nothing in float64).
         seed: seed of the subsamples and of the quasi-random starts.
-        coarse: ``"auto"`` solves data with more than `COARSE_SAMPLES` samples on a seeded subsample of that
-            many first and then refines on all of it (`brdffit.fitting.marquardt`); True forces
+        coarse: ``"auto"`` solves data with more than `COARSE_RESIDUALS` values on a seeded subsample of
+            `COARSE_SAMPLES` samples first and then refines on all of it (`brdffit.fitting.marquardt`); True forces
             and False disables this. The answer is the full-data optimum either way; only the time differs.
         strict: raise `FitError` instead of returning a non-converged result.
         progress: report the stages (search, polish, hold, refinement, uncertainty) on a progress line on stderr
