@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .problem import BUCKET_CHUNK, FitData, Problem, chunk_data, physical_params, residual_fn, stack_data
+from .problem import BUCKET_CHUNK, FitData, Problem, chunk_data, physical_params, residual_fn
 
 __all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "CHUNK_SAMPLES"]
 
@@ -107,7 +107,7 @@ def compile_seconds() -> float:
 def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
     """One material's ``data`` in equally shaped chunks of ``size`` samples, each with a leading material axis of
     1 (bounds the memory of the tangents; split once and reuse the list when accumulating repeatedly)."""
-    return [stack_data([piece]) for piece in chunk_data(data, size)]
+    return chunk_data(data, size)
 
 
 def accumulate(problem: Problem, trees: dict, pieces: list[FitData]) -> NormalEquations:

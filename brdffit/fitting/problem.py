@@ -192,32 +192,32 @@ def stack_data(items: list[FitData]) -> FitData:
 
 
 def chunk_data(data: FitData, size: int):
-    """Split ``data`` into `FitData` pieces of ``size`` samples; the last is padded with masked samples so that
-    every piece has the same shape (one compilation serves all). Data of at most ``size`` samples is returned
-    whole.
+    """Split one material's ``data`` into `FitData` pieces of ``size`` samples, each with a leading material axis
+    of 1 (the layout of `stack_data`); the last is padded with masked samples so that every piece has the same
+    shape (one compilation serves all). Data of at most ``size`` samples is one piece.
 
     Returns:
         A list of `FitData`.
     """
-    n = data.values.shape[0]
-    if n <= size:
-        return [data]
-    per_sample = {k: getattr(data, k) for k in _PER_SAMPLE}
-    return [data._replace(**piece) for piece in _split(per_sample, size)]
+    return [FitData(**piece) for piece in _split(data._asdict(), size)]
 
 
 @functools.partial(jax.jit, static_argnums=1)
-def _split(per_sample: dict, size: int) -> list:
-    # One compiled program copies every piece (eager slicing took 0.1 s on a MERL-size table).
-    n = jax.tree_util.tree_leaves(per_sample)[0].shape[0]
-    pad = -n % size
+def _split(fields: dict, size: int) -> list:
+    # One compiled program cuts and stacks every piece (eager slicing took 0.1 s on a MERL-size table, eager
+    # stacking 0.4 s).
+    n = fields["values"].shape[0]
+    pieces = max(-(-n // size), 1)
+    pad = pieces * size - n if n > size else 0
 
     def padded(a):
         return jnp.concatenate([a, jnp.zeros((pad,) + a.shape[1:], a.dtype)]) if pad else a
 
-    whole = jax.tree_util.tree_map(padded, per_sample)
-    return [jax.tree_util.tree_map(lambda a, start=start: a[start:start + size], whole)
-            for start in range(0, n, size)]
+    per_sample = {k: jax.tree_util.tree_map(padded, fields[k]) for k in _PER_SAMPLE}
+    shared = {k: jax.tree_util.tree_map(lambda a: a[None], v) for k, v in fields.items() if k not in _PER_SAMPLE}
+    width = min(size, n)
+    return [dict(shared, **jax.tree_util.tree_map(lambda a, start=start: a[None, start:start + width], per_sample))
+            for start in range(0, pieces * width, width)]
 
 
 def flatten_free(problem: Problem, tree: dict, names=None):
