@@ -85,8 +85,10 @@ def pass_program(structure: Problem):
     seen = set()
 
     def fn(trees, data):
-        key = jax.tree_util.tree_structure((trees, data)), tuple(
-            (np.shape(leaf), str(jnp.result_type(leaf))) for leaf in jax.tree_util.tree_leaves((trees, data)))
+        # The shapes that decide a compilation: every other leaf's shape follows from the values' and the
+        # problem's (a cheap key: this runs once per chunk of every pass).
+        key = (tuple(np.shape(v) for v in trees.values()), data.values.shape, str(data.values.dtype),
+               tuple(sorted(data.fixed)))
         if key in seen:
             return jitted(trees, data)
         start = time.perf_counter()
