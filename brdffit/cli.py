@@ -7,7 +7,9 @@ import argparse
 import json
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 from . import __version__
 
@@ -55,14 +57,196 @@ def _parse_fixed(items) -> dict:
     return fixed
 
 
-def _load(path):
+# ------------------------------------------------------------------------------------------- instrument tables
+# The options of `brdffit.io.read_table` on the command line, declared once: `_add_table_options` gives them to
+# every command that reads measurements, `_table_options` turns them into read_table's keywords, and
+# `table_options_doc` writes the table of docs/cli.md (a test checks that the page holds it).
+def _names(text: str) -> list:
+    """A comma list of columns: header names, or 0-based indices (a number)."""
+    items = [item.strip() for item in text.split(",")]
+    if not all(items):
+        raise argparse.ArgumentTypeError(f"{text!r}: an empty column name (write NAME[,NAME...])")
+    return [int(item) if item.isdigit() else item for item in items]
+
+
+def _columns(text: str) -> dict:
+    from .io.table import ANGLE_COLUMNS, WEIGHTS_COLUMN
+
+    mapping = {}
+    for item in text.split(","):
+        key, sep, column = (part.strip() for part in item.partition("="))
+        if not sep or not key or not column:
+            raise argparse.ArgumentTypeError(f"{item!r}: write KEY=COLUMN pairs separated by commas, e.g. "
+                                             "theta_i=thetai,phi_i=phi,theta_o=thetar,phi_o=phir")
+        if key not in (*ANGLE_COLUMNS, WEIGHTS_COLUMN):
+            raise argparse.ArgumentTypeError(f"unknown key {key!r}; keys are {', '.join(ANGLE_COLUMNS)} and "
+                                             f"{WEIGHTS_COLUMN}")
+        if key in mapping:
+            raise argparse.ArgumentTypeError(f"{key!r} is given twice")
+        mapping[key] = int(column) if column.isdigit() else column
+    return mapping
+
+
+def _sigma(text: str):
+    return False if text.strip() == "none" else _names(text)
+
+
+def _where(text: str) -> tuple:
+    column, sep, wanted = (part.strip() for part in text.partition("="))
+    if not sep or not column or not wanted:
+        raise argparse.ArgumentTypeError(f"{text!r}: write COLUMN=VALUE, e.g. lambda=0.532")
+    try:
+        numbers = [float(v) for v in wanted.split(",")]
+    except ValueError:
+        return int(column) if column.isdigit() else column, wanted  # text, compared whole
+    return int(column) if column.isdigit() else column, numbers[0] if len(numbers) == 1 else numbers
+
+
+def _delimiter(text: str) -> str:
+    named = {"tab": "\t", "\\t": "\t", "space": " ", "whitespace": " "}
+    if text in named:
+        return named[text]
+    if len(text) != 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: give one character, 'tab' or 'space'")
+    return text
+
+
+def _negative(text: str) -> str:
+    if text not in ("error", "missing"):
+        raise argparse.ArgumentTypeError(f"{text!r}: choose error or missing")
+    return text
+
+
+class _TableOption(NamedTuple):
+    """One option of `brdffit.io.read_table` on the command line."""
+
+    flag: str
+    keyword: str  # read_table's argument
+    metavar: str | None  # None: a switch, which passes ``switched`` when given
+    help: str
+    parse: Callable | None = None  # the option's text -> the keyword's value
+    repeat: bool = False
+    switched: object = None
+
+
+TABLE_OPTIONS = (
+    _TableOption("--columns", "columns", "KEY=COLUMN,...",
+                 "where the angles (and weights) are: KEY one of theta_i, phi_i, theta_o, phi_o, weights; COLUMN a "
+                 "header name or a 0-based index; keys not given take their canonical names", _columns),
+    _TableOption("--values", "values", "COLUMN[,COLUMN...]",
+                 "the value column(s), one channel each (default: every other numeric column)", _names),
+    _TableOption("--sigma", "sigma", "COLUMN[,COLUMN...]|none",
+                 "the σ column(s), aligned with --values (default: sigma_<value column> where present; 'none' "
+                 "ignores σ columns)", _sigma),
+    _TableOption("--where", "where", "COLUMN=VALUE[,VALUE...]",
+                 "keep the rows whose COLUMN equals VALUE: a number (within a relative 1e-9; a comma list keeps "
+                 "any of them) or text (compared whole); repeatable, every filter must hold", _where, repeat=True),
+    _TableOption("--channel-column", "channel_column", "COLUMN",
+                 "one channel per distinct value of COLUMN (e.g. lambda), pairing rows with the same four angles; "
+                 "NaN where a geometry lacks a row", lambda text: int(text) if text.isdigit() else text),
+    _TableOption("--channels", "channels", "NAME[,NAME...]",
+                 "the channels' names (default: the value columns' headers)",
+                 lambda text: [name.strip() for name in text.split(",")]),
+    _TableOption("--radians", "degrees", None, "the angle columns are in radians (default: degrees)",
+                 switched=False),
+    _TableOption("--delimiter", "delimiter", "D",
+                 "the cell separator: one character, 'tab' or 'space' (runs of whitespace); default: a tab for .tsv "
+                 "or a tab in the first line, else ',', else ';', else whitespace", _delimiter),
+    _TableOption("--negative", "negative", "error|missing",
+                 "a negative value is an error (default) or, with 'missing', a missing value (NaN)", _negative),
+)
+TABLE_GROUP = "instrument tables (CSV/TSV/text files only; the options of brdffit.io.read_table)"
+
+
+def _add_table_options(p) -> None:
+    """Give a command that reads measurements the options of `brdffit.io.read_table`."""
+    group = p.add_argument_group(TABLE_GROUP)
+    for option in TABLE_OPTIONS:
+        dest = option.flag[2:].replace("-", "_")
+        if option.metavar is None:
+            group.add_argument(option.flag, dest=dest, action="store_true", help=option.help)
+        else:
+            group.add_argument(option.flag, dest=dest, metavar=option.metavar, type=option.parse, help=option.help,
+                               action="append" if option.repeat else "store")
+
+
+def _table_options(args) -> dict:
+    """The `brdffit.io.read_table` keywords of the table options given on the command line."""
+    options = {}
+    for option in TABLE_OPTIONS:
+        given = getattr(args, option.flag[2:].replace("-", "_"), None)
+        if option.metavar is None:
+            if given:
+                options[option.keyword] = option.switched
+        elif given is None:
+            continue
+        elif option.repeat:
+            merged = {}
+            for key, value in given:
+                if key in merged:
+                    raise UsageError(f"{option.flag} {key}: the column is filtered twice; give its values once as a "
+                                     "comma list")
+                merged[key] = value
+            options[option.keyword] = merged
+        else:
+            options[option.keyword] = given
+    return options
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|")  # a pipe inside a Markdown table cell, code spans included
+
+
+def table_options_doc() -> str:
+    """The Markdown table of the table options (docs/cli.md holds it; a test checks it is current)."""
+    rows = ["| option | meaning |", "|---|---|"]
+    for option in TABLE_OPTIONS:
+        usage = option.flag if option.metavar is None else f"{option.flag} {option.metavar}"
+        rows.append(f"| `{_cell(usage)}` | {_cell(option.help)} |")
+    return "\n".join(rows) + "\n"
+
+
+def _load(path, args):
+    """The measurements in a file, read with the command's table options; loads neither JAX nor the models.
+
+    Raises:
+        UsageError: table options for a file that is not a table. FileNotFoundError, FormatError,
+            MeasurementError: from the reader, naming the file.
+    """
     from . import io
 
-    return io.load(path)
+    path = Path(path)
+    options = _table_options(args)
+    try:
+        if not options:
+            return io.load(path)
+        if not path.exists():
+            raise FileNotFoundError(f"{path}: no such file")
+        kind = io.detect_format(path)
+        if kind != "table":
+            flags = [o.flag for o in TABLE_OPTIONS if o.keyword in options]
+            raise UsageError(f"{path} is a {kind} file; {', '.join(flags)} {'apply' if len(flags) > 1 else 'applies'} "
+                             "to instrument tables (CSV/TSV/text) only: read it without")
+        return io.load(path, format="table", **options)
+    except io.FormatError as exc:
+        if not exc.problem.startswith("angle ") or "no column" not in exc.problem:
+            raise
+        raise io.FormatError(exc.path, exc.problem + "; name the file's angle columns with --columns "
+                             "theta_i=NAME,phi_i=NAME,theta_o=NAME,phi_o=NAME (see --help)") from None
 
 
 def _default_out(path: Path) -> Path:
     return path.with_name(path.stem + ".brdffit")
+
+
+def _check_writable(out: Path) -> None:
+    """Refuse, before any work, an output folder that cannot be made (e.g. the default beside a read-only input)."""
+    existing = out
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        raise UsageError(f"cannot write the output folder {out} ({existing} is not a writable folder); choose one "
+                         "with --out")
 
 
 def _cmd_models(args) -> int:
@@ -79,38 +263,101 @@ def _cmd_models(args) -> int:
     return EXIT_OK
 
 
-def _cmd_info(args) -> int:
+INCIDENCES_LISTED = 12  # `brdffit info` lists the θi of at most this many incidences
+
+
+def _incidences(m) -> tuple[int, list[float] | None]:
+    """The number of distinct incident directions and, when there are few, their θi in degrees (sorted).
+
+    Directions are compared as unit vectors rounded to 1e-9, so that φi is irrelevant at θi = 0 and 0 equals 2π.
+    """
     import numpy as np
 
-    m = _load(args.file)
-    valid = np.isfinite(m.values)
+    wi = np.round(m.wi(), 9) + 0.0  # + 0.0 turns -0.0 into 0.0
+    _, first = np.unique(wi, axis=0, return_index=True)
+    if len(first) > INCIDENCES_LISTED:
+        return len(first), None
+    return len(first), sorted(round(float(np.degrees(t)), 6) for t in m.theta_i[first])
+
+
+def describe(m, path) -> dict:
+    """What `brdffit info` shows of measurements read from ``path``, as one JSON-serialisable dict.
+
+    Arguments:
+        m: the `Measurements`.
+        path: the file they were read from.
+
+    Returns:
+        ``file``, ``format`` and ``description`` (from ``m.meta``, None when absent), ``samples``, ``channels``,
+        ``incidences`` (distinct (θi, φi) directions) and ``incidence_theta_i_deg`` (their θi, when at most
+        `INCIDENCES_LISTED`), the angle ranges in degrees, ``value_range`` (1/sr), ``missing`` (values that are
+        NaN, of samples x channels) and ``missing_fraction``, ``sigma`` and ``weights`` (present or not),
+        ``weights_total``, ``read`` (``meta["read"]``: what the reader reports, e.g. values clipped) and ``meta``.
+    """
+    import numpy as np
+
     deg = np.degrees
-    info = {
-        "file": str(args.file),
+    valid = np.isfinite(m.values)
+    incidences, theta_list = _incidences(m)
+    return {
+        "file": str(path),
+        "format": m.meta.get("format"),
+        "description": m.meta.get("description"),
         "samples": m.n,
         "channels": list(m.channels),
+        "incidences": incidences,
+        "incidence_theta_i_deg": theta_list,
         "theta_i_deg": [float(deg(m.theta_i.min())), float(deg(m.theta_i.max()))],
         "theta_o_deg": [float(deg(m.theta_o.min())), float(deg(m.theta_o.max()))],
         "phi_o_deg": [float(deg(m.phi_o.min())), float(deg(m.phi_o.max()))],
-        "missing_fraction": float(1.0 - valid.mean()),
         "value_range": [float(np.nanmin(m.values)), float(np.nanmax(m.values))] if valid.any() else None,
+        "missing": int(valid.size - valid.sum()),
+        "missing_fraction": float(1.0 - valid.mean()),
         "sigma": m.sigma is not None,
         "weights": m.weights is not None,
+        "weights_total": None if m.weights is None else float(np.sum(m.weights)),
+        "read": dict(m.meta.get("read") or {}),
         "meta": m.meta,
     }
+
+
+def _shown(value) -> str:
+    """A meta value as `brdffit info` prints it: numbers with 6 significant digits, containers as JSON."""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (dict, list)):
+        return json.dumps(value)
+    return str(value)
+
+
+def _cmd_info(args) -> int:
+    m = _load(args.file, args)
+    info = describe(m, args.file)
     if args.json:
         print(json.dumps(info, indent=2))
         return EXIT_OK
-    print(f"{info['file']}: {m.n} samples x {m.n_channels} channels ({', '.join(m.channels)})")
-    print(f"  theta_i {info['theta_i_deg'][0]:.1f}..{info['theta_i_deg'][1]:.1f} deg, theta_o "
-          f"{info['theta_o_deg'][0]:.1f}..{info['theta_o_deg'][1]:.1f} deg, phi_o {info['phi_o_deg'][0]:.1f}.."
-          f"{info['phi_o_deg'][1]:.1f} deg")
+    lines = [f"{info['file']}: {m.n} samples x {m.n_channels} channel{'s' if m.n_channels != 1 else ''} "
+             f"({', '.join(m.channels)})"]
+    for key in ("format", "description"):
+        if info[key] is not None:
+            lines.append(f"  {key}: {_shown(info[key])}")
+    listed = info["incidence_theta_i_deg"]
+    lines.append(f"  incidences: {info['incidences']}"
+                 + (f" (theta_i {', '.join(f'{t:g}' for t in listed)} deg)" if listed else ""))
+    (ti0, ti1), (to0, to1), (po0, po1) = info["theta_i_deg"], info["theta_o_deg"], info["phi_o_deg"]
+    lines.append(f"  theta_i {ti0:.1f}..{ti1:.1f} deg, theta_o {to0:.1f}..{to1:.1f} deg, "
+                 f"phi_o {po0:.1f}..{po1:.1f} deg")
     if info["value_range"]:
-        print(f"  values {info['value_range'][0]:.4g}..{info['value_range'][1]:.4g} 1/sr, missing "
-              f"{100 * info['missing_fraction']:.2f}%")
-    print(f"  sigma: {'yes' if m.sigma is not None else 'no'}, weights: {'yes' if m.weights is not None else 'no'}")
+        lines.append(f"  values {info['value_range'][0]:.4g}..{info['value_range'][1]:.4g} 1/sr")
+    lines.append(f"  missing: {info['missing']} of {m.values.size} values ({100 * info['missing_fraction']:.2f}%)")
+    weights = f"yes, total {info['weights_total']:.6g}" if m.weights is not None else "no"
+    lines.append(f"  sigma: {'yes' if info['sigma'] else 'no'}, weights: {weights}")
+    if info["read"]:
+        lines.append("  read:")
+        lines.extend(f"    {key}: {_shown(value)}" for key, value in info["read"].items())
     if "truth" in m.meta:
-        print(f"  ground truth: {m.meta['truth']['spec']} {json.dumps(m.meta['truth']['params'])}")
+        lines.append(f"  ground truth: {m.meta['truth']['spec']} {json.dumps(m.meta['truth']['params'])}")
+    print("\n".join(lines))
     return EXIT_OK
 
 
@@ -145,7 +392,9 @@ def _progress(args) -> bool:
 
 def _cmd_fit(args) -> int:
     path = Path(args.file)
-    measurements = _load(path)  # first: a file that cannot be read is reported before JAX is loaded
+    out = Path(args.out) if args.out else _default_out(path)
+    _check_writable(out)
+    measurements = _load(path, args)  # first: a file that cannot be read is reported before JAX is loaded
     from . import fit, io, select
 
     enable_compilation_cache()
@@ -171,7 +420,6 @@ def _cmd_fit(args) -> int:
             raise UsageError(f"--lobes {args.lobes!r}: give a number of lobes or 'auto'") from None
         result = fit(measurements, _with_lobes(args.model, k), multistart=args.multistart, progress=_progress(args),
                      **_fit_options(args))
-    out = Path(args.out) if args.out else _default_out(path)
     out.mkdir(parents=True, exist_ok=True)
     h5 = out / "result.h5"
     io.save(measurements, h5)
@@ -274,10 +522,12 @@ def _cmd_synth(args) -> int:
 
 
 def _cmd_convert(args) -> int:
-    from . import FitResult, io
+    from . import io
 
     source, target = Path(args.input), Path(args.output)
     if target.suffix.lower() in (".binary", ".merl"):
+        from . import FitResult
+
         # A MERL table is a tabulation of a model: take the fit stored in a results file.
         try:
             result = FitResult.load(source, args.name)
@@ -291,7 +541,7 @@ def _cmd_convert(args) -> int:
         if not args.quiet:
             print(f"wrote {target}: MERL tabulation of {result.spec}")
         return EXIT_OK
-    m = io.load(source)
+    m = _load(source, args)
     io.save(m, target)
     if not args.quiet:
         print(f"wrote {target}: {m.n} samples x {m.n_channels} channels")
@@ -315,12 +565,16 @@ def _cmd_export(args) -> int:
     return EXIT_OK
 
 
-def _render_source(path: Path, use_data: bool, name):
-    """What `brdffit render` shades: a MERL table, the fit stored in a results file, or the measurements."""
+def _render_source(path: Path, args):
+    """What `brdffit render` shades: a MERL table, the fit stored in a results file, or the measurements (read
+    with the table options when given)."""
     import h5py
 
     from . import FitResult, io
 
+    use_data, name = args.data, args.name
+    if _table_options(args):
+        return _load(path, args), "measurements (interpolated)"
     if io.detect_format(path) == "merl":
         return io.read_merl(path), "MERL table"
     if not use_data and io.detect_format(path) == "hdf5":
@@ -331,14 +585,14 @@ def _render_source(path: Path, use_data: bool, name):
             if result.model is None:
                 raise UsageError(f"{path}: the fit has independent channels; render one channel's model instead")
             return result.model, f"fit {result.spec}"
-    return io.load(path), "measurements (interpolated)"
+    return _load(path, args), "measurements (interpolated)"
 
 
 def _cmd_render(args) -> int:
     from . import render
 
     path = Path(args.file)
-    source, what = _render_source(path, args.data, args.name)
+    source, what = _render_source(path, args)
     lights = list(render.DEFAULT_LIGHTS)
     if args.area_light:
         key_theta, key_phi, key_intensity = lights[0]
@@ -366,7 +620,7 @@ def _add_posterior_options(p):
 
 
 def _cmd_select(args) -> int:
-    measurements = _load(args.file)  # first: a file that cannot be read is reported before JAX is loaded
+    measurements = _load(args.file, args)  # first: a file that cannot be read is reported before JAX is loaded
     from . import select
     from .select import DEFAULT_CANDIDATES
 
@@ -403,6 +657,10 @@ def _add(sub, name, help_text, examples, run):
     return p
 
 
+MEASUREMENT_FILE = "measurement file: a table (.csv/.tsv/text, see the table options), brdffit .h5, MERL .binary"
+PTFE_EXAMPLE = "../shared/data/nist-ptfe/PTFE.data.csv --columns theta_i=thetai,phi_i=phi,theta_o=thetar,phi_o=phir --values f_r11"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every ``brdffit`` command."""
     parser = argparse.ArgumentParser(
@@ -417,14 +675,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add(sub, "models", "list every lobe with its parameters, bounds and reference", ["brdffit models"],
          _cmd_models)
     p = _add(sub, "info", "describe the measurements in a file",
-             ["brdffit info data/synthetic/plastic.h5", "brdffit info table.csv --json"], _cmd_info)
-    p.add_argument("file", help="measurement file (.h5, .csv/.tsv, MERL .binary)")
+             ["brdffit info data/synthetic/plastic.h5", "brdffit info table.csv --json",
+              f"brdffit info {PTFE_EXAMPLE} --where lambda=0.532"], _cmd_info)
+    p.add_argument("file", help=MEASUREMENT_FILE)
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_table_options(p)
     p = _add(sub, "fit", "fit a model to the measurements in a file and write the result",
              ["brdffit fit data/synthetic/plastic.h5",
               "brdffit fit data/synthetic/plastic.h5 --model lambert+ggx --fixed f0=0.04 --out out/",
-              "brdffit fit data/synthetic/clay.h5 --model oren-nayar --json"], _cmd_fit)
-    p.add_argument("file", help="measurement file (.h5, .csv/.tsv, MERL .binary)")
+              "brdffit fit data/synthetic/clay.h5 --model oren-nayar --json",
+              f"brdffit fit {PTFE_EXAMPLE} --where lambda=0.532 --model lambert --out ptfe/"], _cmd_fit)
+    p.add_argument("file", help=MEASUREMENT_FILE)
     p.add_argument("--model", default=DEFAULT_MODEL,
                    help="model spec, lobes joined with '+' (see `brdffit models`), or 'auto' (the default): "
                         "choose among the standard candidates by BIC (`brdffit select`)")
@@ -442,6 +703,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (default: next to the input, <name>.brdffit/)")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON summary to stdout")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    _add_table_options(p)
     p = _add(sub, "posterior", "sample (or resume) the parameter posterior of a fit stored in a results file",
              ["brdffit posterior data/synthetic/plastic.brdffit/result.h5",
               "brdffit posterior out/result.h5 --steps 10000   # continues a stored chain"], _cmd_posterior)
@@ -473,10 +735,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "convert", "convert measurements between CSV and HDF5, or tabulate a fit as a MERL file",
              ["brdffit convert table.csv table.h5", "brdffit convert out/result.h5 fitted.binary"], _cmd_convert)
-    p.add_argument("input", help="input file")
+    p.add_argument("input", help="measurements (" + MEASUREMENT_FILE + ") or, for a .binary output, a results file")
     p.add_argument("output", help="output file (.csv, .h5, or .binary for a MERL tabulation of a fit)")
     p.add_argument("--name", help="which fit of a results file to tabulate (default: the first)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    _add_table_options(p)
     p = _add(sub, "export", "write a fitted material in the form a renderer takes (json, Mitsuba 3 XML, pbrt-v4)",
              ["brdffit export data/synthetic/plastic.brdffit/result.h5 --to mitsuba",
               "brdffit export out/result.h5 --to pbrt --out material.pbrt"], _cmd_export)
@@ -504,16 +767,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--npy", action="store_true", help="also write the HDR image as float32 .npy")
     p.add_argument("--out", help="PNG path (default: the input with .png)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    _add_table_options(p)
     p = _add(sub, "select", "fit candidate models and choose the smallest that is good enough",
              ["brdffit select data/synthetic/plastic.h5",
               "brdffit select data/synthetic/lafortune-retro.h5 --candidates "
               "'lambert+lafortune;lambert+lafortune(lobes=2)' --criterion cv"], _cmd_select)
-    p.add_argument("file", help="measurement file (.h5, .csv/.tsv, MERL .binary)")
+    p.add_argument("file", help=MEASUREMENT_FILE)
     p.add_argument("--candidates", help="model specs separated by ';' (default: the standard candidate list)")
     p.add_argument("--criterion", default="bic", choices=["aic", "bic", "cv"], help="selection criterion")
     p.add_argument("--folds", type=int, default=5, help="folds of --criterion cv (default 5)")
     _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print the selection as one JSON object")
+    _add_table_options(p)
     return parser
 
 
