@@ -136,8 +136,8 @@ TABLE_OPTIONS = (
     _TableOption("--values", "values", "COLUMN[,COLUMN...]",
                  "the value column(s), one channel each (default: every other numeric column)", _names),
     _TableOption("--sigma", "sigma", "COLUMN[,COLUMN...]|none",
-                 "the σ column(s), aligned with --values (default: sigma_<value column> where present; 'none' "
-                 "ignores σ columns)", _sigma),
+                 "the σ column(s), aligned with --values (default: the column sigma_V of each value column V, "
+                 "where present; 'none' ignores σ columns)", _sigma),
     _TableOption("--where", "where", "COLUMN=VALUE[,VALUE...]",
                  "keep the rows whose COLUMN equals VALUE: a number (within a relative 1e-9; a comma list keeps "
                  "any of them) or text (compared whole); repeatable, every filter must hold", _where, repeat=True),

@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
-from brdffit import FitResult, io, synth
+from brdffit import FitResult, Measurements, io, synth
 from brdffit.cli import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_OK, main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -225,3 +225,254 @@ def test_fit_writes_a_report_and_the_report_command_rebuilds_it(tmp_path, capsys
     assert main(["fit", str(PLASTIC), "--model", "lambert+cook-torrance", "--no-report", "--out", str(bare),
                  "--quiet"]) == EXIT_OK
     assert not (bare / "report.html").exists()
+
+
+# ------------------------------------------------------------------------------------------- instrument tables
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+PTFE = DATA / "nist-ptfe" / "PTFE.data.csv"
+PTFE_COLUMNS = ["--columns", "theta_i=thetai,phi_i=phi,theta_o=thetar,phi_o=phir", "--values", "f_r11"]
+needs_ptfe = pytest.mark.skipif(not PTFE.exists(), reason=f"the NIST PTFE file is not at {PTFE} (../shared/data)")
+
+
+def _info(argv, capsys) -> dict:
+    assert main(["info", *argv, "--json"]) == EXIT_OK
+    return json.loads(capsys.readouterr().out)
+
+
+@pytest.fixture(scope="module")
+def ptfe_rows():
+    """The PTFE file's rows parsed with the csv module (an independent reader): lambda, thetai, f_r11."""
+    import csv
+
+    with open(PTFE, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return np.array([[float(r["lambda"]), float(r["thetai"]), float(r["f_r11"])] for r in rows])
+
+
+@needs_ptfe
+def test_info_reads_the_ptfe_file_with_table_options(capsys, ptfe_rows):
+    info = _info([str(PTFE), *PTFE_COLUMNS, "--where", "lambda=0.532"], capsys)
+    at_532 = ptfe_rows[ptfe_rows[:, 0] == 0.532]
+    assert info["samples"] == len(at_532) == 1824 and info["channels"] == ["f_r11"]
+    # Six incidences: |thetai| of the file (the source at thetai <= 0, azimuth 0 -> 180 degrees).
+    assert info["incidences"] == 6
+    assert info["incidence_theta_i_deg"] == pytest.approx(sorted(set(np.abs(at_532[:, 1]).tolist())))
+    assert info["incidence_theta_i_deg"] == pytest.approx([0.001, 15, 30, 45, 60, 75])
+    assert info["value_range"] == [at_532[:, 2].min(), at_532[:, 2].max()]
+    assert info["missing"] == 0 and info["sigma"] is False and info["weights_total"] is None
+    assert info["format"] == "table"
+    # The same as Python's read_table with the same options.
+    m = io.load(PTFE, columns={"theta_i": "thetai", "phi_i": "phi", "theta_o": "thetar", "phi_o": "phir"},
+                values="f_r11", where={"lambda": 0.532})
+    assert info["theta_o_deg"] == [float(np.degrees(m.theta_o.min())), float(np.degrees(m.theta_o.max()))]
+    # A comma list keeps any of the wavelengths; --channel-column makes one channel of each.
+    both = _info([str(PTFE), *PTFE_COLUMNS, "--where", "lambda=0.351,1.064", "--channel-column", "lambda"], capsys)
+    assert both["channels"] == ["lambda=0.351", "lambda=1.064"] and both["samples"] == 1824
+    kept = ptfe_rows[np.isin(ptfe_rows[:, 0], [0.351, 1.064])]
+    assert both["value_range"] == [kept[:, 2].min(), kept[:, 2].max()] and both["missing"] == 0
+    assert main(["info", str(PTFE), *PTFE_COLUMNS, "--where", "lambda=0.532"]) == EXIT_OK
+    text = capsys.readouterr().out
+    assert "1824 samples x 1 channel (f_r11)" in text
+    assert "incidences: 6 (theta_i 0.001, 15, 30, 45, 60, 75 deg)" in text
+    assert "missing: 0 of 1824 values (0.00%)" in text
+
+
+@needs_ptfe
+def test_ptfe_without_column_options_says_how_to_name_them(capsys):
+    assert main(["info", str(PTFE)]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err
+    assert "PTFE.data.csv" in err and "no column 'theta_i'" in err and "--columns theta_i=NAME" in err
+
+
+def _doc_examples() -> list[str]:
+    """The commands of docs/cli.md's fenced blocks that read ../shared/data."""
+    text = (ROOT / "docs" / "cli.md").read_text(encoding="utf-8")
+    blocks = text.split("```")[1::2]
+    return [line.strip() for block in blocks for line in block.splitlines()
+            if line.strip().startswith("brdffit ") and "../shared/data" in line]
+
+
+def test_docs_list_the_table_options_as_declared():
+    from brdffit.cli import table_options_doc
+
+    assert table_options_doc() in (ROOT / "docs" / "cli.md").read_text(encoding="utf-8"), \
+        "docs/cli.md's table of table options is stale: paste brdffit.cli.table_options_doc()"
+    assert len(_doc_examples()) >= 4  # the PTFE examples are there to be run (next test)
+
+
+@needs_ptfe
+def test_docs_cli_ptfe_examples_run_as_written(tmp_path, monkeypatch, capsys):
+    import shlex
+
+    # Run from a folder whose ../shared/data is the real one, so that the examples' outputs land in tmp_path.
+    work = tmp_path / "project"
+    work.mkdir()
+    (tmp_path / "shared").symlink_to(DATA.parent, target_is_directory=True)
+    monkeypatch.chdir(work)
+    for line in _doc_examples():
+        argv = shlex.split(line.split("#")[0])[1:]
+        # An example that wrote beside its input would write into ../shared/data: every one names its output.
+        assert argv[0] in ("info", "convert") or "--out" in argv, f"docs/cli.md: {line!r} needs --out"
+        assert main(argv) == EXIT_OK, f"docs/cli.md example failed: {line}\n{capsys.readouterr().err}"
+        printed = capsys.readouterr().out
+        if argv[0] == "fit":
+            result = json.loads(printed)
+            assert result["status"] == "converged"
+            assert result["params"]["rho_d"][0] == pytest.approx(0.987, abs=0.01)  # the value the page states
+    assert io.load(work / "ptfe.h5").channels == ("lambda=0.351", "lambda=0.532", "lambda=0.633", "lambda=1.064")
+    assert not any(p.name.endswith(".brdffit") for p in PTFE.parent.iterdir())
+
+
+@pytest.fixture
+def instrument_table(tmp_path):
+    """A small instrument-style table: angles in radians under other names, two value columns with σ, a label
+    column, a wavelength column, ';' separated, one negative value."""
+    rng = np.random.default_rng(1)
+    n = 40
+    ti = np.repeat([0.1, 0.5], n // 2)
+    to = rng.uniform(0, 1.2, n)
+    po = rng.uniform(0, 6.2, n)
+    lam = np.tile([0.5, 0.6], n // 2)
+    a, b = rng.uniform(0.1, 0.5, n), rng.uniform(0.2, 0.9, n)
+    a[3] = -0.01
+    lines = ["wl;ti;pi;to;po;label;A;B;dA;dB"]
+    lines += [f"{w!r};{t!r};0;{o!r};{p!r};s{k % 3};{x!r};{y!r};0.01;0.02"
+              for k, (w, t, o, p, x, y) in enumerate(zip(*(c.tolist() for c in (lam, ti, to, po, a, b))))]
+    path = tmp_path / "gonio.txt"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_convert_with_table_options_gives_read_table_s_measurements(instrument_table, tmp_path, capsys):
+    out = tmp_path / "g.h5"
+    argv = ["convert", str(instrument_table), str(out), "--columns", "theta_i=ti,phi_i=pi,theta_o=to,phi_o=po",
+            "--values", "A,B", "--sigma", "dA,dB", "--channels", "a,b", "--radians", "--delimiter", ";",
+            "--negative", "missing", "--where", "wl=0.6", "--where", "label=s1", "--quiet"]
+    assert main(argv) == EXIT_OK
+    expected = io.read_table(instrument_table, columns={"theta_i": "ti", "phi_i": "pi", "theta_o": "to",
+                                                        "phi_o": "po"},
+                             values=["A", "B"], sigma=["dA", "dB"], channels=["a", "b"], degrees=False, delimiter=";",
+                             negative="missing", where={"wl": 0.6, "label": "s1"})
+    got = io.load(out)
+    assert got.n == expected.n > 0 and got.channels == ("a", "b")
+    for name in ("theta_i", "phi_i", "theta_o", "phi_o", "values", "sigma"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(expected, name))
+    # Radians: an angle read as degrees would differ by 180/pi.
+    assert got.theta_i.max() == 0.5
+    # --sigma none ignores σ columns; the default finds none here (they are not named sigma_<value>).
+    info = _info([str(instrument_table), "--columns", "theta_i=ti,phi_i=pi,theta_o=to,phi_o=po", "--values", "A",
+                  "--sigma", "none", "--radians", "--where", "wl=0.5"], capsys)
+    assert info["sigma"] is False and info["samples"] == 20 and info["incidences"] == 2
+    assert info["incidence_theta_i_deg"] == pytest.approx(np.degrees([0.1, 0.5]).tolist())
+
+
+@pytest.mark.parametrize("extra, message, names", [
+    (["--columns", "theta_i"], "argument --columns: 'theta_i': write KEY=COLUMN", "option"),
+    (["--columns", "theta=ti"], "argument --columns: unknown key 'theta'", "option"),
+    (["--columns", "theta_i=ti,theta_i=ti"], "argument --columns: 'theta_i' is given twice", "option"),
+    (["--columns", "theta_i=tee,phi_i=pi,theta_o=to,phi_o=po"], "angle theta_i: no column 'tee'", "file"),
+    (["--values", "C"], "values: no column 'C'", "file"),
+    (["--where", "wl"], "argument --where: 'wl': write COLUMN=VALUE", "option"),
+    (["--where", "wl=0.7"], "no row has wl = 0.7 (values in that column: 0.5, 0.6)", "file"),
+    (["--where", "wl=0.5", "--where", "wl=0.6"], "--where wl: the column is filtered twice", "option"),
+    (["--where", "nope=1"], "where: no column 'nope'", "file"),
+    (["--delimiter", "ab"], "argument --delimiter: 'ab': give one character", "option"),
+    (["--negative", "clip"], "argument --negative: 'clip'", "option"),
+    (["--channel-column", "lam"], "channel_column: no column 'lam'", "file"),
+])
+def test_bad_table_options_exit_2_naming_option_file_or_column(extra, message, names, instrument_table, capsys):
+    columns = [] if extra[0] == "--columns" else ["--columns", "theta_i=ti,phi_i=pi,theta_o=to,phi_o=po"]
+    argv = ["info", str(instrument_table), *columns, "--radians", "--negative", "missing", *extra]
+    assert main(argv) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err
+    assert message in err
+    if names == "file":
+        assert f"{instrument_table}: " in err  # errors of reading start with the file
+
+
+def test_table_options_for_a_non_table_file_are_a_usage_error(tmp_path, capsys):
+    for command in (["info"], ["select", "--candidates", "lambert"], ["fit", "--model", "lambert", "--out",
+                                                                       str(tmp_path / "o")],
+                    ["render", "--out", str(tmp_path / "x.png")]):
+        assert main([command[0], str(PLASTIC), *command[1:], "--where", "R=0.5", "--radians"]) == EXIT_BAD_INPUT
+        err = capsys.readouterr().err
+        assert "plastic.h5 is a hdf5 file; --where, --radians apply to instrument tables" in err, err
+    assert main(["convert", str(PLASTIC), str(tmp_path / "p.csv"), "--values", "R"]) == EXIT_BAD_INPUT
+    assert "--values applies to instrument tables" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists() and not (tmp_path / "x.png").exists()
+
+
+def test_fit_refuses_an_output_folder_it_cannot_make_before_fitting(tmp_path, capsys):
+    blocker = tmp_path / "file.txt"
+    blocker.write_text("not a folder")
+    assert main(["fit", str(PLASTIC), "--model", "lambert", "--out", str(blocker / "out")]) == EXIT_BAD_INPUT
+    assert f"cannot write the output folder {blocker / 'out'}" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------------- info
+def test_info_shows_the_readers_meta_read_entries(tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    n = 50
+    theta_i = np.repeat(np.radians([10.0, 40.0, 40.0, 70.0, 0.0]), 10)
+    phi_i = np.repeat(np.radians([0.0, 0.0, 90.0, 0.0, 123.0]), 10)  # 40 deg at two azimuths: two incidences
+    values = rng.uniform(0.1, 0.4, (n, 2))
+    values[[2, 7, 9], 0] = np.nan
+    values[11, 1] = np.nan
+    weights = rng.uniform(0.5, 1.5, n)
+    read = {"negative values clipped to 0": 12, "missing (outgoing direction at or below the horizon)": 40,
+            "scale": 0.5}
+    m = Measurements(theta_i, phi_i, rng.uniform(0, 1.2, n), rng.uniform(0, 6, n), values, weights=weights,
+                     channels=["R", "G"], meta={"format": "rgl", "description": "white paper", "read": read})
+    path = tmp_path / "m.h5"
+    io.save(m, path)
+    assert io.load(path).meta["read"] == read  # HDF5 keeps the meta
+    info = _info([str(path)], capsys)
+    assert info["read"] == read and info["format"] == "rgl" and info["description"] == "white paper"
+    assert info["missing"] == 4 and info["missing_fraction"] == pytest.approx(4 / 100)
+    assert info["weights_total"] == pytest.approx(float(weights.sum()), rel=1e-12)
+    assert info["incidences"] == 5 and info["incidence_theta_i_deg"] == pytest.approx([0, 10, 40, 40, 70])
+    assert info["value_range"] == [float(np.nanmin(values)), float(np.nanmax(values))]
+    assert main(["info", str(path)]) == EXIT_OK
+    text = capsys.readouterr().out
+    for line in ("50 samples x 2 channels (R, G)", "format: rgl", "description: white paper",
+                 "incidences: 5 (theta_i 0, 10, 40, 40, 70 deg)", "missing: 4 of 100 values (4.00%)",
+                 f"sigma: no, weights: yes, total {weights.sum():.6g}", "    negative values clipped to 0: 12",
+                 "    missing (outgoing direction at or below the horizon): 40", "    scale: 0.5"):
+        assert line in text, line
+
+
+def test_info_on_a_merl_file(tmp_path, capsys):
+    from brdffit.io import MerlTable
+
+    data = np.broadcast_to(np.linspace(0.05, 0.3, 180), (3, 90, 90, 180)).copy()
+    data[1, 0] = np.nan  # G missing in the first θh row
+    path = tmp_path / "m.binary"
+    io.write_merl(MerlTable(data), path)
+    info = _info([str(path)], capsys)
+    m = io.load(path)
+    assert info["samples"] == m.n and info["format"] == "merl" and info["channels"] == ["R", "G", "B"]
+    assert info["missing"] == int(np.isnan(m.values).sum()) > 0
+    assert info["missing"] == int(np.isnan(m.values[:, 1]).sum())  # only G has holes
+    # The cells above the horizon measure (2π)² sr² within 0.1 % (docs/formats.md); the θh row without G stays, as
+    # R and B are present there.
+    assert info["weights_total"] == pytest.approx(4 * np.pi ** 2, rel=1e-3)
+    assert info["incidences"] > 12 and info["incidence_theta_i_deg"] is None
+    assert info["value_range"] == pytest.approx([0.05, 0.3], rel=1e-12)
+    assert main(["info", str(path), "--columns", "theta_i=a"]) == EXIT_BAD_INPUT
+    assert "m.binary is a merl file; --columns applies to instrument tables" in capsys.readouterr().err
+
+
+def test_info_and_table_options_load_no_jax(instrument_table):
+    import subprocess
+
+    script = ("import sys; from brdffit.cli import main; "
+              f"assert main(['info', {str(PLASTIC)!r}]) == 0; "
+              f"assert main(['info', {str(instrument_table)!r}, '--columns', 'theta_i=ti,phi_i=pi,theta_o=to,phi_o=po',"
+              " '--values', 'A', '--radians', '--negative', 'missing']) == 0; "
+              f"assert main(['convert', {str(PLASTIC)!r}, {str(instrument_table.with_suffix('.csv'))!r}, '--quiet'])"
+              " == 0; "
+              "print(sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'jaxlib', 'optimistix', 'scipy')))")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout
+    assert io.load(instrument_table.with_suffix(".csv")).n == io.load(PLASTIC).n
