@@ -309,12 +309,15 @@ def test_docs_cli_ptfe_examples_run_as_written(tmp_path, monkeypatch, capsys):
     work.mkdir()
     (tmp_path / "shared").symlink_to(DATA.parent, target_is_directory=True)
     monkeypatch.chdir(work)
+    doc = (ROOT / "docs" / "cli.md").read_text(encoding="utf-8")
     for line in _doc_examples():
         argv = shlex.split(line.split("#")[0])[1:]
         # An example that wrote beside its input would write into ../shared/data: every one names its output.
         assert argv[0] in ("info", "convert") or "--out" in argv, f"docs/cli.md: {line!r} needs --out"
         assert main(argv) == EXIT_OK, f"docs/cli.md example failed: {line}\n{capsys.readouterr().err}"
         printed = capsys.readouterr().out
+        if argv[0] == "info" and "--json" not in argv:
+            assert printed in doc, f"docs/cli.md shows another output of {line!r}:\n{printed}"
         if argv[0] == "fit":
             result = json.loads(printed)
             assert result["status"] == "converged"
@@ -476,3 +479,25 @@ def test_info_and_table_options_load_no_jax(instrument_table):
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout
     assert io.load(instrument_table.with_suffix(".csv")).n == io.load(PLASTIC).n
+
+
+@pytest.mark.parametrize("kind, name, incidences", [
+    ("alta", "alta-cea-retro/retro-gray-tape.dat", 3),  # 15, 30 and 60 degrees (../shared/data/README.md)
+    ("rgl", "rgl-epfl/paper_white_rgb.bsdf", 8),  # 8 incidences, isotropic
+])
+def test_info_on_the_other_readers_formats(kind, name, incidences, capsys):
+    path = DATA / name
+    if not path.exists():
+        pytest.skip(f"{path} is absent (../shared/data)")
+    if kind not in io.FORMATS:
+        pytest.skip(f"brdffit.io does not read the {kind} format yet")
+    info = _info([str(path)], capsys)
+    m = io.load(path)
+    assert info["format"] == kind and info["samples"] == m.n and info["incidences"] == incidences
+    assert info["read"] == m.meta.get("read", {}) and info["read"]
+    assert info["missing"] == int(np.isnan(m.values).sum())
+    assert main(["info", str(path)]) == EXIT_OK
+    text = capsys.readouterr().out
+    assert f"incidences: {incidences} (theta_i " in text
+    for key in info["read"]:
+        assert f"\n    {key}: " in text
