@@ -5,7 +5,8 @@ extension; the format modules can also be used directly:
 
 - `table` — CSV / TSV / whitespace tables from instruments, and brdffit's canonical CSV layout;
 - `merl` — the MERL binary BRDF tables (Matusik et al. 2003): read, look up, convert, and write from any model;
-- `hdf5` — brdffit's own HDF5 files (measurements, later fits and posteriors).
+- `hdf5` — brdffit's own HDF5 files (measurements, later fits and posteriors);
+- `alta` — the text data files of the ALTA BRDF library (``#DIM``, ``#PARAM_IN``, ... header; read and write).
 
 A file that cannot be read as its format raises `FormatError` naming the file and the problem (line and column
 where relevant); numbers that break the rules of `Measurements` raise `brdffit.MeasurementError` naming the file.
@@ -17,22 +18,26 @@ from pathlib import Path
 
 from ..measurements import Measurements
 from ._common import FormatError, check_not_lfs_pointer
+from .alta import read_alta, write_alta
 from .hdf5 import read_hdf5, read_hdf5_group, update_hdf5, write_hdf5
 from .merl import MerlTable, read_merl, write_merl
 from .table import read_table, write_table
 
 __all__ = ["load", "save", "detect_format", "FormatError", "read_table", "write_table", "read_merl", "write_merl",
-           "MerlTable", "read_hdf5", "write_hdf5", "update_hdf5", "read_hdf5_group", "FORMATS"]
+           "MerlTable", "read_hdf5", "write_hdf5", "update_hdf5", "read_hdf5_group", "read_alta", "write_alta",
+           "FORMATS"]
 
 # Extensions of each format (lower case, with the dot).
 FORMATS = {
     "table": (".csv", ".tsv", ".txt", ".dat", ".tab"),
     "merl": (".binary", ".merl"),
     "hdf5": (".h5", ".hdf5", ".he5"),
+    "alta": (".alta",),  # ALTA text data in a .dat / .txt file is recognised by its header (_sniff)
 }
 
 
 def _sniff(head: bytes) -> str | None:
+    from .alta import looks_like_alta
     from .hdf5 import is_hdf5
     from .merl import looks_like_merl
 
@@ -40,11 +45,13 @@ def _sniff(head: bytes) -> str | None:
         return "hdf5"
     if looks_like_merl(head):
         return "merl"
+    if looks_like_alta(head):
+        return "alta"
     return None
 
 
 def detect_format(path, head: bytes | None = None) -> str:
-    """The format of a file: ``"table"``, ``"merl"`` or ``"hdf5"``, from its first bytes, else its extension.
+    """The format of a file (``"table"``, ``"merl"``, ``"hdf5"``, ``"alta"``): its first bytes, else its extension.
 
     Raises:
         FormatError: a Git LFS pointer, or content and extension that name no format brdffit reads.
@@ -52,7 +59,7 @@ def detect_format(path, head: bytes | None = None) -> str:
     path = Path(path)
     if head is None:
         with open(path, "rb") as fh:
-            head = fh.read(64)
+            head = fh.read(4096)  # an ALTA header may put #DIM after a few #URL / #CMD lines
     check_not_lfs_pointer(path, head)
     sniffed = _sniff(head)
     if sniffed:
@@ -73,11 +80,12 @@ def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa
 
     Arguments:
         path: a table (``.csv``, ``.tsv``, ``.txt``), a MERL binary (``.binary``, ``.merl``) or a brdffit HDF5 file
-            (``.h5``, ``.hdf5``). The content decides where it is unambiguous (HDF5 signature, MERL header).
-        format: force ``"table"``, ``"merl"`` or ``"hdf5"``.
+            (``.h5``, ``.hdf5``), ALTA text data (``.alta``, or a ``.dat`` / ``.txt`` with an ALTA header). The
+            content decides where it is unambiguous (HDF5 signature, MERL header, ALTA ``#DIM`` header).
+        format: force ``"table"``, ``"merl"``, ``"hdf5"`` or ``"alta"``.
         **options: passed to the reader: `read_table` (``columns``, ``values``, ``sigma``, ``where``,
-            ``channel_column``, ``degrees``, ...), `MerlTable.to_measurements` (``subsample``, ``seed``) or
-            `read_hdf5` (``group``).
+            ``channel_column``, ``degrees``, ...), `MerlTable.to_measurements` (``subsample``, ``seed``),
+            `read_hdf5` (``group``) or `read_alta` (``channels``).
 
     Returns:
         `brdffit.Measurements`.
@@ -103,6 +111,8 @@ def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa
         return read_merl(path).to_measurements(subsample=subsample, seed=seed)
     if format == "hdf5":
         return read_hdf5(path, **options)
+    if format == "alta":
+        return read_alta(path, **options)
     raise ValueError(f"unknown format {format!r}; use one of {', '.join(FORMATS)}")
 
 
@@ -111,9 +121,9 @@ def save(measurements: Measurements, path, *, format: str | None = None, **optio
 
     Arguments:
         measurements: the `Measurements`.
-        path: ``.csv`` / ``.tsv`` / ``.txt`` (the canonical table layout) or ``.h5`` / ``.hdf5``.
-        format: force ``"table"`` or ``"hdf5"``.
-        **options: passed to `write_table` or `write_hdf5`.
+        path: ``.csv`` / ``.tsv`` / ``.txt`` (the canonical table layout), ``.h5`` / ``.hdf5`` or ``.alta``.
+        format: force ``"table"``, ``"hdf5"`` or ``"alta"``.
+        **options: passed to `write_table`, `write_hdf5` or `write_alta` (``param_in``, ``param_out``).
 
     Raises:
         ValueError: an unknown extension, or a MERL path: a MERL file tabulates a BRDF on a fixed grid and cannot be
@@ -130,6 +140,8 @@ def save(measurements: Measurements, path, *, format: str | None = None, **optio
         write_table(measurements, path, **options)
     elif format == "hdf5":
         write_hdf5(measurements, path, **options)
+    elif format == "alta":
+        write_alta(measurements, path, **options)
     elif format == "merl":
         raise ValueError(f"{path}: measurements cannot be saved as a MERL table (it tabulates a BRDF on a fixed "
                          "half/difference grid, not scattered samples); fit a model and call "
