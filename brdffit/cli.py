@@ -61,15 +61,22 @@ def _parse_fixed(items) -> dict:
 # The options of `brdffit.io.read_table` on the command line, declared once: `_add_table_options` gives them to
 # every command that reads measurements, `_table_options` turns them into read_table's keywords, and
 # `table_options_doc` writes the table of docs/cli.md (a test checks that the page holds it).
+def _column(text: str):
+    """A column as read_table takes it: a header name, or a 0-based index where the text is a number."""
+    text = text.strip()
+    return int(text) if text.isdigit() else text
+
+
 def _names(text: str) -> list:
-    """A comma list of columns: header names, or 0-based indices (a number)."""
-    items = [item.strip() for item in text.split(",")]
-    if not all(items):
+    """A comma list of columns."""
+    items = [_column(item) for item in text.split(",")]
+    if "" in items:
         raise argparse.ArgumentTypeError(f"{text!r}: an empty column name (write NAME[,NAME...])")
-    return [int(item) if item.isdigit() else item for item in items]
+    return items
 
 
 def _columns(text: str) -> dict:
+    """KEY=COLUMN pairs as read_table's ``columns`` mapping, with the keys checked."""
     from .io.table import ANGLE_COLUMNS, WEIGHTS_COLUMN
 
     mapping = {}
@@ -83,26 +90,29 @@ def _columns(text: str) -> dict:
                                              f"{WEIGHTS_COLUMN}")
         if key in mapping:
             raise argparse.ArgumentTypeError(f"{key!r} is given twice")
-        mapping[key] = int(column) if column.isdigit() else column
+        mapping[key] = _column(column)
     return mapping
 
 
 def _sigma(text: str):
+    """σ columns, or False (read_table's "ignore σ") for 'none'."""
     return False if text.strip() == "none" else _names(text)
 
 
 def _where(text: str) -> tuple:
+    """COLUMN=VALUE as (column, number | list of numbers | text)."""
     column, sep, wanted = (part.strip() for part in text.partition("="))
     if not sep or not column or not wanted:
         raise argparse.ArgumentTypeError(f"{text!r}: write COLUMN=VALUE, e.g. lambda=0.532")
     try:
         numbers = [float(v) for v in wanted.split(",")]
     except ValueError:
-        return int(column) if column.isdigit() else column, wanted  # text, compared whole
-    return int(column) if column.isdigit() else column, numbers[0] if len(numbers) == 1 else numbers
+        return _column(column), wanted  # text, compared whole
+    return _column(column), numbers[0] if len(numbers) == 1 else numbers
 
 
 def _delimiter(text: str) -> str:
+    """One character; 'tab' and 'space' (read_table splits on runs of whitespace) by name."""
     named = {"tab": "\t", "\\t": "\t", "space": " ", "whitespace": " "}
     if text in named:
         return named[text]
@@ -128,6 +138,11 @@ class _TableOption(NamedTuple):
     repeat: bool = False
     switched: object = None
 
+    @property
+    def dest(self) -> str:
+        """The attribute of the parsed arguments."""
+        return self.flag[2:].replace("-", "_")
+
 
 TABLE_OPTIONS = (
     _TableOption("--columns", "columns", "KEY=COLUMN,...",
@@ -143,7 +158,7 @@ TABLE_OPTIONS = (
                  "any of them) or text (compared whole); repeatable, every filter must hold", _where, repeat=True),
     _TableOption("--channel-column", "channel_column", "COLUMN",
                  "one channel per distinct value of COLUMN (e.g. lambda), pairing rows with the same four angles; "
-                 "NaN where a geometry lacks a row", lambda text: int(text) if text.isdigit() else text),
+                 "NaN where a geometry lacks a row", _column),
     _TableOption("--channels", "channels", "NAME[,NAME...]",
                  "the channels' names (default: the value columns' headers)",
                  lambda text: [name.strip() for name in text.split(",")]),
@@ -162,19 +177,18 @@ def _add_table_options(p) -> None:
     """Give a command that reads measurements the options of `brdffit.io.read_table`."""
     group = p.add_argument_group(TABLE_GROUP)
     for option in TABLE_OPTIONS:
-        dest = option.flag[2:].replace("-", "_")
         if option.metavar is None:
-            group.add_argument(option.flag, dest=dest, action="store_true", help=option.help)
+            group.add_argument(option.flag, dest=option.dest, action="store_true", help=option.help)
         else:
-            group.add_argument(option.flag, dest=dest, metavar=option.metavar, type=option.parse, help=option.help,
-                               action="append" if option.repeat else "store")
+            group.add_argument(option.flag, dest=option.dest, metavar=option.metavar, type=option.parse,
+                               help=option.help, action="append" if option.repeat else "store")
 
 
 def _table_options(args) -> dict:
     """The `brdffit.io.read_table` keywords of the table options given on the command line."""
     options = {}
     for option in TABLE_OPTIONS:
-        given = getattr(args, option.flag[2:].replace("-", "_"), None)
+        given = getattr(args, option.dest, None)
         if option.metavar is None:
             if given:
                 options[option.keyword] = option.switched
@@ -225,10 +239,12 @@ def _load(path, args):
         kind = io.detect_format(path)
         if kind != "table":
             flags = [o.flag for o in TABLE_OPTIONS if o.keyword in options]
-            raise UsageError(f"{path} is a {kind} file; {', '.join(flags)} {'apply' if len(flags) > 1 else 'applies'} "
-                             "to instrument tables (CSV/TSV/text) only: read it without")
+            verb = "apply" if len(flags) > 1 else "applies"
+            raise UsageError(f"{path} is a {kind} file; {', '.join(flags)} {verb} to instrument tables (CSV/TSV/text) "
+                             "only: read it without")
         return io.load(path, format="table", **options)
     except io.FormatError as exc:
+        # read_table names a missing angle column "angle theta_i: no column ..."; say how to name it here.
         if not exc.problem.startswith("angle ") or "no column" not in exc.problem:
             raise
         raise io.FormatError(exc.path, exc.problem + "; name the file's angle columns with --columns "
@@ -657,8 +673,10 @@ def _add(sub, name, help_text, examples, run):
     return p
 
 
-MEASUREMENT_FILE = "measurement file: a table (.csv/.tsv/text, see the table options), brdffit .h5, MERL .binary"
-PTFE_EXAMPLE = "../shared/data/nist-ptfe/PTFE.data.csv --columns theta_i=thetai,phi_i=phi,theta_o=thetar,phi_o=phir --values f_r11"
+MEASUREMENT_FILE = ("measurement file in any format brdffit.io.load reads (docs/formats.md): brdffit .h5, MERL "
+                    ".binary, a table (.csv/.tsv/text; see the table options), ...")
+PTFE_EXAMPLE = ("../shared/data/nist-ptfe/PTFE.data.csv --columns theta_i=thetai,phi_i=phi,theta_o=thetar,phi_o=phir "
+                "--values f_r11")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -735,7 +753,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "convert", "convert measurements between CSV and HDF5, or tabulate a fit as a MERL file",
              ["brdffit convert table.csv table.h5", "brdffit convert out/result.h5 fitted.binary"], _cmd_convert)
-    p.add_argument("input", help="measurements (" + MEASUREMENT_FILE + ") or, for a .binary output, a results file")
+    p.add_argument("input", help=MEASUREMENT_FILE + "; for a .binary output, a results file with a fit")
     p.add_argument("output", help="output file (.csv, .h5, or .binary for a MERL tabulation of a fit)")
     p.add_argument("--name", help="which fit of a results file to tabulate (default: the first)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
