@@ -29,7 +29,7 @@ def load_or_fail_cleanly(path, **options):
 
 
 @FUZZ
-@given(data=st.binary(max_size=400), ext=st.sampled_from([".csv", ".tsv", ".txt", ".binary", ".h5", ""]))
+@given(data=st.binary(max_size=400), ext=st.sampled_from([".csv", ".tsv", ".txt", ".binary", ".h5", ".alta", ""]))
 def test_random_bytes(workdir, data, ext):
     path = workdir / f"garbage{ext}"
     path.write_bytes(data)
@@ -90,3 +90,40 @@ def test_merl_header_with_garbage(workdir, tail):
     path.write_bytes(np.asarray([90, 90, 180], "<i4").tobytes() + tail)
     with pytest.raises(FormatError, match="truncated"):
         bio.load(path)
+
+
+ALTA_ALPHABET = "0123456789.-+eE \t\n#nafDIMPARM_INOUTVSCSLRGB"
+ALTA_HEADERS = ["#DIM 4 1\n#PARAM_IN SPHERICAL_TL_PL_TV_PV\n", "#DIM 3 1\n#PARAM_IN ISOTROPIC_TL_TV_PROJ_DPHI\n",
+                "#DIM 3 1\n#PARAM_IN RUSIN_TH_TD_PD\n#PARAM_OUT INV_STERADIAN_COSINE_FACTOR\n",
+                "#DIM 6 3\n#PARAM_IN CARTESIAN\n#PARAM_OUT RGB_COLOR\n#VS 2\n", ""]
+
+
+@FUZZ
+@given(header=st.sampled_from(ALTA_HEADERS), text=st.text(alphabet=ALTA_ALPHABET, max_size=300))
+def test_random_alta_text(workdir, header, text):
+    path = workdir / "random.alta"
+    path.write_text(header + text)
+    load_or_fail_cleanly(path)
+
+
+def _alta_text(workdir, param_in) -> str:
+    m = Measurements(np.radians([0, 30, 60]), [0.0, 1.0, 2.0], np.radians([10, 40, 70]), np.pi,
+                     [[0.1, 0.2, 0.3], [0.3, 0.4, 0.5], [0.5, 0.6, 0.7]], sigma=0.01, meta={"alta": {"header": {
+                         "URL": "https://example.org"}}})
+    path = workdir / "valid.alta"
+    bio.save(m, path, param_in=param_in)
+    return path.read_text()
+
+
+@FUZZ
+@given(param_in=st.sampled_from(["SPHERICAL_TL_PL_TV_PV", "CARTESIAN", "ISOTROPIC_TL_TV_PROJ_DPHI",
+                                 "RUSIN_TH_TD_PD"]),
+       cut=st.integers(0, 10_000), start=st.integers(0, 10_000), junk=st.text(alphabet=ALTA_ALPHABET, max_size=20))
+def test_damaged_alta_files(workdir, param_in, cut, start, junk):
+    text = _alta_text(workdir, param_in)
+    start %= len(text) + 1
+    path = workdir / "damaged.dat"  # a .dat file: the content decides between ALTA and table
+    path.write_text(text[:start] + junk + text[start + cut % 30:])
+    load_or_fail_cleanly(path)
+    path.write_text(text[: cut % (len(text) + 1)])  # truncated anywhere
+    load_or_fail_cleanly(path)
