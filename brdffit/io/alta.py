@@ -61,12 +61,12 @@ __all__ = ["read_alta", "write_alta", "looks_like_alta", "PARAM_IN", "PARAM_OUT"
 _STRUCTURE = ("DIM", "PARAM_IN", "PARAM_OUT", "VS")
 _CHANNELS_KEY = "BRDFFIT_CHANNELS"  # brdffit's own header entry: the channel names (ALTA keeps unknown keys)
 _DEFAULT_OUT = "INV_STERADIAN"
-_SNIFF_BYTES = 4096  # enough for the header of every ALTA file we know (the CEA files: 150 bytes)
+_HEADER_BYTES = 4096  # where a '#FORMAT binary' line is looked for (the CEA files' headers take 150 bytes)
 
 
 # ------------------------------------------------------------------------------------ input parameterisations
 def _polar(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """θ and φ of vectors ``v`` (..., 3), not necessarily unit: θ = atan2(|v_xy|, v_z) is accurate at every angle."""
+    """θ and φ of vectors ``v`` (N, 3), not necessarily unit: θ = atan2(|v_xy|, v_z) is accurate at every angle."""
     return np.arctan2(np.hypot(v[:, 0], v[:, 1]), v[:, 2]), np.arctan2(v[:, 1], v[:, 0])
 
 
@@ -208,7 +208,7 @@ class _Header:
 def _decode(path: Path, data: bytes) -> str:
     if not data.strip():
         raise FormatError(path, "the file is empty")
-    if re.search(rb"^[ \t]*#FORMAT[ \t]+binary", data[:_SNIFF_BYTES], re.MULTILINE):
+    if re.search(rb"^[ \t]*#FORMAT[ \t]+binary", data[:_HEADER_BYTES], re.MULTILINE):
         raise FormatError(path, "ALTA binary data (#FORMAT binary) is not read by brdffit; convert it to ALTA text "
                                 "data (e.g. with ALTA's data2data) first")
     nul = data.find(b"\0")
