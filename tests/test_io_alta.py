@@ -187,6 +187,51 @@ def test_rusinkiewicz_against_the_definition(tmp_path, rng):
     assert m.theta_o[n + 1] == pytest.approx(0.5, abs=1e-12) and m.meta["read"]["azimuth"].startswith("φh = 0")
 
 
+# ALTA's own conversions, printed once (%.17g) by a small C++ program built on ALTA's sources/core/params.cpp
+# (belcour/alta 7c54015) calling params::convert(row, <PARAM_IN>, CARTESIAN, out): out = (V, L).
+ALTA_TO_CARTESIAN = {
+    "ISOTROPIC_TL_TV_PROJ_DPHI": [
+        ([0.3, 0.5 * math.cos(0.7), 0.5 * math.sin(0.7)],
+         [0.36668487758608259, 0.308854411682284, 0.87758256189037276, 0.29552020666133955, 0, 0.95533648912560598]),
+        ([1.0, 1.2 * math.cos(-2.5), 1.2 * math.sin(-2.5)],
+         [-0.74669716316284307, -0.55779943016749778, 0.36235775447667362, 0.8414709848078965, 0,
+          0.54030230586813977])],
+    "RUSIN_TH_TD_PD": [
+        ([0.3, 0.4, 0.5], [0.59867527225759953, 0.18669709850368066, 0.77893010713259503, -0.054291001666736727,
+                           -0.18669709850368066, 0.98091624542991884]),
+        ([0.2, 0.6, -2.0], [-0.066321465279982811, -0.51342794813459414, 0.85556601458766268, 0.39425921387085505,
+                            0.51342794813459414, 0.76220168876238792]),
+        ([0.5, 0.3, 2.0], [0.35008778365911286, 0.26871576349214971, 0.89734630003331561, 0.56593763803547115,
+                           -0.26871576349214971, 0.77942698715509173])],
+    "SPHERICAL_TL_PL_TV_PV": [
+        ([0.5, 0.25, 1.0, 3.5], [-0.78800113088452672, -0.29517390805807697, 0.54030230586813977,
+                                 0.46452135963892854, 0.11861177641841196, 0.87758256189037276])],
+}
+# ... and params::convert(cart, CARTESIAN, <PARAM_IN>, out) for V = (0.3, -0.2, √0.87), L = (-0.4, 0.1, √0.83).
+ALTA_CARTESIAN = [0.3, -0.2, math.sqrt(1 - 0.13), -0.4, 0.1, math.sqrt(1 - 0.17)]
+ALTA_FROM_CARTESIAN = {
+    "ISOTROPIC_TL_TV_PROJ_DPHI": [0.42498878296240344, -0.34737373188215781, -0.12406204710077066],
+    "RUSIN_TH_TD_PD": [0.076551920097724213, 0.39081611815865686, 1.9523151450660834],
+    "SPHERICAL_TL_PL_TV_PV": [0.42498878296240344, 2.8966139904629289, 0.36886298422662456, -0.58800260354756761],
+}
+
+
+@pytest.mark.parametrize("param_in", list(ALTA_TO_CARTESIAN))
+def test_directions_match_altas_own_conversion(tmp_path, param_in):
+    rows = [x + [1.0] for x, _ in ALTA_TO_CARTESIAN[param_in]]
+    m = read_alta(write(tmp_path, f"#DIM {len(rows[0]) - 1} 1\n#PARAM_IN {param_in}\n" + fmt(rows)))
+    expected = np.array([cart for _, cart in ALTA_TO_CARTESIAN[param_in]])
+    np.testing.assert_allclose(np.concatenate([m.wo(), m.wi()], axis=1), expected, rtol=0, atol=1e-14)
+    # writing: the same numbers as ALTA's from_cartesian, except the sign of θv·sinΔφ, where ALTA's from_cartesian
+    # takes φl − φv against its own to_cartesian's φv − φl (the reading above, which the tests pin)
+    source = read_alta(write(tmp_path, "#DIM 6 1\n#PARAM_IN CARTESIAN\n" + fmt([ALTA_CARTESIAN + [1.0]]), "c.alta"))
+    written = PARAM_IN[param_in].from_angles(source)[0]
+    alta = np.array(ALTA_FROM_CARTESIAN[param_in])
+    if param_in == "ISOTROPIC_TL_TV_PROJ_DPHI":
+        alta[2] = -alta[2]
+    np.testing.assert_allclose(np.exp(1j * written), np.exp(1j * alta), rtol=0, atol=1e-14)  # angles mod 2π
+
+
 @pytest.mark.parametrize("param_in", list(PARAM_IN))
 def test_round_trip_every_parameterisation(tmp_path, rng, param_in):
     theta_i, phi_i, theta_o, phi_o = random_pairs(rng)
@@ -211,13 +256,15 @@ def test_round_trip_every_parameterisation(tmp_path, rng, param_in):
         np.testing.assert_allclose(back.wo(), m.wo(), rtol=0, atol=1e-12)
 
 
-def test_round_trip_isotropic_pairs_in_their_frame_keep_the_directions(tmp_path, rng):
-    from brdffit.geometry import from_half_diff
+def polar(v):
+    return np.arctan2(np.hypot(v[:, 0], v[:, 1]), v[:, 2]), np.arctan2(v[:, 1], v[:, 0])
 
+
+def test_round_trip_isotropic_pairs_in_their_frame_keep_the_directions(tmp_path, rng):
     theta_i, _, theta_o, phi_o = random_pairs(rng)
+    light, view = rusinkiewicz_alta(rng.uniform(0.05, 0.6, 40), rng.uniform(0.05, 0.9, 40), rng.uniform(0, 6.2, 40))
     canonical = {"ISOTROPIC_TL_TV_PROJ_DPHI": (theta_i, 0.0, theta_o, phi_o),
-                 "RUSIN_TH_TD_PD": tuple(np.asarray(a) for a in from_half_diff(
-                     rng.uniform(0.05, 0.6, 40), 0.0, rng.uniform(0.05, 0.9, 40), rng.uniform(0, 6.2, 40)))}
+                 "RUSIN_TH_TD_PD": (*polar(light), *polar(view))}  # pairs with φh = 0
     for param_in, angles in canonical.items():
         m = Measurements(*angles, np.arange(1.0, 41.0))
         write_alta(m, tmp_path / "c.alta", param_in=param_in)
