@@ -325,6 +325,12 @@ def test_writer_keeps_channel_names_drops_missing_rows_and_refuses_partial_rows(
     assert not (tmp_path / "p.alta").exists()
     bio.save(m.select_channels("a"), tmp_path / "forced.dat", format="alta")
     assert bio.detect_format(tmp_path / "forced.dat") == "alta"
+    # header entries come back from meta["alta"]["header"], never the structural ones; other meta is ignored
+    odd = m.replace(meta={"alta": {"header": {"URL": "u", "DIM": "9 9", "CMD": ["a", "b"], "N": 5}}})
+    write_alta(odd, tmp_path / "h.alta")
+    assert (tmp_path / "h.alta").read_text().splitlines()[:4] == ["#URL u", "#CMD a", "#CMD b", "#DIM 4 2"]
+    write_alta(m.replace(meta={"alta": 3}), tmp_path / "h.alta")
+    assert read_alta(tmp_path / "h.alta").meta["alta"]["header"] == {}
 
 
 # ----------------------------------------------------------------------------------------------------- errors

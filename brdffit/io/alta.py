@@ -505,9 +505,11 @@ def write_alta(measurements: Measurements, path, *, param_in: str = "SPHERICAL_T
     table = np.concatenate(columns, axis=1)
 
     lines = []
-    for key, value in (m.meta.get("alta", {}).get("header") or {}).items():
+    alta = m.meta.get("alta")
+    provenance = alta.get("header") if isinstance(alta, dict) else None
+    for key, value in (provenance if isinstance(provenance, dict) else {}).items():
         for v in value if isinstance(value, list) else [value]:
-            if isinstance(key, str) and re.fullmatch(r"[A-Za-z]\w*", key) and key not in _STRUCTURE \
+            if re.fullmatch(r"[A-Za-z]\w*", key) and key not in (*_STRUCTURE, _CHANNELS_KEY, "FORMAT") \
                     and isinstance(v, str) and "\n" not in v and "\r" not in v:
                 lines.append(f"#{key} {v}")
     lines += [f"#DIM {len(PARAM_IN[param_in].columns)} {m.n_channels}", f"#PARAM_IN {param_in}",
