@@ -6,7 +6,8 @@ extension; the format modules can also be used directly:
 - `table` — CSV / TSV / whitespace tables from instruments, and brdffit's canonical CSV layout;
 - `merl` — the MERL binary BRDF tables (Matusik et al. 2003): read, look up, convert, and write from any model;
 - `hdf5` — brdffit's own HDF5 files (measurements, later fits and posteriors);
-- `alta` — the text data files of the ALTA BRDF library (``#DIM``, ``#PARAM_IN``, ... header; read and write).
+- `alta` — the text data files of the ALTA BRDF library (``#DIM``, ``#PARAM_IN``, ... header; read and write);
+- `rgl` — RGL-EPFL ``.bsdf`` measured BRDFs (Dupuy & Jakob 2018): read, look up, convert to weighted samples.
 
 A file that cannot be read as its format raises `FormatError` naming the file and the problem (line and column
 where relevant); numbers that break the rules of `Measurements` raise `brdffit.MeasurementError` naming the file.
@@ -21,11 +22,12 @@ from ._common import FormatError, check_not_lfs_pointer
 from .alta import read_alta, write_alta
 from .hdf5 import read_hdf5, read_hdf5_group, update_hdf5, write_hdf5
 from .merl import MerlTable, read_merl, write_merl
+from .rgl import RglTable, read_rgl
 from .table import read_table, write_table
 
 __all__ = ["load", "save", "detect_format", "FormatError", "read_table", "write_table", "read_merl", "write_merl",
            "MerlTable", "read_hdf5", "write_hdf5", "update_hdf5", "read_hdf5_group", "read_alta", "write_alta",
-           "FORMATS"]
+           "read_rgl", "RglTable", "FORMATS"]
 
 # Extensions of each format (lower case, with the dot).
 FORMATS = {
@@ -33,6 +35,7 @@ FORMATS = {
     "merl": (".binary", ".merl"),
     "hdf5": (".h5", ".hdf5", ".he5"),
     "alta": (".alta",),  # ALTA text data in a .dat / .txt file is recognised by its header (_sniff)
+    "rgl": (".bsdf",),
 }
 
 
@@ -40,18 +43,22 @@ def _sniff(head: bytes) -> str | None:
     from .alta import looks_like_alta
     from .hdf5 import is_hdf5
     from .merl import looks_like_merl
+    from .rgl import looks_like_rgl
 
     if is_hdf5(head):
         return "hdf5"
     if looks_like_merl(head):
         return "merl"
+    if looks_like_rgl(head):
+        return "rgl"
     if looks_like_alta(head):
         return "alta"
     return None
 
 
 def detect_format(path, head: bytes | None = None) -> str:
-    """The format of a file (``"table"``, ``"merl"``, ``"hdf5"``, ``"alta"``): its first bytes, else its extension.
+    """The format of a file (``"table"``, ``"merl"``, ``"hdf5"``, ``"alta"``, ``"rgl"``): its first bytes, else its
+    extension.
 
     Raises:
         FormatError: a Git LFS pointer, or content and extension that name no format brdffit reads.
@@ -72,7 +79,7 @@ def detect_format(path, head: bytes | None = None) -> str:
         return "table"  # text of an unknown extension: try it as a table
     raise FormatError(path, f"cannot tell the format: extension {ext or '(none)'!r} is not one of "
                             f"{', '.join(e for exts in FORMATS.values() for e in exts)} and the content is neither "
-                            "HDF5, MERL nor text")
+                            "HDF5, MERL, RGL-EPFL nor text")
 
 
 def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa: A002 - the natural name
@@ -81,11 +88,12 @@ def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa
     Arguments:
         path: a table (``.csv``, ``.tsv``, ``.txt``), a MERL binary (``.binary``, ``.merl``) or a brdffit HDF5 file
             (``.h5``, ``.hdf5``), ALTA text data (``.alta``, or a ``.dat`` / ``.txt`` with an ALTA header). The
-            content decides where it is unambiguous (HDF5 signature, MERL header, ALTA ``#DIM`` header).
-        format: force ``"table"``, ``"merl"``, ``"hdf5"`` or ``"alta"``.
+            content decides where it is unambiguous (HDF5 signature, MERL header, ALTA ``#DIM`` header), or an
+            RGL-EPFL ``.bsdf`` file (recognised by its ``tensor_file`` magic).
+        format: force ``"table"``, ``"merl"``, ``"hdf5"``, ``"alta"`` or ``"rgl"``.
         **options: passed to the reader: `read_table` (``columns``, ``values``, ``sigma``, ``where``,
             ``channel_column``, ``degrees``, ...), `MerlTable.to_measurements` (``subsample``, ``seed``),
-            `read_hdf5` (``group``) or `read_alta` (``channels``).
+            `read_hdf5` (``group``), `read_alta` (``channels``) or `RglTable.to_measurements` (``negative``).
 
     Returns:
         `brdffit.Measurements`.
@@ -113,6 +121,8 @@ def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa
         return read_hdf5(path, **options)
     if format == "alta":
         return read_alta(path, **options)
+    if format == "rgl":
+        return read_rgl(path).to_measurements(**options)
     raise ValueError(f"unknown format {format!r}; use one of {', '.join(FORMATS)}")
 
 
@@ -146,5 +156,7 @@ def save(measurements: Measurements, path, *, format: str | None = None, **optio
         raise ValueError(f"{path}: measurements cannot be saved as a MERL table (it tabulates a BRDF on a fixed "
                          "half/difference grid, not scattered samples); fit a model and call "
                          "brdffit.io.write_merl(model, path), or save as .csv or .h5")
+    elif format == "rgl":
+        raise ValueError(f"{path}: brdffit reads RGL-EPFL .bsdf files but does not write them; save as .csv or .h5")
     else:
         raise ValueError(f"unknown format {format!r}; use one of {', '.join(FORMATS)}")
