@@ -29,7 +29,8 @@ def load_or_fail_cleanly(path, **options):
 
 
 @FUZZ
-@given(data=st.binary(max_size=400), ext=st.sampled_from([".csv", ".tsv", ".txt", ".binary", ".h5", ".alta", ""]))
+@given(data=st.binary(max_size=400),
+       ext=st.sampled_from([".csv", ".tsv", ".txt", ".binary", ".h5", ".alta", ".bsdf", ""]))
 def test_random_bytes(workdir, data, ext):
     path = workdir / f"garbage{ext}"
     path.write_bytes(data)
@@ -127,3 +128,22 @@ def test_damaged_alta_files(workdir, param_in, cut, start, junk):
     load_or_fail_cleanly(path)
     path.write_text(text[: cut % (len(text) + 1)])  # truncated anywhere
     load_or_fail_cleanly(path)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cut=st.integers(0, 100_000), header_flip=st.integers(0, 100_000), flip=st.integers(0, 100_000),
+       byte=st.integers(0, 255), other=st.integers(0, 255))
+def test_damaged_rgl_files(workdir, cut, header_flip, flip, byte, other):
+    from test_io_rgl import small_rgl_bytes
+
+    valid = small_rgl_bytes()
+    data = bytearray(valid)
+    data[header_flip % 400] = byte  # the header (names, ranks, types, offsets, extents) is the first ~390 bytes
+    data[flip % len(data)] = other
+    path = workdir / "damaged.bsdf"
+    path.write_bytes(bytes(data))
+    load_or_fail_cleanly(path)
+    path.write_bytes(valid[: cut % len(valid)])  # truncated anywhere
+    with pytest.raises(FormatError, match="truncated|outside the file") as err:
+        bio.load(path)
+    assert str(path) in str(err.value)

@@ -158,11 +158,11 @@ def read_tensor_file(path) -> dict[str, np.ndarray]:
         if name in fields:
             raise FormatError(path, f"{where} occurs twice")
         dtype = np.dtype(DTYPES[code])
-        n = math.prod(shape)
-        end = offset + n * dtype.itemsize  # Python integers: no overflow for any header
-        if end > len(data):
-            raise FormatError(path, f"{where}: its data (bytes {offset:,} to {end:,}, shape {tuple(shape)}, "
-                                    f"{dtype.name}) lie outside the file ({len(data):,} bytes): truncated or damaged")
+        n = math.prod(shape)  # a Python integer: no overflow, however large the extents
+        if offset + n * dtype.itemsize > len(data):
+            extent = f"shape {tuple(shape)}" if rank <= 8 else f"rank {rank}"
+            raise FormatError(path, f"{where}: its data ({extent}, {dtype.name}, from byte {offset:,}) lie outside "
+                                    f"the file ({len(data):,} bytes): truncated or damaged")
         array = np.frombuffer(data, dtype=dtype, count=n, offset=offset).reshape(shape).astype(dtype.newbyteorder("="))
         array.flags.writeable = False
         fields[name] = array
@@ -529,8 +529,9 @@ def read_rgl(path) -> RglTable:
 
     Raises:
         FileNotFoundError: no such file. FormatError: a damaged container (`read_tensor_file`), a spectral file,
-            a missing field, a field of the wrong type, rank or shape, non-finite numbers, θi not increasing, a
-            ``sigma`` <= 0, or an incidence whose ``vndf`` is nowhere positive; the message names file and field.
+            a missing field, a field of the wrong type, rank or shape, non-finite numbers, θi not increasing or
+            none below 90°, a ``sigma`` <= 0, a negative ``ndf`` or ``vndf``, or an incidence whose ``vndf`` is
+            nowhere positive; the message names file and field.
     """
     path = Path(path)
     fields = read_tensor_file(path)
@@ -564,8 +565,12 @@ def read_rgl(path) -> RglTable:
     if p_count > 2 and round(_TWO_PI / float(phi_i[-1] - phi_i[0])) not in (1, 2, 4):
         raise FormatError(path, f"field 'phi_i': an anisotropic file spans 2π, π or π/2, this one "
                                 f"{float(phi_i[-1] - phi_i[0]):.6g} rad")
+    if not theta_i[0] < _HALF_PI - 1e-6:
+        raise FormatError(path, "field 'theta_i': no incidence below 90° (nothing was measured)")
     if np.any(sigma <= 0):
         raise FormatError(path, "field 'sigma': the projected area must be > 0 everywhere")
+    if np.any(ndf < 0):
+        raise FormatError(path, "field 'ndf': a microfacet density must be >= 0")
     if np.any(vndf < 0):
         raise FormatError(path, "field 'vndf': a density must be >= 0")
     empty = np.flatnonzero(vndf.reshape(p_count * t_count, -1).max(axis=1) <= 0)
