@@ -154,7 +154,7 @@ def test_warp_inverse_is_the_inverse(synthetic, request, which):
 
 def test_warp_jacobian_agrees_with_ndf_and_sigma(tables):
     """|dωo/ds| from the tabulated vndf, 4 (ωi·m) (dωm/du) / p(u), equals 4 σ(ωi) / D(m) (the form the weights
-    use) to about 1 % at the nodes away from the specular column and the support's edge."""
+    use) to 1 % at the nodes away from the specular column and the support's edge."""
     for name, table in tables.items():
         h, w = table.rgb.shape[-2:]
         s2, s1 = (a.reshape(-1) for a in np.meshgrid(np.linspace(0, 1, h), np.linspace(0, 1, w), indexing="ij"))
@@ -167,8 +167,8 @@ def test_warp_jacobian_agrees_with_ndf_and_sigma(tables):
             from_warp = 4 * cos_im * 2 * math.pi ** 2 * u1 * np.sin(theta_m) / pdf
             ndf, sigma, _ = table._microfacets(u1, u2, theta, 0.0)
             ratio = from_warp / (4 * sigma / ndf)
-            assert np.median(np.abs(ratio - 1)) < 0.012, (name, k)
-            assert np.percentile(np.abs(ratio - 1), 95) < 0.03, (name, k)
+            assert np.median(np.abs(ratio - 1)) < 0.01, (name, k)  # measured: at most 0.9 %
+            assert np.percentile(np.abs(ratio - 1), 95) < 0.015, (name, k)  # measured: at most 1.0 %
 
 
 # ----------------------------------------------------------------------------------------- Mitsuba 3 (client)
@@ -183,9 +183,14 @@ def mitsuba():
 
 
 def _mitsuba_values(mi, bsdf, theta_i, phi_i, theta_o, phi_o):
-    """Mitsuba's ``eval`` with ``si.wi`` = ωi and ``wo`` = ωo, divided by its cosine of ``wo``: f_r."""
+    """Mitsuba's ``eval`` with ``si.wi`` = ωi and ``wo`` = ωo, divided by its cosine of ``wo``: f_r.
+
+    At normal incidence Mitsuba's azimuth of ωi depends on the signs of its zero components: it folds ωi by its
+    symmetry (a rotation by π unless a component is negative, −0.0 included) before ``atan2``, so (0, +0, 1) gives
+    φi = −π and (0, −0, 1) gives φi = 0, brdffit's convention; the normal is passed as (0, −0, 1)."""
     ctx, si = mi.BSDFContext(), mi.SurfaceInteraction3f()
     wi, wo = _unit(theta_i, phi_i), _unit(theta_o, phi_o)
+    wi[np.asarray(theta_i) == 0] = (0.0, -0.0, 1.0)
     out = np.empty((len(wi), 3))
     for n in range(len(wi)):
         si.wi = mi.Vector3f(*wi[n])
@@ -222,6 +227,7 @@ def test_lookup_agrees_with_mitsuba(mitsuba, tables, name):
     relative = _relative(ours, theirs)
     assert np.percentile(relative, 95) < 1e-4, name
     assert np.median(relative) < 1e-5, name
+    assert np.all(relative[-20:] < 1e-4), name  # normal incidence: φi = 0 in both
     # Mitsuba's si.wi is the table's incidence: the swapped order is another BRDF value (measured data are not
     # exactly reciprocal), far outside the agreement above
     theta_i, phi_i, theta_o, phi_o = angles
@@ -461,6 +467,9 @@ def test_field_outside_the_file_and_unknown_type(tmp_path):
     ({"vndf": np.zeros((1, 4, 7, 9), "<f4")}, "field 'vndf': incidence slice 0 is zero"),
     ({"theta_i": np.array([0.0, 1.2, 0.6, 1.5], "<f4")}, "strictly increasing"),
     ({"jacobian": np.array([1, 1], "u1")}, "field 'jacobian'"),
+    ({"ndf": np.full((3, 8), -1.0, "<f4")}, "field 'ndf'.*>= 0"),
+    ({"theta_i": np.array([math.pi / 2], "<f4"), "vndf": np.ones((1, 1, 7, 9), "<f4"),
+      "rgb": np.ones((1, 1, 3, 4, 4), "<f4"), "luminance": np.ones((1, 1, 4, 4), "<f4")}, "no incidence below 90"),
 ])
 def test_bad_fields(tmp_path, changes, message):
     path = tmp_path / "bad.bsdf"
