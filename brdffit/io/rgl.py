@@ -1,7 +1,7 @@
 r"""RGL-EPFL ``.bsdf`` files: measured BRDFs in the adaptive parameterisation of Dupuy & Jakob.
 
 J. Dupuy and W. Jakob, "An Adaptive Parameterization for Efficient Material Acquisition and Rendering", ACM
-Transactions on Graphics 37(6), 2018 (the paper, §4-5). The reference readers are powitacq (by the authors),
+Transactions on Graphics 37(6), 2018 (the paper). The reference readers are powitacq (by the authors),
 Mitsuba 3's ``measured`` plugin (``src/bsdfs/measured.cpp``, ``include/mitsuba/core/distr_2d.h``) and pbrt-v4's
 ``MeasuredBxDF`` (``src/pbrt/bxdfs.cpp``, ``PiecewiseLinear2D`` in ``src/pbrt/util/sampling.h``). This module is
 written from the paper and from reading them; docs/formats.md describes the same in prose.
@@ -22,7 +22,7 @@ are kept but not used.
 column index along u₁ and the row index along u₂. The microfacet normal m = (ωi + ωo)/|ωi + ωo| is taken in these
 coordinates, for an isotropic file (P <= 2) with its azimuth measured from φi.
 
-**The warp** (paper §5, "inverse parameterisation"). For each incidence the ``vndf`` table, normalised to integrate to
+**The warp** (the paper's parameterisation, inverted). For each incidence the ``vndf`` table, normalised to integrate to
 1 over the unit square, is a density p(u); the map from u to the sample square is the continuous marginal /
 conditional CDF of its bilinear interpolant: s₂ = F(u₂) = ∫₀^{u₂} r(t) dt with r(t) = ∫₀¹ p(x, t) dx, and
 s₁ = ∫₀^{u₁} p(x, u₂) dx / r(u₂). Its Jacobian is triangular with determinant p(u). Between tabulated incidences every
@@ -47,15 +47,16 @@ rule (¼, ½ or 1 times 1/((h−1)(w−1)) at corners, edges, inside). The Jacob
 
 (4 (ωi·m): the reflection ωo(m), Walter et al. 2007 eq. 14; 2π² u₁ sin θm = dωm/du for θm = (π/2) u₁²,
 φm = 2π u₂ − π; 1/p(u): the warp). The second form holds because the vndf is the visible normal distribution,
-p(u) = (ωi·m) D(m) / σ(ωi) · dωm/du (paper §4; the files agree to about 1 %, tests/test_io_rgl.py). brdffit uses it:
+p(u) = (ωi·m) D(m) / σ(ωi) · dωm/du (the files agree to 1 %, tests/test_io_rgl.py). brdffit uses this form:
 the bilinear p(u) vanishes linearly at u₁ = 0, where the first form is 0/0 at the nodes of the specular direction
 (the whole column s₁ = 0 maps to m = n) and would drop the peak. With it, weight · f_r · cos θo = cell · rgb, so
 Σ weight · f_r · cos θo over one incidence is the trapezoid rule for its directional albedo ∫ f_r cos θo dωo.
 
 **Conventions.** ωi is the direction to the light: the incidence of the tables (Mitsuba evaluates the table at its
 ``si.wi`` and returns the value times the cosine of its ``wo``; pbrt-v4 at its ``wo``, dividing by the cosine of
-its ``wi``). At normal incidence the azimuth of ωi is undefined: brdffit uses φi = 0, as ``atan2(0, 0)`` does in the
-reference readers. The tabulated incidence θi = 90° (a light at the horizon; the files copy the slice before it) is
+its ``wi``). At normal incidence the azimuth of ωi is undefined: brdffit uses φi = 0, what ``atan2(0, 0)`` gives
+(Mitsuba 3.9 first folds ωi by a rotation by π and gets 0 or −π depending on the signs of the zero components). The
+tabulated incidence θi = 90° (a light at the horizon; the files copy the slice before it) is
 used for interpolation only, not as samples.
 """
 
@@ -227,15 +228,6 @@ class _Warp:
     @staticmethod
     def _mix(table: np.ndarray, slices, mix, *index) -> np.ndarray:
         return np.einsum("nk,nk->n", mix, table[(slices, *(i[:, None] for i in index))])
-
-    def pdf(self, u1, u2, slices, mix) -> np.ndarray:
-        """The normalised density p(u) at unit-square points."""
-        i, fx = _patch(u1, self.cols)
-        j, fy = _patch(u2, self.rows)
-        c0 = self._mix(self.density, slices, mix, j, i) * (1 - fy) + self._mix(self.density, slices, mix, j + 1, i) * fy
-        c1 = (self._mix(self.density, slices, mix, j, i + 1) * (1 - fy)
-              + self._mix(self.density, slices, mix, j + 1, i + 1) * fy)
-        return c0 + fx * (c1 - c0)
 
     def to_sample(self, u1, u2, slices, mix) -> tuple[np.ndarray, np.ndarray]:
         """The sample-square point (s₁, s₂) of unit-square points u: the marginal / conditional CDFs at u."""
