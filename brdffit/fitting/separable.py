@@ -34,7 +34,7 @@ from ..models.model import evaluate_pair
 from .losses import get_loss
 from .problem import FitData, Problem
 
-__all__ = ["amplitude_basis", "solve_amplitudes", "solve_box", "box_patterns", "project"]
+__all__ = ["amplitude_basis", "amplitude_sums", "solve_box", "box_patterns", "project"]
 
 # Relative ridge added to the amplitude normal matrix: keeps the candidate systems solvable when a basis
 # function vanishes on the data (a lobe that no sample sees) or two coincide (lambert+lambert); far below any
@@ -178,39 +178,47 @@ def _box_qp(lower: tuple, upper: tuple):
     return solve
 
 
-def solve_amplitudes(problem: Problem, names: tuple, f0, basis, weight, data: FitData) -> dict:
-    """The best amplitudes per channel for residuals ``weight · (f₀ + B a − f_d)`` within their bounds.
+def amplitude_sums(problem: Problem, params: dict, names: tuple, data: FitData):
+    """The normal equations of the amplitudes ``names`` for residuals ``w · (f₀ + B a − f_d)``, w the loss's
+    weights (`Loss.weight`, linearised at the data for a nonlinear loss).
 
     Arguments:
         problem: the `Problem`.
-        names: the amplitudes (K names).
-        f0, basis: from `amplitude_basis`.
-        weight: ``(N, C)`` the residual weights (0 for missing samples).
+        params: physical values of every parameter (the values of ``names`` are ignored).
+        names: the linear amplitudes (K names).
         data: the `FitData`.
 
     Returns:
-        name -> ``(C,)`` amplitudes.
+        ``(c0, gram, rhs)``: ‖w (f_d − f₀)‖² per channel ``(C,)``, G = (wB)ᵀ(wB) ``(C, K, K)`` and
+        b = (wB)ᵀ w (f_d − f₀) ``(C, K)``, so that the squared residual norm is c₀ − 2aᵀb + aᵀGa.
     """
-    specs = problem.specs
-    lower = tuple(float(specs[a].lower) for a in names)
-    upper = tuple(float(specs[a].upper) for a in names)
-    weighted = basis * weight[..., None]  # (N, C, K)
-    target = (data.values - f0) * weight  # (N, C)
-    gram = jnp.einsum("nck,ncl->ckl", weighted, weighted)
-    rhs = jnp.einsum("nck,nc->ck", weighted, target)
-    amplitudes = jax.vmap(_box_qp(lower, upper))(gram, rhs)  # (C, K)
-    return {a: amplitudes[:, k] for k, a in enumerate(names)}
+    _, _, weighted, target = _amplitude_system(problem, params, names, data)
+    return (jnp.sum(target * target, axis=0),) + _normal_sums(weighted, target)
+
+
+def _amplitude_system(problem: Problem, params: dict, names: tuple, data: FitData):
+    """``(f0, basis, weighted basis w·B, target w·(f_d − f₀))`` of the amplitudes ``names``."""
+    weight = _weights(problem, data)
+    f0, basis = amplitude_basis(problem, params, names, data)
+    return f0, basis, basis * weight[..., None], (data.values - f0) * weight
+
+
+def _normal_sums(weighted, target):
+    return jnp.einsum("nck,ncl->ckl", weighted, weighted), jnp.einsum("nck,nc->ck", weighted, target)
 
 
 def _projection(problem: Problem, params: dict, data: FitData):
-    """The parameters with `Problem.linear` solved, the model values there, the weighted basis and the weights."""
+    """The parameters with `Problem.linear` solved within their bounds (traced: the enumerated active-set solve
+    with its derivative, `_box_qp`), the model values there, the weighted basis and the weights."""
     names = problem.linear
-    weight = _weights(problem, data)
-    f0, basis = amplitude_basis(problem, params, names, data)
-    amplitudes = solve_amplitudes(problem, names, f0, basis, weight, data)
-    stacked = jnp.stack([amplitudes[a] for a in names], axis=-1)  # (C, K)
+    specs = problem.specs
+    f0, basis, weighted, target = _amplitude_system(problem, params, names, data)
+    gram, rhs = _normal_sums(weighted, target)
+    solve = _box_qp(tuple(float(specs[a].lower) for a in names), tuple(float(specs[a].upper) for a in names))
+    stacked = jax.vmap(solve)(gram, rhs)  # (C, K)
+    amplitudes = {a: stacked[:, k] for k, a in enumerate(names)}
     f = f0 + jnp.einsum("nck,ck->nc", basis, stacked)
-    return dict(params, **amplitudes), f, basis * weight[..., None], weight
+    return dict(params, **amplitudes), f, weighted, _weights(problem, data)
 
 
 def project(problem: Problem, params: dict, data: FitData):
