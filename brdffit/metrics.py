@@ -9,7 +9,7 @@ import numpy as np
 from .geometry import LocalPair
 from .models.model import Model, evaluate_pair
 
-__all__ = ["fit_metrics", "METRICS"]
+__all__ = ["fit_metrics", "metric_sums", "metrics_from_sums", "METRICS"]
 
 METRICS = ("rmse_abs", "rmse_rel", "ngan", "low")
 
@@ -17,10 +17,21 @@ METRICS = ("rmse_abs", "rmse_rel", "ngan", "low")
 _CHUNK = 65_536
 
 
-def _metric_sums(model: Model, pair: LocalPair, values, cos_i, weights):
-    """Numerators and denominators of the metrics over one chunk: ``(8, C)``."""
-    f_model = evaluate_pair(model, pair)
-    valid = jnp.isfinite(values)
+def metric_sums(f_model, values, valid, cos_i, weights):
+    """Numerators and denominators of the metrics over some samples: ``(8, C)`` (`metrics_from_sums` finishes
+    them). The fits' passes (`brdffit.fitting.normal_equations`) accumulate the same sums from the model values
+    they compute anyway.
+
+    Arguments:
+        f_model: model values ``(N, C)``.
+        values: data ``(N, C)`` (any value where not ``valid``).
+        valid: ``(N, C)`` True where the data count.
+        cos_i: ``(N,)`` cosθi.
+        weights: ``(N,)`` quadrature weights.
+
+    Returns:
+        ``(8, C)``: for each metric of `METRICS` its numerator, then its denominator.
+    """
     f_data = jnp.where(valid, values, 0.0)
     c = cos_i[:, None]
     w = jnp.where(valid, weights[:, None], 0.0)
@@ -30,6 +41,16 @@ def _metric_sums(model: Model, pair: LocalPair, values, cos_i, weights):
     low = jnp.where(valid, jnp.log1p(jnp.maximum(f_model * c, -0.999)) - jnp.log1p(f_data * c), 0.0)
     terms = (diff * diff, valid, relative * relative, positive, w * (diff * c) ** 2, w, w * low * low, w)
     return jnp.stack([jnp.sum(t, axis=0, dtype=diff.dtype) for t in terms])
+
+
+def metrics_from_sums(sums) -> dict:
+    """The metrics from `metric_sums` (added over chunks): name -> NumPy array ``(C,)``."""
+    sums = np.asarray(sums, dtype=float)
+    return dict(zip(METRICS, np.sqrt(sums[0::2] / np.maximum(sums[1::2], 1e-300))))
+
+
+def _metric_sums(model: Model, pair: LocalPair, values, cos_i, weights):
+    return metric_sums(evaluate_pair(model, pair), values, jnp.isfinite(values), cos_i, weights)
 
 
 @jax.jit
@@ -49,9 +70,7 @@ def _metrics(model: Model, pair: LocalPair, values, cos_i, weights):
         return a.reshape((chunks, size) + a.shape[1:])
 
     batched = (jax.tree_util.tree_map(blocks, pair), blocks(values, jnp.nan), blocks(cos_i), blocks(weights))
-    sums = jnp.sum(jax.lax.map(lambda xs: _metric_sums(model, *xs), batched), axis=0)
-    rms = jnp.sqrt(sums[0::2] / jnp.maximum(sums[1::2], 1e-300))
-    return dict(zip(METRICS, rms))
+    return jnp.sum(jax.lax.map(lambda xs: _metric_sums(model, *xs), batched), axis=0)
 
 
 def fit_metrics(model: Model, measurements, pair: LocalPair | None = None) -> dict:
@@ -81,5 +100,5 @@ def fit_metrics(model: Model, measurements, pair: LocalPair | None = None) -> di
         values = np.concatenate([values, np.full((extra, values.shape[1]), np.nan)])
         cos_i = np.concatenate([cos_i, np.ones(extra)])
         weights = np.concatenate([np.asarray(weights, dtype=float), np.ones(extra)])
-    out = _metrics(model, pair, jnp.asarray(values), jnp.asarray(cos_i), jnp.asarray(weights, dtype=float))
-    return {k: np.asarray(out[k], dtype=float) for k in METRICS}
+    return metrics_from_sums(_metrics(model, pair, jnp.asarray(values), jnp.asarray(cos_i),
+                                      jnp.asarray(weights, dtype=float)))

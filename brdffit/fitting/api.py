@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..metrics import fit_metrics
+from ..metrics import fit_metrics, metrics_from_sums
 from ..models.model import Model
 from ..models.registry import get as get_model
 from ..params import at_bound
@@ -406,7 +406,8 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
     aic, bic = information_criteria(problem.loss, cost, n_valid, k)
     channel_cost = normal.channel_cost if normal is not None else np.full(problem.channels, cost / problem.channels)
     metrics = {"rmse_loss": np.sqrt(channel_cost / np.maximum(valid.sum(axis=0), 1))}
-    metrics.update(fit_metrics(fitted, measurements, pair=data.pair))
+    metrics.update(metrics_from_sums(normal.metric_sums) if normal is not None
+                   else fit_metrics(fitted, measurements, pair=data.pair))
 
     def per_param(flat):
         offsets = layout.offsets(problem.free)
@@ -535,13 +536,14 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             run_time += r_time
             best = dict(best, params=refined["params"], cost=refined["cost"], steps=best["steps"] + refined["steps"],
                         max_steps=refined["max_steps"], nonfinite=refined["nonfinite"])
-            normal = refined["normal"]
             params = canonical(problem, refined["params"])
         if not problem.free:
             r = residuals_at(problem, {k: jnp.asarray(v) for k, v in params.items()}, full[m])
             best = dict(best, cost=float(jnp.sum(r * r)))
-        elif any(not np.array_equal(np.asarray(params[k]), np.asarray(best["params"][k])) for k in problem.free):
-            normal = normal_equations_at(problem, params, full[m])  # the canonical order moved the columns
+        else:
+            # A pass at the answer itself: the solver's last sums were moved with its amplitudes (and the canonical
+            # order may have moved the columns). It gives the status, the covariance and the metrics.
+            normal = normal_equations_at(problem, params, full[m])
         results.append(_result(problem, base_model, measurements, full[m], params, best, normal, records[m],
                                {"compile": compile_time, "run": run_time / len(items), "init": init_time / len(items)},
                                strategy))

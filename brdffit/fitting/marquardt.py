@@ -156,7 +156,7 @@ class _Batch:
             channel_cost = np.maximum(sums.channel_cost + change, 0.0)
             moved = NormalEquations(jtj=jtj, jtr=jtr + np.einsum("...pq,...q->...p", jtj, delta),
                                     cost=np.where(np.isfinite(sums.cost), np.sum(channel_cost, axis=-1), sums.cost),
-                                    meat=sums.meat, channel_cost=channel_cost)
+                                    meat=sums.meat, channel_cost=channel_cost, metric_sums=sums.metric_sums)
         return _State(x, moved, delta, sums.cost)
 
     def unconstrained(self, x):
