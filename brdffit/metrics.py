@@ -17,10 +17,10 @@ METRICS = ("rmse_abs", "rmse_rel", "ngan", "low")
 _CHUNK = 65_536
 
 
-def metric_sums(f_model, values, valid, cos_i, weights):
+def metric_sums(f_model, values, valid, cos_i, weights, xp=jnp):
     """Numerators and denominators of the metrics over some samples: ``(8, C)`` (`metrics_from_sums` finishes
-    them). The fits' passes (`brdffit.fitting.normal_equations`) accumulate the same sums from the model values
-    they compute anyway.
+    them). The fits take the same sums on the host from the model values of their last pass
+    (`brdffit.fitting.normal_equations.accumulate`): inside the pass they doubled its compilation time.
 
     Arguments:
         f_model: model values ``(N, C)``.
@@ -28,19 +28,20 @@ def metric_sums(f_model, values, valid, cos_i, weights):
         valid: ``(N, C)`` True where the data count.
         cos_i: ``(N,)`` cosθi.
         weights: ``(N,)`` quadrature weights.
+        xp: `jax.numpy` (traced) or ``numpy``.
 
     Returns:
         ``(8, C)``: for each metric of `METRICS` its numerator, then its denominator.
     """
-    f_data = jnp.where(valid, values, 0.0)
+    f_data = xp.where(valid, values, 0.0)
     c = cos_i[:, None]
-    w = jnp.where(valid, weights[:, None], 0.0)
-    diff = jnp.where(valid, f_model - f_data, 0.0)
+    w = xp.where(valid, weights[:, None], 0.0)
+    diff = xp.where(valid, f_model - f_data, 0.0)
     positive = valid & (f_data > 0)
-    relative = jnp.where(positive, diff / jnp.where(positive, f_data, 1.0), 0.0)
-    low = jnp.where(valid, jnp.log1p(jnp.maximum(f_model * c, -0.999)) - jnp.log1p(f_data * c), 0.0)
+    relative = xp.where(positive, diff / xp.where(positive, f_data, 1.0), 0.0)
+    low = xp.where(valid, xp.log1p(xp.maximum(f_model * c, -0.999)) - xp.log1p(f_data * c), 0.0)
     terms = (diff * diff, valid, relative * relative, positive, w * (diff * c) ** 2, w, w * low * low, w)
-    return jnp.stack([jnp.sum(t, axis=0, dtype=diff.dtype) for t in terms])
+    return xp.stack([xp.sum(t, axis=0, dtype=diff.dtype) for t in terms])
 
 
 def metrics_from_sums(sums) -> dict:

@@ -183,6 +183,11 @@ def _robust_scale(problem: Problem, start: dict, data: FitData) -> float:
 
 
 # -------------------------------------------------------------------------------------------------------- polish
+def _polish_width(count: int) -> int:
+    """The number of points a polish of ``count`` starts solves: the next multiple of POLISH_STARTS."""
+    return -(-count // POLISH_STARTS) * POLISH_STARTS
+
+
 def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: list[dict] | None = None):
     """Solve every start of every material in one batched program.
 
@@ -215,7 +220,7 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
         # Starts padded to a multiple of POLISH_STARTS (repeating the last): one compiled pass serves a search's
         # starts, a given start and the hold rounds alike.
         count = len(starts[0])
-        width = -(-count // POLISH_STARTS) * POLISH_STARTS
+        width = _polish_width(count)
         padded = [material + [material[-1]] * (width - count) for material in starts]
         out, compile_time, run_time = _timed(lambda: marquardt.solve(
             problem, padded, [solve_data], rtol=problem.solver.rtol, atol=problem.solver.atol,
@@ -543,7 +548,8 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         else:
             # A pass at the answer itself: the solver's last sums were moved with its amplitudes (and the canonical
             # order may have moved the columns). It gives the status, the covariance and the metrics.
-            normal = normal_equations_at(problem, params, full[m])
+            normal = normal_equations_at(problem, params, full[m],
+                                         width=1 if two_stage else _polish_width(len(starts[0])))
         results.append(_result(problem, base_model, measurements, full[m], params, best, normal, records[m],
                                {"compile": compile_time, "run": run_time / len(items), "init": init_time / len(items)},
                                strategy))

@@ -83,6 +83,8 @@ class _State:
     def where(self, take, other: "_State") -> "_State":
         """This state where ``take (M, S)`` is True, ``other`` elsewhere."""
         def pick(a, b):
+            if a is None:  # sums that were not asked for
+                return None
             return np.where(np.reshape(take, take.shape + (1,) * (np.ndim(a) - take.ndim)), a, b)
 
         return _State(pick(self.x, other.x), NormalEquations(*(pick(a, b) for a, b in zip(self.sums, other.sums))),

@@ -46,7 +46,8 @@ class NormalEquations(NamedTuple):
         meat: Jᵀ diag(r²) J ``(..., P, P)`` (the sandwich covariance's middle).
         channel_cost: rᵀr of each channel ``(..., C)``.
         metric_sums: the goodness-of-fit sums of `brdffit.metrics.metric_sums` ``(..., 8, C)`` at the evaluated
-            point (`brdffit.metrics.metrics_from_sums` turns them into the metrics).
+            point when `accumulate` was asked for them, else None (`brdffit.metrics.metrics_from_sums` turns them
+            into the metrics).
     """
 
     jtj: np.ndarray
@@ -59,13 +60,12 @@ class NormalEquations(NamedTuple):
     def at_point(self, m: int, s: int) -> "NormalEquations":
         """The sums of point ``(m, s)`` of the batch."""
         return NormalEquations(self.jtj[m, s], self.jtr[m, s], float(self.cost[m, s]), self.meat[m, s],
-                               self.channel_cost[m, s], self.metric_sums[m, s])
+                               self.channel_cost[m, s], None if self.metric_sums is None else self.metric_sums[m, s])
 
 
 def _tangents(problem: Problem, tree: dict, data: FitData):
     """For one point and one material: ``(C, Q + 1, N)``, row q the tangent of free name q (in ``problem.free``
-    order) in each channel and row Q the residuals; and the goodness-of-fit sums ``(8, C)`` of the model values
-    (`brdffit.metrics.metric_sums`).
+    order) in each channel and row Q the residuals; and the model values ``(N, C)``.
 
     The Q seeds are stacked and the JVP is vmapped over them (what ``jax.jacfwd`` does): the compiled program
     holds one copy of the model with a tangent axis and evaluates the primal once. One JVP per name, unrolled,
@@ -79,8 +79,7 @@ def _tangents(problem: Problem, tree: dict, data: FitData):
              for k, v in tree.items()}
     residuals, tangents, f = jax.vmap(lambda seed: jax.jvp(r, (tree,), (seed,), has_aux=True),
                                       out_axes=(None, 0, None))(seeds)
-    sums = metric_sums(f, data.values, data.mask, data.cos_i, data.sqrt_weight ** 2)
-    return jnp.transpose(jnp.concatenate([tangents, residuals[None]]), (2, 0, 1)), sums
+    return jnp.transpose(jnp.concatenate([tangents, residuals[None]]), (2, 0, 1)), f
 
 
 _COMPILE_SECONDS = [0.0]
@@ -90,8 +89,8 @@ _COMPILE_SECONDS = [0.0]
 def pass_program(structure: Problem):
     """The jitted pass of a problem structure (`Problem.structure`): ``fn(trees, data) -> (A, sums)`` with
     ``trees`` free name -> value ``(M, S) + shape`` (materials, points of each), ``data`` a `FitData` with a
-    leading material axis, ``A`` ``(M, S, C, Q + 1, N)`` the tangents and residuals of `_tangents` and ``sums``
-    ``(M, S, 8, C)`` its metric sums. Its first call for a shape compiles; the seconds are added to
+    leading material axis, ``A`` ``(M, S, C, Q + 1, N)`` the tangents and residuals of `_tangents` and ``f``
+    ``(M, S, N, C)`` the model values. Its first call for a shape compiles; the seconds are added to
     `compile_seconds`."""
     per_point = jax.vmap(lambda tree, data: _tangents(structure, tree, data), in_axes=(0, None))
     jitted = jax.jit(jax.vmap(per_point, in_axes=(0, 0)))
@@ -119,19 +118,28 @@ def compile_seconds() -> float:
     return _COMPILE_SECONDS[0]
 
 
+def _metric_sums(f, piece: FitData):
+    """`brdffit.metrics.metric_sums` of model values ``f`` ``(M, S, N, C)`` against one piece: ``(M, S, 8, C)``."""
+    values, mask, cos_i, sqrt_weight = (np.asarray(getattr(piece, k)) for k in ("values", "mask", "cos_i",
+                                                                                 "sqrt_weight"))
+    return np.stack([np.stack([metric_sums(point, values[m], mask[m], cos_i[m], sqrt_weight[m] ** 2, xp=np)
+                               for point in material]) for m, material in enumerate(f)])
+
+
 def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
     """One material's ``data`` in equally shaped chunks of ``size`` samples, each with a leading material axis of
     1 (bounds the memory of the tangents; split once and reuse the list when accumulating repeatedly)."""
     return chunk_data(data, size)
 
 
-def accumulate(problem: Problem, trees: dict, pieces: list[FitData]) -> NormalEquations:
+def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bool = False) -> NormalEquations:
     """JᵀJ, Jᵀr, rᵀr, Jᵀ diag(r²) J and the per-channel rᵀr over all of the data, for every point of a batch.
 
     Arguments:
         problem: the `Problem`.
         trees: free name -> physical values ``(M, S) + shape``: S points for each of M materials.
         pieces: the data of the M materials (leading material axis), whole or in chunks (`chunks`).
+        metrics: also sum the goodness-of-fit terms of the model values (on the host, in NumPy).
 
     Returns:
         The `NormalEquations`, each field with leading axes ``(M, S)``.
@@ -156,9 +164,10 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData]) -> NormalEq
         for piece in pieces:
             # The per-channel Gram matrices with BLAS on the host: measured 3x faster on the CPU than the same
             # reductions in XLA, and a (M, S, C, Q + 1, N) transfer per chunk on a GPU.
-            a, piece_sums = fn(trees, piece)
+            a, f = fn(trees, piece)
             a = np.asarray(a)
-            metric_total = metric_total + np.asarray(piece_sums)
+            if metrics:
+                metric_total = metric_total + _metric_sums(np.asarray(f), piece)
             gram = gram + a @ np.swapaxes(a, -1, -2)  # (M, S, C, Q+1, Q+1): tangents and residuals
             weighted = a[..., :q, :] * a[..., q:, :]
             meat = meat + weighted @ np.swapaxes(weighted, -1, -2)
@@ -172,4 +181,5 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData]) -> NormalEq
         jtr = np.sum(incidence * gram[..., index, q, :], axis=-1)
         channel_cost = np.array(gram[..., q, q, :], dtype=float)
         return NormalEquations(jtj=expand(gram[..., :q, :q, :]), jtr=jtr, cost=np.sum(channel_cost, axis=-1),
-                               meat=expand(meat), channel_cost=channel_cost, metric_sums=metric_total)
+                               meat=expand(meat), channel_cost=channel_cost,
+                               metric_sums=metric_total if metrics else None)

@@ -23,11 +23,22 @@ from .problem import FitData, Problem
 __all__ = ["normal_equations_at", "covariances", "Uncertainty"]
 
 
-def normal_equations_at(problem: Problem, params: dict, data: FitData) -> NormalEquations:
-    """JᵀJ, Jᵀ diag(r²) J, Jᵀr and the costs at physical ``params`` over the free parameters (chunked pass)."""
+def normal_equations_at(problem: Problem, params: dict, data: FitData, width: int = 1) -> NormalEquations:
+    """JᵀJ, Jᵀ diag(r²) J, Jᵀr, the costs and the metric sums at physical ``params`` over the free parameters
+    (chunked pass).
+
+    Arguments:
+        problem, params, data: the `Problem`, physical values of every parameter, one material's `FitData`.
+        width: evaluate the point as a batch of this many (equal) points: the width of the solve that found it, so
+            that its compiled pass serves here too instead of compiling one for a single point.
+
+    Returns:
+        The `NormalEquations` of the point.
+    """
     data = data._replace(fixed={k: jnp.asarray(v) for k, v in params.items() if k not in problem.free})
-    trees = {k: np.asarray(params[k], dtype=float)[None, None] for k in problem.free}
-    return accumulate(problem, trees, chunks(data)).at_point(0, 0)
+    trees = {k: np.broadcast_to(np.asarray(params[k], dtype=float), (1, width) + np.shape(params[k])).copy()
+             for k in problem.free}
+    return accumulate(problem, trees, chunks(data), metrics=True).at_point(0, 0)
 
 
 class Uncertainty:
