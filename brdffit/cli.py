@@ -234,9 +234,7 @@ def _load(path, args):
     try:
         if not options:
             return io.load(path)
-        if not path.exists():
-            raise FileNotFoundError(f"{path}: no such file")
-        kind = io.detect_format(path)
+        kind = io.detect_format(path)  # a missing path, a directory, a FIFO, ... is refused here
         if kind != "table":
             flags = [o.flag for o in TABLE_OPTIONS if o.keyword in options]
             verb = "apply" if len(flags) > 1 else "applies"

@@ -25,6 +25,10 @@ __all__ = ["Measurements", "MeasurementError", "concatenate"]
 # A polar angle may exceed π/2 (or fall below 0) by this much through rounding (a file written in degrees, a
 # direction computed from a vector); it is then clipped to the range. Anything further out is an error.
 THETA_TOLERANCE = 1e-9
+# The largest f_r accepted (1/sr). No surface comes near it (a mirror seen by a detector of 1e-6 sr reads about
+# 1e6); the bound keeps squared, weighted residuals finite in float64, so one absurd value (1e300) is refused as
+# input instead of ending a fit as "non-finite".
+MAX_VALUE = 1e100
 
 _TWO_PI = 2.0 * math.pi
 _ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
@@ -180,6 +184,11 @@ class Measurements:
             row, col = _first_bad(np.isinf(values))
             raise MeasurementError("values", row, "a finite value in 1/sr or NaN for missing",
                                    f"channel {col} is {float(values[row, col])!r};", channel=col)
+        huge = values > MAX_VALUE  # NaN compares False
+        if huge.any():
+            row, col = _first_bad(huge)
+            raise MeasurementError("values", row, f"f_r <= {MAX_VALUE:g} 1/sr (a physical BRDF value)",
+                                   f"channel {col} is {float(values[row, col])!r};", channel=col)
         negative = values < 0  # NaN compares False
         if negative.any():
             row, col = _first_bad(negative)
@@ -271,6 +280,33 @@ class Measurements:
     def fields(self) -> dict[str, Any]:
         """The constructor arguments of this object, as a dict (arrays are the read-only originals)."""
         return {name: getattr(self, name) for name in self.__slots__}
+
+    def check_informative(self) -> "Measurements":
+        """Refuse measurements that hold no information for a fit: no sample, every weight 0, or a channel with no
+        present value of positive weight (a fit of them would end "converged" at its start, with negative degrees
+        of freedom). Every reader calls this on what it read; call it on measurements built by hand before a fit.
+
+        Returns:
+            ``self``.
+
+        Raises:
+            MeasurementError: naming the field and, for an empty channel, the channel.
+        """
+        if self.n == 0:
+            raise MeasurementError("values", None, "at least one sample", "no valid samples: there are none;")
+        weighted = np.ones(self.n, dtype=bool) if self.weights is None else self.weights > 0
+        if not weighted.any():
+            raise MeasurementError("weights", None, "at least one weight > 0", "no valid samples: every weight is 0;")
+        informative = self.valid & weighted[:, None]
+        if not informative.any():
+            raise MeasurementError("values", None, "at least one present value (not NaN) of weight > 0",
+                                   "no valid samples: every value is missing (NaN) or has weight 0;")
+        empty = np.flatnonzero(~informative.any(axis=0))
+        if empty.size:
+            k = int(empty[0])
+            raise MeasurementError("values", None, "at least one present value (not NaN) of weight > 0 in every "
+                                   "channel", f"channel {self.channels[k]!r} has none;", channel=k)
+        return self
 
     def wi(self) -> np.ndarray:
         """Unit vectors towards the light, shape ``(N, 3)`` (NumPy float64)."""

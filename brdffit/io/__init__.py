@@ -18,7 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..measurements import Measurements
-from ._common import FormatError, check_not_lfs_pointer
+from ._common import FormatError, check_not_lfs_pointer, read_head
 from .alta import read_alta, write_alta
 from .hdf5 import read_hdf5, read_hdf5_group, update_hdf5, write_hdf5
 from .merl import MerlTable, read_merl, write_merl
@@ -61,12 +61,12 @@ def detect_format(path, head: bytes | None = None) -> str:
     extension.
 
     Raises:
-        FormatError: a Git LFS pointer, or content and extension that name no format brdffit reads.
+        FileNotFoundError: no such file. FormatError: not a regular file, a Git LFS pointer, or content and extension
+            that name no format brdffit reads.
     """
     path = Path(path)
     if head is None:
-        with open(path, "rb") as fh:
-            head = fh.read(4096)  # an ALTA header may put #DIM after a few #URL / #CMD lines
+        head = read_head(path, 4096)  # an ALTA header may put #DIM after a few #URL / #CMD lines
     check_not_lfs_pointer(path, head)
     sniffed = _sniff(head)
     if sniffed:
@@ -106,9 +106,7 @@ def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa
     """
     path = Path(path)
     if format is None:
-        if not path.exists():
-            raise FileNotFoundError(f"{path}: no such file")
-        format = detect_format(path)
+        format = detect_format(path)  # refuses a missing path and anything but a regular file (_common.open_regular)
     if format == "table":
         return read_table(path, **options)
     if format == "merl":

@@ -1,15 +1,30 @@
-"""What every reader and writer shares: the file error, the Git LFS check and atomic replacement of a file."""
+"""What every reader and writer shares: the file error, the Git LFS check, opening only regular files of a bounded
+size, bounded metadata JSON, and atomic replacement of a file."""
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import json
 import os
+import re
+import stat
 import tempfile
 from pathlib import Path
 
-__all__ = ["FormatError", "atomic_path", "check_not_lfs_pointer", "LFS_PREFIX"]
+__all__ = ["FormatError", "atomic_path", "check_not_lfs_pointer", "LFS_PREFIX", "MAX_FILE_BYTES", "open_regular",
+           "read_file_bytes", "read_head", "parse_meta_json", "MAX_META_CHARS", "MAX_META_DEPTH"]
 
 LFS_PREFIX = b"version https://git-lfs"
+
+# The largest input file a reader takes (a MERL table is 35 MB, an RGL-EPFL file well under 100 MB): anything larger
+# is refused before it is read, so that a huge or endless input never exhausts memory.
+MAX_FILE_BYTES = 2 << 30
+# Bounds of a JSON metadata text (a table's "# brdffit-meta:" line, an HDF5 file's meta attribute): its length in
+# characters and the nesting depth of its lists and objects (json's recursive decoder would overflow the stack far
+# deeper, and a deep structure is no metadata a person wrote).
+MAX_META_CHARS = 1 << 20
+MAX_META_DEPTH = 32
 
 
 class FormatError(ValueError):
@@ -42,8 +57,69 @@ def check_not_lfs_pointer(path, head: bytes) -> None:
                                 "'git lfs pull' (or download it) and try again")
 
 
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+          (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def _not_found(path: Path) -> FileNotFoundError:
+    if path.is_symlink():
+        return FileNotFoundError(f"{path}: a symbolic link to {os.readlink(path)!r}, which does not exist")
+    return FileNotFoundError(f"{path}: no such file")
+
+
+def open_regular(path):
+    """Open a file for reading in binary mode, refusing anything that is not a regular file of a bounded size.
+
+    The file is opened without blocking (O_NONBLOCK: a FIFO with no writer would otherwise block forever) and its
+    type is read from the open descriptor (fstat), so what is checked is what is read.
+
+    Arguments:
+        path: the file.
+
+    Returns:
+        A binary file object (the caller closes it).
+
+    Raises:
+        FileNotFoundError: no such file (or a symbolic link to a missing file).
+        FormatError: a directory, FIFO, device or socket; a symbolic link loop; a file larger than
+            `MAX_FILE_BYTES`; a file that cannot be opened (permissions).
+    """
+    path = Path(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        raise _not_found(path) from None
+    except OSError as err:
+        if err.errno == errno.ELOOP:
+            raise FormatError(path, "a symbolic link loop (the link leads, through links, back to itself)") from None
+        raise FormatError(path, f"cannot be opened: {err.strerror}") from None
+    try:
+        info = os.fstat(fd)
+        for is_kind, kind in _KINDS:
+            if is_kind(info.st_mode):
+                raise FormatError(path, f"{kind}, not a regular file; brdffit reads measurements from regular "
+                                        "files only")
+        if not stat.S_ISREG(info.st_mode):
+            raise FormatError(path, "not a regular file; brdffit reads measurements from regular files only")
+        if info.st_size > MAX_FILE_BYTES:
+            raise FormatError(path, f"{info.st_size:,} bytes: larger than the {MAX_FILE_BYTES:,} bytes a reader "
+                                    "takes")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def read_head(path, size: int) -> bytes:
+    """The first ``size`` bytes of a regular file (see `open_regular` for what is refused)."""
+    with open_regular(path) as fh:
+        return fh.read(size)
+
+
 def read_file_bytes(path) -> bytes:
-    """The bytes of a data file; a missing file or a Git LFS pointer is an error that names the file.
+    """The bytes of a data file; a missing file, anything but a regular file of at most `MAX_FILE_BYTES`, or a Git
+    LFS pointer is an error that names the file.
 
     Arguments:
         path: the file.
@@ -52,15 +128,53 @@ def read_file_bytes(path) -> bytes:
         Its content.
 
     Raises:
-        FileNotFoundError: "<path>: no such file". FormatError: the file is a Git LFS pointer.
+        FileNotFoundError: "<path>: no such file". FormatError: not a regular file, too large (`open_regular`), or a
+            Git LFS pointer.
     """
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: no such file") from None
+    with open_regular(path) as fh:
+        data = fh.read(MAX_FILE_BYTES + 1)  # a file that grew after the check is still read only this far
+    if len(data) > MAX_FILE_BYTES:
+        raise FormatError(path, f"larger than the {MAX_FILE_BYTES:,} bytes a reader takes")
     check_not_lfs_pointer(path, data[:64])
     return data
+
+
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
+_BRACKETS = re.compile(r"[\[\]{}]")
+
+
+def parse_meta_json(path, text: str, what: str):
+    """Decode a metadata JSON text after bounding its size and nesting depth.
+
+    Arguments:
+        path: the file it came from (named by errors).
+        text: the JSON text.
+        what: where in the file it is (e.g. "the '# brdffit-meta:' line"), for the messages.
+
+    Returns:
+        The decoded value.
+
+    Raises:
+        FormatError: longer than `MAX_META_CHARS`, nested deeper than `MAX_META_DEPTH`, or not valid JSON.
+    """
+    if len(text) > MAX_META_CHARS:
+        raise FormatError(path, f"{what} holds {len(text):,} characters of metadata; at most {MAX_META_CHARS:,} are "
+                                "read")
+    depth = deepest = 0
+    for char in _BRACKETS.findall(_JSON_STRING.sub('""', text)):  # brackets inside strings do not nest
+        if char in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif char in "]}":
+            depth -= 1
+    if deepest > MAX_META_DEPTH:
+        raise FormatError(path, f"{what} nests its metadata {deepest} levels deep; at most {MAX_META_DEPTH} are "
+                                "read")
+    try:
+        return json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as err:
+        raise FormatError(path, f"{what} is not valid JSON: {err}") from None
 
 
 def _file_mode(path: Path) -> int:

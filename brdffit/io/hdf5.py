@@ -14,11 +14,22 @@ Schema (format_version "1"; docs/formats.md is the reference)::
 
 Every write goes to a temporary file in the target's directory that is renamed into place, so a failed write never
 damages an existing file. Arrays are stored bit for bit, so a round trip is exact.
+
+Reading an untrusted file is bounded (`inspect_hdf5`): before the file is opened here, a forked child process opens
+it, reads every attribute and dataset and checks that each dataset's declared size is below `MAX_DATASET_BYTES`
+and backed by the bytes the file stores; external links, external raw storage and virtual datasets (data of other
+files) are refused. The child is killed after `INSPECT_TIMEOUT_S`: damaged metadata can make libhdf5 loop forever
+(zeroed global-heap objects hang ``H5Aread``), in C code that no Python signal interrupts. The signature may
+follow a user block (at byte 512, 1024, 2048, ... as HDF5 places it).
 """
 
 from __future__ import annotations
 
 import json
+import math
+import os
+import select
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -26,14 +37,25 @@ from typing import Any
 import numpy as np
 
 from ..measurements import MeasurementError, Measurements
-from ._common import FormatError, atomic_path, check_not_lfs_pointer
+from ._common import FormatError, atomic_path, check_not_lfs_pointer, parse_meta_json, read_head
 
 __all__ = ["FORMAT_VERSION", "MEASUREMENTS_GROUP", "read_hdf5", "write_hdf5", "update_hdf5", "read_hdf5_group",
-           "write_measurements_group", "read_measurements_group", "is_hdf5"]
+           "write_measurements_group", "read_measurements_group", "is_hdf5", "inspect_hdf5", "open_hdf5",
+           "MAX_DATASET_BYTES", "MAX_ATTRIBUTE_BYTES", "INSPECT_TIMEOUT_S"]
 
 FORMAT_VERSION = "1"
 MEASUREMENTS_GROUP = "measurements"
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+HEAD_BYTES = 1 << 16  # the signature is looked for in this many first bytes (user blocks up to 32 KiB)
+
+# Limits on what a file may declare (a dataset's shape times its item size is allocated in full when it is read).
+MAX_DATASET_BYTES = 1 << 30
+MAX_ATTRIBUTE_BYTES = 1 << 24
+MAX_OBJECTS = 100_000  # groups and datasets visited: a bound on link cycles (a group hard-linked into itself)
+# Deflate cannot expand data more than 1032:1 (zlib's technical details, "maximum compression factor"), so a
+# filtered dataset declaring more than this times its stored bytes is filled with fill values, not data.
+MAX_FILTER_RATIO = 1032
+INSPECT_TIMEOUT_S = 10.0  # seconds the inspecting child may take (a normal file takes milliseconds)
 
 _ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
 
@@ -44,9 +66,19 @@ def _h5py():
     return h5py
 
 
+def _signature_offset(head: bytes) -> int | None:
+    """Where the HDF5 signature is: at 0, or after a user block at 512, 1024, 2048, ... (HDF5 format spec, III.A)."""
+    offset = 0
+    while offset + len(HDF5_SIGNATURE) <= len(head):
+        if head.startswith(HDF5_SIGNATURE, offset):
+            return offset
+        offset = 512 if offset == 0 else 2 * offset
+    return None
+
+
 def is_hdf5(head: bytes) -> bool:
-    """Whether the first bytes of a file carry the HDF5 signature (at offset 0, as our files have it)."""
-    return head.startswith(HDF5_SIGNATURE)
+    """Whether the first bytes of a file carry the HDF5 signature (at offset 0 or after a user block)."""
+    return _signature_offset(head) is not None
 
 
 def _creator() -> str:
@@ -68,30 +100,156 @@ def _attr_text(value) -> str:
     return str(value)
 
 
+def _attribute(path, obj, name: str, where: str):
+    """An attribute's value; an unreadable one (an unknown string encoding, damaged bytes) is a FormatError."""
+    try:
+        return obj.attrs[name]
+    except (OSError, RuntimeError, KeyError, TypeError, ValueError) as err:
+        raise FormatError(path, f"attribute {name!r} of {where} cannot be read: {err}") from None
+
+
+def _check_attribute(path, obj, name: str, where: str) -> None:
+    """Read one attribute, refusing one that declares more than `MAX_ATTRIBUTE_BYTES` or cannot be decoded."""
+    try:
+        attribute = obj.attrs.get_id(name)
+        size = math.prod(attribute.shape or ()) * attribute.dtype.itemsize
+    except (OSError, RuntimeError, KeyError, TypeError, ValueError) as err:
+        raise FormatError(path, f"attribute {name!r} of {where} cannot be read: {err}") from None
+    if size > MAX_ATTRIBUTE_BYTES:
+        raise FormatError(path, f"attribute {name!r} of {where} declares {size:,} bytes, more than the "
+                                f"{MAX_ATTRIBUTE_BYTES:,} brdffit reads")
+    _attribute(path, obj, name, where)
+
+
+def _check_dataset(path, dataset, where: str) -> None:
+    """Refuse a dataset that reads another file's data or declares more than it (or `MAX_DATASET_BYTES`) holds."""
+    if dataset.is_virtual:
+        raise FormatError(path, f"{where} is a virtual dataset (its data are in other files); brdffit reads data "
+                                "from this file only")
+    if dataset.external:
+        raise FormatError(path, f"{where} keeps its data in external file(s) {[e[0] for e in dataset.external]}; "
+                                "brdffit reads data from this file only")
+    declared = math.prod(dataset.shape or ()) * dataset.dtype.itemsize
+    if declared > MAX_DATASET_BYTES:
+        raise FormatError(path, f"{where} declares shape {dataset.shape} ({declared:,} bytes), more than the "
+                                f"{MAX_DATASET_BYTES:,} bytes brdffit reads from one dataset")
+    stored = dataset.id.get_storage_size()
+    filtered = dataset.id.get_create_plist().get_nfilters() > 0
+    if declared > (MAX_FILTER_RATIO * stored if filtered else stored):
+        raise FormatError(path, f"{where} declares shape {dataset.shape} ({declared:,} bytes) but the file stores "
+                                f"{stored:,} bytes of it (unwritten rows read as fill values); not measured data")
+
+
+def _inspect(path) -> None:
+    """Open ``path`` and read all of it, raising FormatError on what `inspect_hdf5` refuses (runs in the child)."""
+    h5py = _h5py()
+    try:
+        f = h5py.File(path, "r", locking=False)
+    except OSError as err:
+        raise FormatError(path, f"cannot be opened as HDF5 (truncated or damaged?): {err}") from None
+    with f:
+        pending, visited = [("/", f)], 0
+        while pending:
+            where, group = pending.pop()
+            for key in group.attrs:
+                _check_attribute(path, group, key, where)
+            if not isinstance(group, h5py.Group):
+                continue
+            for name in group:
+                full = f"{where.rstrip('/')}/{name if isinstance(name, str) else repr(name)}"
+                link = group.get(name, getlink=True)
+                if isinstance(link, h5py.ExternalLink):
+                    raise FormatError(path, f"{full} is an external link to {link.filename}:{link.path}; brdffit "
+                                            "reads data from this file only")
+                if isinstance(link, h5py.SoftLink):
+                    continue  # its target is visited through its hard link
+                visited += 1
+                if visited > MAX_OBJECTS:
+                    raise FormatError(path, f"more than {MAX_OBJECTS:,} groups and datasets (a link cycle?)")
+                obj = group[name]
+                if isinstance(obj, h5py.Dataset):
+                    _check_dataset(path, obj, full)
+                    obj[()]
+                pending.append((full, obj))
+
+
+def inspect_hdf5(path, timeout: float | None = None) -> None:
+    """Check an HDF5 file in a forked child process that reads all of it, killed after ``timeout`` seconds.
+
+    What the child refuses (`_inspect`): a file libhdf5 cannot open, an unreadable attribute (e.g. an unknown string
+    encoding), an attribute or dataset declaring more than `MAX_ATTRIBUTE_BYTES` / `MAX_DATASET_BYTES` or more than
+    the file stores, external links, external storage, virtual datasets. A child that does not finish in time, or
+    that libhdf5 crashes, makes the file refused too; the parent never runs libhdf5 on such a file.
+
+    Arguments:
+        path: the file.
+        timeout: seconds (default `INSPECT_TIMEOUT_S`).
+
+    Raises:
+        FormatError: naming the file and the reason.
+    """
+    timeout = INSPECT_TIMEOUT_S if timeout is None else float(timeout)
+    read_end, write_end = os.pipe()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # JAX warns of fork(); the child runs no JAX, only libhdf5
+        pid = os.fork()
+    if pid == 0:  # the child: report "" (fine) or the problem through the pipe, never return into the caller
+        os.close(read_end)
+        message = b""
+        try:
+            _inspect(path)
+        except FormatError as err:
+            message = err.problem.encode("utf-8", "replace")
+        except BaseException as err:  # noqa: BLE001 - whatever libhdf5 raises, the parent reports it
+            message = f"cannot be read as HDF5 (truncated or damaged?): {err}".encode("utf-8", "replace")
+        finally:
+            try:
+                os.write(write_end, message[:4096])
+            finally:
+                os._exit(0)
+    os.close(write_end)
+    try:
+        ready, _, _ = select.select([read_end], [], [], timeout)
+        message = os.read(read_end, 4096) if ready else None
+    finally:
+        os.close(read_end)
+    if message is None:
+        os.kill(pid, 9)
+        os.waitpid(pid, 0)
+        raise FormatError(path, f"reading its HDF5 metadata did not finish within {timeout:g} s (damaged metadata "
+                                "makes libhdf5 loop); the file is refused")
+    _, status = os.waitpid(pid, 0)
+    if os.WIFSIGNALED(status):
+        raise FormatError(path, f"libhdf5 crashed (signal {os.WTERMSIG(status)}) reading it: a damaged HDF5 file")
+    if message:
+        raise FormatError(path, message.decode("utf-8", "replace"))
+
+
 def _check_root(path, f) -> None:
     if "format_version" not in f.attrs:
         raise FormatError(path, "an HDF5 file but not one brdffit wrote (no 'format_version' attribute on /); "
                                 "convert it with a table (CSV) or build Measurements from its arrays")
-    version = _attr_text(f.attrs["format_version"])
+    version = _attr_text(_attribute(path, f, "format_version", "/"))
     if version != FORMAT_VERSION:
         raise FormatError(path, f"format_version {version!r} is not one this brdffit reads "
                                 f"(it reads {FORMAT_VERSION!r}); update brdffit")
 
 
-def _open_checked(path):
-    """Open an existing brdffit HDF5 file read-only, or raise a FormatError that says why not."""
+def open_hdf5(path):
+    """Open an existing brdffit HDF5 file read-only, or raise a FormatError that says why not.
+
+    The file must be a regular file (`brdffit.io._common.open_regular`) with the HDF5 signature that passes
+    `inspect_hdf5`, with brdffit's ``format_version``. The caller closes the returned ``h5py.File``.
+    """
     h5py = _h5py()
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(64)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: no such file") from None
+    head = read_head(path, HEAD_BYTES)
     check_not_lfs_pointer(path, head)
     if not head:
         raise FormatError(path, "the file is empty (expected an HDF5 file)")
     if not is_hdf5(head):
-        raise FormatError(path, "not an HDF5 file (no HDF5 signature at the start)")
+        raise FormatError(path, "not an HDF5 file (no HDF5 signature at the start or after a user block)")
+    inspect_hdf5(path)
     try:
         f = h5py.File(path, "r")
     except OSError as err:
@@ -147,16 +305,18 @@ def read_measurements_group(group, path=None) -> Measurements:
             raise FormatError(path, f"{where}/{name} is not a numeric dataset")
         arrays[name] = np.asarray(obj[()], dtype=np.float64)
     try:
-        channels = json.loads(_attr_text(group.attrs["channels"])) if "channels" in group.attrs else None
-        meta = json.loads(_attr_text(group.attrs["meta"])) if "meta" in group.attrs else {}
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise FormatError(path, f"attribute channels or meta of {where} is not valid JSON: {err}") from None
+        channels = (parse_meta_json(path, _attr_text(_attribute(path, group, "channels", where)),
+                                    f"attribute {where}.channels") if "channels" in group.attrs else None)
+        meta = (parse_meta_json(path, _attr_text(_attribute(path, group, "meta", where)), f"attribute {where}.meta")
+                if "meta" in group.attrs else {})
+    except UnicodeDecodeError as err:
+        raise FormatError(path, f"attribute channels or meta of {where} is not UTF-8 text: {err}") from None
     if channels is not None and (not isinstance(channels, list) or not all(isinstance(c, str) for c in channels)):
         raise FormatError(path, f"attribute {where}.channels must be a JSON list of strings")
     if not isinstance(meta, dict):
         raise FormatError(path, f"attribute {where}.meta must be a JSON object")
     try:
-        return Measurements(**arrays, channels=channels, meta=meta)
+        return Measurements(**arrays, channels=channels, meta=meta).check_informative()
     except MeasurementError as err:
         raise err.with_file(f"{path} ({where})" if path else where) from None
 
@@ -185,7 +345,7 @@ def read_hdf5_group(path, group_name: str, read_fn: Callable[[Any], Any]):
     """
     h5py = _h5py()
     name = group_name.strip("/")
-    with _open_checked(path) as f:
+    with open_hdf5(path) as f:
         try:
             if name not in f or not isinstance(f[name], h5py.Group):
                 groups = []
@@ -257,7 +417,7 @@ def update_hdf5(path, group_name: str, write_fn: Callable[[Any], Any]):
     if not parts:
         raise ValueError(f"group_name must name a group below the root, got {group_name!r}")
     path = Path(path)
-    source = _open_checked(path) if path.exists() else None
+    source = open_hdf5(path) if path.exists() else None
     try:
         with atomic_path(path, suffix=".h5") as tmp:
             with h5py.File(tmp, "w") as f:

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..measurements import Measurements
+from ..measurements import MeasurementError, Measurements
 from ._common import FormatError, atomic_path, read_file_bytes
 
 __all__ = ["MerlTable", "read_merl", "write_merl", "looks_like_merl", "DIMS", "SCALES", "theta_h_index",
@@ -222,6 +222,9 @@ class MerlTable:
             `Measurements` of the cells with at least one channel present and both directions above the horizon,
             in cell order (θh, θd, φd), channels ``("R", "G", "B")``, ``weights`` the cell measures (sr², not
             rescaled by a subsample).
+
+        Raises:
+            MeasurementError: no cell with a value above the horizon, or a channel with no value (naming the file).
         """
         theta_i, phi_i, theta_o, phi_o = (a.reshape(-1) for a in cell_angles(float(phi_h)))
         flat = self.data.reshape(3, -1)
@@ -246,8 +249,12 @@ class MerlTable:
         }
         if subsample is not None:
             meta["subsample"] = {"n": int(len(rows)), "seed": int(seed)}
-        return Measurements(theta_i[rows], phi_i[rows], theta_o[rows], phi_o[rows], flat[:, rows].T,
-                            weights=cell_weights().reshape(-1)[rows], channels=CHANNELS, meta=meta)
+        measurements = Measurements(theta_i[rows], phi_i[rows], theta_o[rows], phi_o[rows], flat[:, rows].T,
+                                    weights=cell_weights().reshape(-1)[rows], channels=CHANNELS, meta=meta)
+        try:
+            return measurements.check_informative()
+        except MeasurementError as err:
+            raise err.with_file(self.source or "MERL table") from None
 
     def write(self, path) -> None:
         """Write the table as a MERL binary file (see `write_merl`)."""

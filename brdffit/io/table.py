@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..measurements import MeasurementError, Measurements
-from ._common import FormatError, atomic_path, read_file_bytes
+from ._common import FormatError, atomic_path, parse_meta_json, read_file_bytes
 
 __all__ = ["read_table", "write_table", "ANGLE_COLUMNS", "META_PREFIX"]
 
@@ -41,9 +41,15 @@ _MISSING = ("", "nan", "NaN", "NAN", "NA", "N/A", "na", "-")
 
 
 def _parse_float(text: str) -> float | None:
-    """The number in a cell, NaN for an empty/missing marker, None if it is not a number."""
+    """The number in a cell, NaN for an empty/missing marker, None if it is not a number.
+
+    Only ASCII numbers are numbers: Python's float() also reads other scripts' digits ('٣٠', full-width '４０') and
+    digit groups ('1_000'), which no instrument writes and which would silently change what a cell says.
+    """
     if text in _MISSING:
         return math.nan
+    if not text.isascii() or "_" in text:
+        return None
     try:
         return float(text)
     except ValueError:
@@ -352,7 +358,7 @@ def read_table(path, *, columns: Mapping | None = None, values=None, sigma=None,
     info.update(meta or {})
     try:
         return Measurements(theta_i, phi_i, theta_o, phi_o, vals, sigma=sig, weights=wts, channels=value_names,
-                            meta=info)
+                            meta=info).check_informative()
     except MeasurementError as err:
         column_name = _error_column(err, table, angle_cols, value_cols, sigma_cols, weights_col, pivot_col)
         raise err.with_file(path, lines if err.row is not None else None, column=column_name) from None
@@ -434,10 +440,7 @@ def _meta_from_comments(path, comments: list[str]) -> dict:
     meta = {}
     for line in comments:
         if line.startswith(META_PREFIX):
-            try:
-                meta = json.loads(line[len(META_PREFIX):])
-            except json.JSONDecodeError as err:
-                raise FormatError(path, f"the {META_PREFIX!r} line is not valid JSON: {err}") from None
+            meta = parse_meta_json(path, line[len(META_PREFIX):], f"the {META_PREFIX!r} line")
             if not isinstance(meta, dict):
                 raise FormatError(path, f"the {META_PREFIX!r} line must hold a JSON object")
     others = [c for c in comments if not c.startswith(META_PREFIX) and c != _HEADER_COMMENT]

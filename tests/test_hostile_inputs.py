@@ -1,0 +1,316 @@
+"""Hostile and broken inputs (issue 20): every reader refuses, by a named error and in bounded time and memory,
+what is not a regular file, HDF5 files that declare more than they hold or read other files, undecodable
+attributes, looping metadata, deeply nested metadata JSON, measurements without information and digits that are
+not ASCII numbers; the command line turns each into exit code 2 and a message naming the file."""
+
+import json
+import os
+import resource
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+import brdffit.io as bio
+from brdffit.cli import EXIT_BAD_INPUT, main
+from brdffit.io import FormatError, hdf5, merl
+from brdffit.io._common import MAX_META_DEPTH
+from brdffit.measurements import MeasurementError, Measurements
+
+READERS = {
+    "load": bio.load,
+    "table": bio.read_table,
+    "merl": bio.read_merl,
+    "hdf5": bio.read_hdf5,
+    "alta": bio.read_alta,
+    "rgl": bio.read_rgl,
+}
+
+
+@pytest.fixture
+def deadline():
+    """Fail a test that blocks (e.g. on a FIFO) instead of hanging the suite: SIGALRM after 20 s."""
+    def expire(signum, frame):
+        raise TimeoutError("the reader blocked for 20 s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.alarm(20)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, previous)
+
+
+def small(n=3, values=None, **fields) -> Measurements:
+    return Measurements(np.radians(np.linspace(0, 60, n)), 0.0, np.radians(np.linspace(10, 70, n)), np.pi,
+                        np.linspace(0.1, 0.3, n) if values is None else values, **fields)
+
+
+def run_cli(args, cwd, memory=4 << 30, timeout=120):
+    """``python -m brdffit.cli ARGS`` in a child with an address-space limit; returns (exit code, stderr)."""
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
+
+    proc = subprocess.run([sys.executable, "-m", "brdffit.cli", *map(str, args)], cwd=cwd, capture_output=True,
+                          text=True, timeout=timeout, preexec_fn=limit,
+                          env={**os.environ, "JAX_PLATFORMS": "cpu"})
+    return proc.returncode, proc.stderr
+
+
+# ------------------------------------------------------------------------------------- regular files only
+def special_files(tmp_path) -> dict:
+    fifo = tmp_path / "pipe.csv"
+    os.mkfifo(fifo)
+    zero = tmp_path / "zero.binary"
+    zero.symlink_to("/dev/zero")
+    folder = tmp_path / "folder.h5"
+    folder.mkdir()
+    loop = tmp_path / "loop.csv"
+    loop.symlink_to(tmp_path / "loop2.csv")
+    (tmp_path / "loop2.csv").symlink_to(loop)
+    return {fifo: "a FIFO (named pipe), not a regular file", zero: "a character device, not a regular file",
+            folder: "a directory, not a regular file", loop: "a symbolic link loop"}
+
+
+@pytest.mark.parametrize("reader", sorted(READERS))
+def test_every_reader_refuses_what_is_not_a_regular_file(tmp_path, deadline, reader):
+    for path, problem in special_files(tmp_path).items():
+        start = time.perf_counter()
+        with pytest.raises(FormatError) as info:
+            READERS[reader](path)
+        assert info.value.path == str(path) and info.value.problem.startswith(problem), (reader, str(info.value))
+        assert time.perf_counter() - start < 1.0  # answered at once: the FIFO is never waited on
+
+
+def test_a_dangling_link_says_where_it_points(tmp_path):
+    link = tmp_path / "gone.csv"
+    link.symlink_to(tmp_path / "missing.csv")
+    with pytest.raises(FileNotFoundError, match=r"gone.csv: a symbolic link to '.*missing.csv', which does not"):
+        bio.load(link)
+
+
+def test_cli_refuses_special_files_with_exit_2(tmp_path, capsys, deadline):
+    for path, problem in special_files(tmp_path).items():
+        assert main(["info", str(path)]) == EXIT_BAD_INPUT
+        assert main(["info", str(path), "--values", "R"]) == EXIT_BAD_INPUT  # the table-option path too
+        err = capsys.readouterr().err
+        assert err.count(f"{path}: {problem}") == 2, err
+
+
+# ------------------------------------------------------------------------------------------------- HDF5
+def brdffit_file(path, n_rows=None, build=None, **kwargs) -> Path:
+    """A brdffit HDF5 file; ``build(group)`` writes the measurement datasets itself when given."""
+    with h5py.File(path, "w", **kwargs) as f:
+        f.attrs["format_version"] = hdf5.FORMAT_VERSION
+        group = f.create_group("measurements")
+        if build is None:
+            hdf5.write_measurements_group(group, small())
+        else:
+            build(group)
+    return path
+
+
+def declared_rows(rows):
+    def build(group):
+        for name in ("theta_i", "phi_i", "theta_o", "phi_o"):
+            group.create_dataset(name, shape=(rows,), chunks=(1024,), dtype="f8", fillvalue=0.1)
+        group.create_dataset("values", shape=(rows, 1), chunks=(1024, 1), dtype="f8", fillvalue=0.2)
+    return build
+
+
+def test_declared_sizes_beyond_the_limit_are_refused_before_allocating(tmp_path):
+    huge = brdffit_file(tmp_path / "huge.h5", build=declared_rows(10**9))
+    assert huge.stat().st_size < 20_000  # a few KB that declare 5 x 8 GB
+    code, err = run_cli(["info", huge], tmp_path, memory=3 << 30)  # 8 GB cannot even be allocated in there
+    assert code == EXIT_BAD_INPUT and "Traceback" not in err
+    assert "huge.h5: /measurements/" in err and "declares shape (1000000000,) (8,000,000,000 bytes), more than " \
+        f"the {hdf5.MAX_DATASET_BYTES:,} bytes" in err
+
+
+def test_declared_rows_the_file_does_not_store_are_refused(tmp_path):
+    # 10^7 rows (80 MB a dataset, below the limit) in a few KB: the rows are fill values, not data.
+    path = brdffit_file(tmp_path / "fill.h5", build=declared_rows(10**7))
+    with pytest.raises(FormatError, match=r"declares shape \(10000000,\) \(80,000,000 bytes\) but the file stores "
+                                          r"0 bytes of it"):
+        bio.load(path)
+    # Compressed data are real content: a gzip-filtered file reads back exactly.
+    m = small(n=5000, values=np.full(5000, 0.25))
+    bio.save(m, tmp_path / "gzip.h5", compression="gzip")
+    assert np.array_equal(bio.load(tmp_path / "gzip.h5").values, m.values)
+
+
+def test_zeroed_heap_bytes_are_answered_in_bounded_time(tmp_path, monkeypatch):
+    path = tmp_path / "zeroed.h5"
+    bio.save(small(), path)
+    data = bytearray(path.read_bytes())
+    heap = data.find(b"GCOL")  # the global heap holding the variable-length string attributes
+    assert heap > 0
+    data[heap + 32:heap + 32 + 512] = bytes(512)  # its objects zeroed: libhdf5's H5Aread then loops forever
+    path.write_bytes(bytes(data))
+    monkeypatch.setattr(hdf5, "INSPECT_TIMEOUT_S", 2.0)
+    start = time.perf_counter()
+    with pytest.raises(FormatError, match=r"zeroed.h5: reading its HDF5 metadata did not finish within 2 s"):
+        bio.load(path)
+    assert time.perf_counter() - start < 5.0
+
+
+def test_the_inspection_costs_milliseconds(tmp_path):
+    path = tmp_path / "m.h5"
+    bio.save(small(n=20_000, values=np.full((20_000, 3), 0.2)), path)
+    bio.load(path)
+    start = time.perf_counter()
+    for _ in range(5):
+        hdf5.inspect_hdf5(path)
+    per_file = (time.perf_counter() - start) / 5
+    assert per_file < 0.25, per_file  # measured 17-30 ms with JAX loaded (the fork copies the page tables)
+
+
+def unknown_encoding_file(path) -> Path:
+    """A brdffit file whose meta attribute's string datatype declares character set 5 (only 0 and 1 exist)."""
+    def build(group):
+        hdf5.write_measurements_group(group, small())
+        del group.attrs["meta"]
+        group.attrs.create("meta", np.bytes_("{}" + " " * 35))  # a fixed-length string of 37 bytes
+    brdffit_file(path, build=build)
+    data = bytearray(path.read_bytes())
+    at = data.find(b"meta\x00\x00\x00\x00\x13")  # the attribute's name, padded to 8, then its datatype (class 3)
+    assert at > 0
+    data[at + 9] = (data[at + 9] & 0x0F) | 0x50  # bits 4-7 of the class bit field: the character set
+    path.write_bytes(bytes(data))
+    with h5py.File(path) as f, pytest.raises(TypeError, match="Unknown string encoding"):
+        f["measurements"].attrs["meta"]  # what plain h5py does with it
+    return path
+
+
+def test_an_unknown_string_encoding_is_a_named_error(tmp_path, capsys):
+    path = unknown_encoding_file(tmp_path / "enc.h5")
+    with pytest.raises(FormatError, match=r"enc.h5: attribute 'meta' of /measurements cannot be read: Unknown "
+                                          r"string encoding \(value 5\)"):
+        bio.load(path)
+    assert main(["info", str(path)]) == EXIT_BAD_INPUT
+    assert "Unknown string encoding" in capsys.readouterr().err
+
+
+def test_external_links_and_external_storage_are_refused(tmp_path):
+    other = tmp_path / "other.h5"
+    bio.save(small(values=[0.7, 0.8, 0.9]), other)
+
+    def linked(group):
+        hdf5.write_measurements_group(group, small())
+        del group["values"]
+        group["values"] = h5py.ExternalLink(str(other), "/measurements/values")
+    path = brdffit_file(tmp_path / "link.h5", build=linked)
+    with pytest.raises(FormatError, match=r"/measurements/values is an external link to .*other.h5:/measurements/"
+                                          r"values; brdffit reads data from this file only"):
+        bio.load(path)
+    raw = tmp_path / "raw.bin"
+    raw.write_bytes(np.array([0.7, 0.8, 0.9]).tobytes())
+
+    def external(group):
+        hdf5.write_measurements_group(group, small())
+        del group["values"]
+        group.create_dataset("values", shape=(3, 1), dtype="<f8", external=[(str(raw), 0, 24)])
+    path = brdffit_file(tmp_path / "external.h5", build=external)
+    with pytest.raises(FormatError, match=r"/measurements/values keeps its data in external file\(s\)"):
+        bio.load(path)
+
+
+def test_a_file_with_a_userblock_is_read(tmp_path):
+    m = small(values=[0.15, 0.25, 0.35])
+    path = brdffit_file(tmp_path / "ub.h5", build=lambda g: hdf5.write_measurements_group(g, m), userblock_size=1024)
+    assert path.read_bytes()[1024:1032] == hdf5.HDF5_SIGNATURE and not hdf5.is_hdf5(path.read_bytes()[:1024])
+    assert bio.detect_format(path) == "hdf5"
+    assert np.array_equal(bio.load(path).values, m.values)
+    assert np.array_equal(bio.load(path.rename(tmp_path / "ub.data")).values, m.values)  # by content alone
+
+
+# ------------------------------------------------------------------------------------------- meta JSON
+@pytest.mark.parametrize("depth", [MAX_META_DEPTH + 1, 1_000, 100_000])
+def test_deeply_nested_meta_json_is_a_named_error(tmp_path, depth):
+    table = tmp_path / "deep.csv"
+    table.write_text("# brdffit-meta: " + "[" * depth + "]" * depth + "\ntheta_i,phi_i,theta_o,phi_o,R\n"
+                     "10,0,20,180,0.3\n")
+    with pytest.raises(FormatError, match=rf"deep.csv: the '# brdffit-meta:' line nests its metadata {depth} levels "
+                                          rf"deep; at most {MAX_META_DEPTH} are read"):
+        bio.load(table)
+
+    def nested(group):
+        hdf5.write_measurements_group(group, small())
+        group.attrs["meta"] = '{"a": ' * depth + "1" + "}" * depth
+    path = brdffit_file(tmp_path / "deep.h5", build=nested)
+    with pytest.raises(FormatError, match=rf"deep.h5: attribute /measurements.meta nests its metadata {depth} levels"):
+        bio.load(path)
+
+
+def test_meta_json_within_the_bounds_reads_and_brackets_in_strings_do_not_count(tmp_path):
+    meta = {"note": "[[[[" * 100}
+    for _ in range(MAX_META_DEPTH - 1):
+        meta = {"k": meta}
+    m = small(meta=meta)
+    bio.save(m, tmp_path / "ok.csv")
+    assert bio.load(tmp_path / "ok.csv").meta["k"] == meta["k"]
+    table = tmp_path / "big.csv"
+    table.write_text('# brdffit-meta: {"x": "' + "a" * (1 << 20) + '"}\ntheta_i,phi_i,theta_o,phi_o,R\n10,0,20,180,1\n')
+    with pytest.raises(FormatError, match=r"characters of metadata; at most 1,048,576 are read"):
+        bio.load(table)
+
+
+# ----------------------------------------------------------------------------- no information, no fit
+def test_zero_samples_and_all_missing_files_are_refused(tmp_path, capsys):
+    def empty(group):
+        hdf5.write_measurements_group(group, small())
+        for name in ("theta_i", "phi_i", "theta_o", "phi_o", "values"):
+            del group[name]
+            group.create_dataset(name, shape=(0,) if name != "values" else (0, 1), dtype="f8")
+    path = brdffit_file(tmp_path / "empty.h5", build=empty)
+    with pytest.raises(MeasurementError, match=r"empty.h5 \(/measurements\): values: no valid samples: there are "
+                                               r"none; expected at least one sample"):
+        bio.load(path)
+    assert main(["info", str(path)]) == EXIT_BAD_INPUT
+    assert "empty.h5 (/measurements): values: no valid samples" in capsys.readouterr().err
+
+    missing = tmp_path / "missing.binary"
+    merl.write_merl(merl.MerlTable(np.full((3, *merl.DIMS), np.nan)), missing)
+    assert np.all(np.frombuffer(missing.read_bytes()[12:], "<f8") == -1.0)  # every cell marked "no value"
+    with pytest.raises(MeasurementError, match=r"missing.binary: values: no valid samples: there are none"):
+        bio.load(missing)
+
+
+@pytest.mark.parametrize("rows, weights, message", [
+    ("10,0,20,180,nan,nan\n30,0,40,180,nan,nan\n", "", "values: no valid samples: every value is missing"),
+    ("10,0,20,180,0.1,0.2,0\n30,0,40,180,0.3,0.4,0\n", ",weights",
+     "weights (column 'weights'): no valid samples: every weight is 0"),
+    ("10,0,20,180,0.1,nan\n30,0,40,180,0.3,nan\n", "", "values (column 'G'): channel 'G' has none"),
+    ("10,0,20,180,0.1,nan,1\n30,0,40,180,0.3,0.4,0\n", ",weights",
+     "values (column 'G'): channel 'G' has none"),  # G's only weighted value is missing
+])
+def test_tables_without_information_are_refused_naming_the_channel(tmp_path, capsys, rows, weights, message):
+    table = tmp_path / "t.csv"
+    table.write_text(f"theta_i,phi_i,theta_o,phi_o,R,G{weights}\n{rows}")
+    with pytest.raises(MeasurementError) as info:
+        bio.load(table)
+    assert str(info.value).startswith(f"{table}: {message}")
+    assert main(["fit", str(table), "--model", "lambert", "--out", str(tmp_path / "o")]) == EXIT_BAD_INPUT
+    assert message in capsys.readouterr().err and not (tmp_path / "o").exists()  # refused before any fit
+
+
+def test_an_absurd_value_is_refused_as_input(tmp_path):
+    table = tmp_path / "huge.csv"
+    table.write_text("theta_i,phi_i,theta_o,phi_o,R\n10,0,20,180,0.3\n30,0,40,180,1e300\n")
+    with pytest.raises(MeasurementError, match=r"huge.csv: line 3: values \(column 'R'\): channel 0 is 1e\+300; "
+                                               r"expected f_r <= 1e\+100 1/sr"):
+        bio.load(table)
+
+
+@pytest.mark.parametrize("cell, python_reads", [("٣٠", 30.0), ("４０", 40.0), ("1_000", 1000.0)])
+def test_digits_that_are_not_ascii_numbers_are_rejected(tmp_path, cell, python_reads):
+    table = tmp_path / "digits.csv"
+    table.write_text(f"theta_i,phi_i,theta_o,phi_o,R\n10,0,20,180,0.3\n{cell},0,40,180,0.2\n", encoding="utf-8")
+    assert float(cell) == python_reads  # what float() alone would have read
+    with pytest.raises(FormatError) as info:
+        bio.load(table)
+    assert str(info.value) == f"{table}: line 3, column 1 ('theta_i'): cannot read {cell!r} as a number"
