@@ -1,0 +1,154 @@
+"""Export a fitted model: brdffit's JSON, a Mitsuba 3 ``<bsdf>`` document or pbrt-v4 ``MakeNamedMaterial``
+statements.
+
+One file per target, each with a ``write`` function; `TARGETS` is the registry that the CLI's ``--to`` choices
+and `EXPORT_FORMATS` come from. Shared pieces (the lobes as renderer terms, the measured deviation, the Schlick
+-> index fit) are in `brdffit.export.terms`; the ``fit`` option is `brdffit.export.refit`. Every renderer output
+opens with comments naming the source spec and the brdffit version, one ``approximation:`` line per
+approximation made, and the deviation of the written material from the source measured at 2,000 random direction
+pairs (docs/export.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from . import mitsuba, native, pbrt
+from .terms import ExportError, f0_to_eta
+
+__all__ = ["EXPORT_FORMATS", "TARGETS", "Target", "ExportError", "export", "export_details", "f0_to_eta"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Target:
+    """An export format.
+
+    Attributes:
+        name: the ``to=`` / ``--to`` name.
+        description: one line for help texts.
+        write: for a renderer, ``write(model, name, header) -> (text, written, notes, deviation)``; None for
+            JSON, which `native.write` handles (it takes fits with one model per channel).
+    """
+
+    name: str
+    description: str
+    write: object = None
+
+
+TARGETS = {t.name: t for t in (
+    Target("json", "brdffit's own description (model_from_dict reads it back)"),
+    Target("mitsuba", "a Mitsuba 3 <bsdf version=\"3.0.0\"> document", mitsuba.write),
+    Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", pbrt.write),
+)}
+EXPORT_FORMATS = tuple(TARGETS)
+
+
+@dataclasses.dataclass(frozen=True)
+class Export:
+    """A renderer export with what it measured.
+
+    Attributes:
+        text: the output.
+        written: the written material, as a brdffit `Model` (Mitsuba) or a function (wi, wo) -> f_r (pbrt).
+        source: the model that was exported (the fit's model; before the ``fit`` option).
+        notes: the approximations made.
+        deviation: `brdffit.export.terms.Deviation` of ``written`` from ``source``.
+    """
+
+    text: str
+    written: object
+    source: object
+    notes: list
+    deviation: object
+
+
+def _unwrap(model_or_result):
+    from ..fitting.result import FitResult
+    from ..models import Model, get
+
+    if isinstance(model_or_result, FitResult):
+        return model_or_result.model, model_or_result
+    if isinstance(model_or_result, Model):
+        return model_or_result, None
+    if isinstance(model_or_result, str):
+        return get(model_or_result), None
+    raise TypeError(f"export needs a brdffit Model, FitResult or spec string, got {type(model_or_result).__name__}")
+
+
+def _generator() -> str:
+    import brdffit
+
+    return f"brdffit {getattr(brdffit, '__version__', 'unknown')}"
+
+
+def export_details(model_or_result, to: str, *, name: str = "material", fit: bool = False) -> Export:
+    """`export` to a renderer, returning the written material and its measured deviation with the text.
+
+    Arguments:
+        model_or_result, name, fit: as `export`.
+        to: ``"mitsuba"`` or ``"pbrt"``.
+
+    Returns:
+        An `Export`.
+
+    Raises:
+        ExportError, ValueError: as `export`.
+    """
+    target = TARGETS.get(to)
+    if target is None or target.write is None:
+        raise ValueError(f"unknown renderer {to!r}; choose one of "
+                         f"{', '.join(t.name for t in TARGETS.values() if t.write is not None)}")
+    model, result = _unwrap(model_or_result)
+    if model is None:
+        raise ExportError(f"a fit in channel_mode='independent' has one model per channel ({result.spec}); "
+                          f"{to} needs one material: refit with channel_mode='shared-shape' or export to json")
+    header = [f"{_generator()} export of model {model.spec} to {to}"]
+    exported = model
+    if fit:
+        from .refit import fit_exportable
+
+        exported, line = fit_exportable(model)
+        header.append(line)
+    text, written, notes, deviation = target.write(exported, name, header)
+    if fit:
+        # The deviation a renderer writes is from the model it was given; the fit's source is the original.
+        from .terms import measure
+
+        deviation = measure(model, written if not hasattr(written, "lobes") else written)
+        text = text.replace("from the source model", f"from the fitted model {exported.spec}", 1)
+        marker = "<!-- " if to == "mitsuba" else "# "
+        closing = " -->" if to == "mitsuba" else ""
+        first = text.index("\n") + 1
+        text = (text[:first] + f"{marker}achieved by the fit, from the source model {model.spec}: "
+                f"{deviation.describe()}{closing}\n" + text[first:])
+    return Export(text, written, model, notes, deviation)
+
+
+def export(model_or_result, to: str = "json", *, name: str = "material", fit: bool = False) -> str:
+    """Write a model (or the model of a fit) in a renderer's own terms.
+
+    Arguments:
+        model_or_result: a `brdffit.Model`, a `brdffit.FitResult` or a spec string (default parameters).
+        to: a name in `TARGETS`: ``"json"`` (spec, channels, parameters, plus ``stderr`` and ``status`` for a
+            `FitResult`; `brdffit.models.model_from_dict` reads it back), ``"mitsuba"`` (a Mitsuba 3
+            ``<bsdf version="3.0.0">`` document for ``mitsuba.load_string``) or ``"pbrt"`` (pbrt-v4
+            ``MakeNamedMaterial`` statements, the last one named ``name``).
+        name: the material's id (Mitsuba) or name (pbrt).
+        fit: for a renderer, fit lambert + GGX lobes that it has exactly to the model over the hemisphere
+            (`brdffit.export.refit`) and write that, with the achieved error in the comments; this also exports
+            lobes with no equivalent (Oren-Nayar, Ward, Lafortune, ...). Ignored for JSON.
+
+    Returns:
+        The text. Renderer outputs open with comments naming the source spec, the brdffit version, each
+        approximation the mapping made and the measured deviation of what is written (docs/export.md).
+
+    Raises:
+        ExportError: the model has a lobe with no equivalent in that renderer (and ``fit`` is false), or more
+            channels than RGB. ValueError: unknown format.
+    """
+    if to not in TARGETS:
+        raise ValueError(f"unknown export format {to!r}; choose one of {', '.join(EXPORT_FORMATS)}")
+    if TARGETS[to].write is None:
+        model, result = _unwrap(model_or_result)
+        return native.write(model, result, _generator())
+    return export_details(model_or_result, to, name=name, fit=fit).text

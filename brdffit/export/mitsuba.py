@@ -1,0 +1,262 @@
+"""Mitsuba 3: a fitted model as a ``<bsdf version="3.0.0">`` document that ``mitsuba.load_string`` takes.
+
+Plugins written (Mitsuba 3 ``src/bsdfs/``; parameters as its plugin tables document them):
+
+| plugin | as a brdffit term | used for |
+|---|---|---|
+| ``diffuse`` (``reflectance``) | ρ/π | every ``lambert`` lobe (summed) |
+| ``roughconductor`` (``distribution``, ``alpha``, ``eta``, ``k``, ``specular_reflectance``) | ks F_conductor D G1 G1 / (4 cosθi cosθo) | ``fresnel=conductor``; with ``material`` none (η = 0, k = 1, F = 1) the constant part of a Schlick term |
+| ``roughplastic`` (``diffuse_reflectance`` 0, ``int_ior``, ``ext_ior`` 1, ``specular_reflectance``) | ks F_dielectric D G1 G1 / (4 cosθi cosθo) | ``fresnel=dielectric`` |
+| ``principled`` (``metallic`` 1, ``base_color`` = f0', ``roughness`` = √α) | Schlick(f0') D_GGX G1 G1 / (4 cosθi cosθo) | ``fresnel=schlick`` with GGX: the only Schlick Fresnel in Mitsuba |
+| ``blendbsdf`` (``weight`` t) | (1 − t) first + t second | sums: each part scaled by 1/its weight |
+
+A sum A + B is written exactly as a blend of 2A and 2B: ``blendbsdf`` takes convex combinations, and each part's
+amplitude (``reflectance``, ``specular_reflectance``) is scaled by the inverse of its weight. Values above 1 go
+through an ``srgb`` texture with ``unbounded`` true, which Mitsuba takes as given (a plain ``<rgb>`` reflectance
+must lie in [0, 1]). ``principled`` has no amplitude: its weight in the blend is its amplitude, so a Schlick lobe
+ks (f0 + (1 − f0) x) is split into a principled part of weight w and base colour f0' with w (1 − f0') = ks (1 − f0),
+plus a mirror ``roughconductor`` (F = 1) with the remaining ks − w. That is exact while ks (1 − f0) <= w <= ks in
+every channel with the weights summing to at most 1; otherwise the nearest split is written and its measured
+deviation is stated.
+
+Mitsuba's ``bsdf.eval`` returns f_r cosθ of the sampled direction (``wo`` in Mitsuba's naming, the direction to
+the light in brdffit's); the BRDF is reciprocal, so only that cosine differs from brdffit's f_r (docs/export.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from . import terms as tm
+
+__all__ = ["write", "EXPORTABLE"]
+
+EXPORTABLE = ("lambert (any number, summed) and cook-torrance or ggx lobes with any Fresnel mode, any number, "
+              "summed")
+# Where a principled part shares a blend with other parts, their weight is at least this much.
+_MIN_OTHER_WEIGHT = 1e-3
+# A dielectric lobe with eta at or below this reflects nothing (F = 0 for eta = 1).
+_DIELECTRIC_NOTHING = 1.0 + 1e-12
+
+
+@dataclasses.dataclass
+class _Leaf:
+    """One plugin of the blend.
+
+    Attributes:
+        plugin: the Mitsuba plugin type.
+        params: (tag, name, value) of its parameters other than the amplitude.
+        amplitude: the name of its amplitude parameter (None for ``principled``).
+        coefficient: the amplitude it must contribute, per channel (for a leaf with an amplitude).
+        weight: its blend weight, fixed for ``principled``, assigned for the others.
+        parts: what it contributes, in brdffit terms: (lobe, local parameters) at the final amplitudes.
+    """
+
+    plugin: str
+    params: list
+    amplitude: str | None
+    coefficient: np.ndarray | None = None
+    weight: float | None = None
+    parts: list = dataclasses.field(default_factory=list)
+
+
+def _microfacet_params(distribution, alpha):
+    return [("string", "distribution", distribution), ("float", "alpha", alpha)]
+
+
+def _schlick_split(term, channels):
+    """(amplitude of the F = 1 part, amplitude of the (1 − cos)⁵ part) of a Schlick lobe, per channel."""
+    ks = np.broadcast_to(term.params["ks"], (channels,)).astype(float)
+    f0 = float(term.params["f0"])
+    return ks * f0, ks * (1.0 - f0)
+
+
+def _leaves(model: tm.Model, notes: list) -> list[_Leaf]:
+    """Map the model's terms to plugins (the principled weights are set by `_weigh`)."""
+    channels = model.channels
+    leaves, schlick = [], []
+    rho = None
+    for term in tm.terms(model, EXPORTABLE):
+        if term.diffuse:
+            rho = term.params["rho_d"] if rho is None else rho + term.params["rho_d"]
+            continue
+        lobe, alpha, ks = term.lobe, term.alpha, term.params["ks"]
+        distribution = "ggx" if lobe.distribution == "ggx" else "beckmann"
+        if lobe.distribution == "blinn":
+            notes.append(f"the Blinn distribution of width m = {tm.number(alpha)} became Mitsuba's Beckmann of "
+                         "the same m")
+        if lobe.distribution != "ggx":
+            notes.append("Mitsuba evaluates the Beckmann Smith G1 with Walter et al.'s rational approximation "
+                         "(not part of the measured deviation below; docs/export.md measures it)")
+        if lobe.shadowing != "smith":
+            notes.append(f"{lobe.name} shadowing={lobe.shadowing} became Mitsuba's separable Smith G1(wi) G1(wo)")
+        if lobe.fresnel == "conductor":
+            eta, k = term.params["eta"], term.params["k"]
+            leaves.append(_Leaf("roughconductor", _microfacet_params(distribution, alpha)
+                                + [("rgb", "eta", eta), ("rgb", "k", k)], "specular_reflectance", ks, parts=[
+                                    (tm.microfacet_lobe(distribution, "conductor"),
+                                     {"ks": ks, "m": alpha, "eta": eta, "k": k})]))
+        elif lobe.fresnel == "dielectric":
+            eta = float(term.params["eta"])
+            if eta <= _DIELECTRIC_NOTHING:
+                notes.append(f"the {lobe.name} lobe has eta = 1: its Fresnel term is 0, it reflects nothing and "
+                             "was left out (exact)")
+                continue
+            leaves.append(_Leaf("roughplastic", _microfacet_params(distribution, alpha)
+                                + [("float", "int_ior", eta), ("float", "ext_ior", 1.0),
+                                   ("rgb", "diffuse_reflectance", np.zeros(3)), ("boolean", "nonlinear", False)],
+                                "specular_reflectance", ks, parts=[
+                                    (tm.microfacet_lobe(distribution, "dielectric"), {"ks": ks, "m": alpha,
+                                                                                      "eta": eta})]))
+        elif distribution == "ggx":
+            schlick.append(term)
+        else:
+            f0 = float(term.params["f0"])
+            eta, k, curve = tm.schlick_to_conductor(f0)
+            notes.append(f"Schlick f0 = {tm.number(f0)} with the Beckmann distribution: Mitsuba's only Schlick "
+                         f"Fresnel is principled's (GGX), so the conductor Fresnel of the closest index eta = "
+                         f"{tm.number(eta)}, k = {tm.number(k)} was written (the curves differ by up to "
+                         f"{curve:.3g} absolute)")
+            leaves.append(_Leaf("roughconductor", _microfacet_params(distribution, alpha)
+                                + [("rgb", "eta", np.full(3, eta)), ("rgb", "k", np.full(3, k))],
+                                "specular_reflectance", ks, parts=[
+                                    (tm.microfacet_lobe(distribution, "conductor"),
+                                     {"ks": ks, "m": alpha, "eta": eta, "k": k})]))
+    if rho is not None:
+        leaves.insert(0, _Leaf("diffuse", [], "reflectance", rho, parts=[(tm.lambert_lobe(), {"rho_d": rho})]))
+    leaves.extend(_schlick_leaves(schlick, channels, bool(leaves), notes))
+    return leaves
+
+
+def _schlick_leaves(schlick: list, channels: int, others: bool, notes: list) -> list[_Leaf]:
+    """Principled (+ mirror) leaves of the GGX Schlick lobes, with weights as small as exactness allows."""
+    if not schlick:
+        return []
+    split = [_schlick_split(term, channels) for term in schlick]
+    weights = np.array([float(np.max(x)) for _, x in split])      # w >= ks (1 - f0) keeps f0' >= 0
+    mirror_needed = any(np.any(a - (w - x) > 1e-15) for (a, x), w in zip(split, weights))
+    cap = 1.0 - _MIN_OTHER_WEIGHT if (others or mirror_needed) else 1.0
+    if weights.sum() > cap:
+        notes.append(f"the Schlick lobes need principled weights summing to {weights.sum():.6g} > {cap:g} "
+                     f"(ks (1 - f0) = {', '.join(f'{w:.6g}' for w in weights)}): scaled down to fit, so their "
+                     "(1 - cos)^5 part is too dark (measured deviation below); no exact construction exists in "
+                     "Mitsuba 3 for ks (1 - f0) > 1")
+        weights = weights * (cap / weights.sum())
+    leaves = []
+    for term, (a, x), w in zip(schlick, split, weights):
+        if w <= 0.0:
+            continue
+        base = np.clip(1.0 - x / w, 0.0, 1.0)
+        alpha = term.alpha
+        lobe_f1 = tm.microfacet_lobe("ggx", "schlick")
+        leaves.append(_Leaf("principled", [("rgb", "base_color", base), ("float", "metallic", 1.0),
+                                           ("float", "roughness", math.sqrt(alpha))], None, weight=float(w),
+                            parts=[(lobe_f1, {"ks": w * base, "m": alpha, "f0": 1.0}),
+                                   (lobe_f1, {"ks": w * (1.0 - base), "m": alpha, "f0": 0.0})]))
+        rest = np.maximum(a - w * base, 0.0)
+        if np.any(rest > 0.0):
+            leaves.append(_Leaf("roughconductor", _microfacet_params("ggx", alpha)
+                                + [("string", "material", "none")], "specular_reflectance", rest,
+                                parts=[(lobe_f1, {"ks": rest, "m": alpha, "f0": 1.0})]))
+    return leaves
+
+
+def _weigh(leaves: list[_Leaf]) -> list[_Leaf]:
+    """Blend weights summing to 1: principled parts keep theirs, the others share the rest equally."""
+    fixed = sum(leaf.weight for leaf in leaves if leaf.amplitude is None)
+    scalable = [leaf for leaf in leaves if leaf.amplitude is not None]
+    if not scalable and fixed < 1.0:
+        black = _Leaf("diffuse", [], "reflectance", np.zeros(3))
+        leaves, scalable = leaves + [black], [black]
+    for leaf in scalable:
+        leaf.weight = (1.0 - fixed) / len(scalable)
+    return leaves
+
+
+def _colour(name: str, values, indent: str) -> list[str]:
+    values = tm.rgb(values)
+    text = ", ".join(tm.number(v) for v in values)
+    if all(0.0 <= v <= 1.0 for v in values):
+        return [f'{indent}<rgb name="{name}" value="{text}"/>']
+    # An unbounded srgb texture: Mitsuba's <rgb> reflectance refuses values outside [0, 1].
+    return [f'{indent}<texture type="srgb" name="{name}">', f'{indent}    <rgb name="color" value="{text}"/>',
+            f'{indent}    <boolean name="unbounded" value="true"/>', f"{indent}</texture>"]
+
+
+def _param(tag, name, value, indent) -> list[str]:
+    if tag == "rgb":
+        return _colour(name, value, indent)
+    if tag == "float":
+        return [f'{indent}<float name="{name}" value="{tm.number(value)}"/>']
+    if tag == "boolean":
+        return [f'{indent}<boolean name="{name}" value="{"true" if value else "false"}"/>']
+    return [f'{indent}<string name="{name}" value="{value}"/>']
+
+
+def _leaf_xml(leaf: _Leaf, indent: str, head: str) -> list[str]:
+    lines = [f'{indent}<bsdf {head}type="{leaf.plugin}">']
+    for tag, name, value in leaf.params:
+        lines += _param(tag, name, value, indent + "    ")
+    if leaf.amplitude is not None:
+        lines += _colour(leaf.amplitude, np.asarray(leaf.coefficient, float) / leaf.weight, indent + "    ")
+    return lines + [f"{indent}</bsdf>"]
+
+
+def _tree(leaves: list[_Leaf], indent: str, head: str) -> list[str]:
+    """A chain of blends: blend(t, first, rest) = (1 − t) first + t rest with 1 − t the first leaf's share."""
+    if len(leaves) == 1:
+        return _leaf_xml(leaves[0], indent, head)
+    share = leaves[0].weight / sum(leaf.weight for leaf in leaves)
+    return ([f'{indent}<bsdf {head}type="blendbsdf">',
+             f'{indent}    <float name="weight" value="{tm.number(1.0 - share)}"/>']
+            + _leaf_xml(leaves[0], indent + "    ", "")
+            + _tree(leaves[1:], indent + "    ", "")
+            + [f"{indent}</bsdf>"])
+
+
+def _comment(text: str) -> str:
+    # "--" may not appear inside an XML comment.
+    while "--" in text:
+        text = text.replace("--", "- -")
+    return f"<!-- {text.rstrip('-')} -->"
+
+
+def write(model: tm.Model, name: str, header: list[str]):
+    """The Mitsuba 3 document of ``model``.
+
+    Arguments:
+        model: the brdffit model (1 or 3 channels).
+        name: the ``id`` of the root ``<bsdf>``.
+        header: comment lines that open the document (source, version, fit notes).
+
+    Returns:
+        (text, the written material as a brdffit `Model`, notes, `Deviation` from ``model``).
+
+    Raises:
+        ExportError: a lobe with no equivalent, or a channel count other than 1 or 3.
+    """
+    check_channels(model, "Mitsuba 3")
+    notes: list[str] = []
+    leaves = _weigh(_leaves(model, notes))
+    written = tm.assemble([part for leaf in leaves for part in leaf.parts] or [(tm.lambert_lobe(), {"rho_d": 0.0})],
+                          model.channels)
+    deviation = tm.measure(model, written)
+    lines = [_comment(line) for line in header]
+    lines += [_comment(f"approximation: {note}") for note in notes]
+    lines.append(_comment(("exact: " if deviation.exact() else "measured deviation from the source model: ")
+                          + deviation.describe()))
+    head = f'version="3.0.0" id={quoteattr(name)} '
+    lines += _tree(leaves, "", head)
+    return "\n".join(lines) + "\n", written, notes, deviation
+
+
+def check_channels(model, target: str):
+    """Raise `ExportError` unless the model has 1 or 3 channels (the renderers take RGB)."""
+    if model.channels not in (1, 3):
+        raise tm.ExportError(f"{target} takes RGB colours; model {model.spec!r} has {model.channels} channels "
+                             "(spectral data need the wavelengths, which a model does not carry); fit RGB or "
+                             "single-channel data")

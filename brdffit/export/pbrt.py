@@ -1,0 +1,177 @@
+"""pbrt-v4: a fitted model as ``MakeNamedMaterial`` statements of its scene syntax.
+
+Materials written (pbrt-v4 ``src/pbrt/materials.{h,cpp}``, ``bxdfs.h``; checked against the transcribed
+formulas of `brdffit.export.pbrt_reference`):
+
+| material | f_r | used for |
+|---|---|---|
+| ``diffuse`` (``rgb reflectance``, clamped by pbrt to [0, 1]) | R/π | every ``lambert`` lobe (summed): exact |
+| ``conductor`` (``rgb eta``, ``rgb k``, ``float roughness`` = α, ``bool remaproughness`` false) | F_complex D_TR G / (4 cosθi cosθo), G = 1/(1 + Λ(ωo) + Λ(ωi)) | microfacet lobes; ``fresnel=dielectric`` as k = 0 (the same Fresnel term) |
+| ``mix`` (``string materials`` [a b], ``float amount`` t) | expected value (1 − t) f_a + t f_b | sums and the amplitude ks |
+
+pbrt-v4 has no amplitude on its conductor: a microfacet lobe enters the mix with weight ks (one value, so a
+per-channel ks is averaged), the diffuse part takes the rest with its reflectance divided by its weight. Every
+microfacet lobe is approximate (Trowbridge-Reitz only, height-correlated Smith, no Schlick Fresnel); the export
+states the deviation measured with those formulas.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from . import pbrt_reference
+from . import terms as tm
+from .mitsuba import check_channels
+
+__all__ = ["write", "EXPORTABLE"]
+
+EXPORTABLE = "lambert (any number, summed) and cook-torrance or ggx lobes with any Fresnel mode, summed"
+# With a diffuse part beside the conductors, the conductors' weights sum to at most 1 minus this.
+_MIN_DIFFUSE_WEIGHT = 1e-3
+
+
+@dataclasses.dataclass
+class _Part:
+    """One material of the mix: its type, its parameters (tag, name, value) and its weight."""
+
+    kind: str
+    params: list
+    weight: float
+
+
+def _candidates(model, notes: list) -> list[tuple[list[_Part], list]]:
+    """The mixes that could stand for ``model``, each with its own notes (``notes`` gets the shared ones)."""
+    rho, conductors = None, []
+    for term in tm.terms(model, EXPORTABLE):
+        if term.diffuse:
+            rho = term.params["rho_d"] if rho is None else rho + term.params["rho_d"]
+            continue
+        lobe, alpha = term.lobe, term.alpha
+        if lobe.fresnel == "conductor":
+            eta, k = term.params["eta"], term.params["k"]
+        elif lobe.fresnel == "dielectric":
+            eta, k = term.params["eta"], np.zeros(1)
+            if float(eta) <= 1.0 + 1e-12:
+                notes.append(f"the {lobe.name} lobe has eta = 1: it reflects nothing and was left out (exact)")
+                continue
+        else:
+            f0 = float(term.params["f0"])
+            e, kk, curve = tm.schlick_to_conductor(f0)
+            eta, k = np.array([e]), np.array([kk])
+            notes.append(f"pbrt-v4 has no Schlick Fresnel: f0 = {tm.number(f0)} became the closest complex index "
+                         f"eta = {tm.number(e)}, k = {tm.number(kk)} (the curves differ by up to {curve:.3g} "
+                         "absolute)")
+        if lobe.distribution != "ggx":
+            notes.append(f"pbrt-v4 has only the Trowbridge-Reitz (GGX) distribution: the {lobe.distribution} "
+                         f"width m = {tm.number(alpha)} was written as the GGX alpha")
+        notes.append(f"{lobe.name} shadowing={lobe.shadowing} became pbrt-v4's height-correlated Smith "
+                     "1/(1 + Lambda(wo) + Lambda(wi))")
+        ks = np.atleast_1d(term.params["ks"])
+        if np.ptp(ks) > 0:
+            notes.append(f"pbrt-v4's conductor has no amplitude: ks = {', '.join(tm.number(v) for v in ks)} "
+                         f"entered the mix as its mean {tm.number(ks.mean())}")
+        conductors.append(_Part("conductor", [("rgb", "eta", eta), ("rgb", "k", k), ("float", "roughness", alpha),
+                                              ("bool", "remaproughness", False)], float(ks.mean())))
+    candidates = [_mix(rho, conductors, 1.0, [])]
+    limit = 1.0 - float(np.max(rho)) if rho is not None else 1.0
+    total = sum(p.weight for p in conductors)
+    if rho is not None and total > limit > 0.0:
+        # The diffuse part would clamp: also try the conductors scaled down until it fits; keep the closer one.
+        candidates.append(_mix(rho, conductors, limit / total, [f"the microfacet weights were scaled by "
+                                                                f"{limit / total:.6g} so that the diffuse "
+                                                                "reflectance stays within pbrt's [0, 1]"]))
+    return candidates
+
+
+def _mix(rho, conductors: list[_Part], scale: float, notes: list) -> tuple[list[_Part], list]:
+    """The mix of the diffuse part and the conductors with their weights times ``scale``, and its notes."""
+    conductors = [dataclasses.replace(p, weight=p.weight * scale) for p in conductors]
+    total = sum(p.weight for p in conductors)
+    cap = 1.0 - _MIN_DIFFUSE_WEIGHT if rho is not None and np.any(rho > 0) else 1.0
+    if total > cap:
+        notes.append(f"the microfacet amplitudes sum to {total:.6g}; pbrt-v4's mix takes at most {cap:g}: scaled "
+                     "down, so the highlight is too dark")
+        for p in conductors:
+            p.weight *= cap / total
+        total = cap
+    parts = [p for p in conductors if p.weight > 0]
+    if total < 1.0:
+        base = np.zeros(1) if rho is None else np.asarray(rho) / (1.0 - total)
+        if np.any(base > 1.0):
+            notes.append(f"the diffuse part needs reflectance {', '.join(tm.number(v) for v in tm.rgb(base))} "
+                         f"beside microfacet weights {total:.6g}; pbrt-v4 clamps it to 1")
+        parts.insert(0, _Part("diffuse", [("rgb", "reflectance", base)], 1.0 - total))
+    return parts, notes
+
+
+def _statement(name: str, kind: str, params: list) -> list[str]:
+    lines = [f'MakeNamedMaterial "{name}"', f'    "string type" [ "{kind}" ]']
+    for tag, key, value in params:
+        if tag == "rgb":
+            text = " ".join(tm.number(v) for v in tm.rgb(value))
+        elif tag == "float":
+            text = tm.number(value)
+        elif tag == "string":
+            text = " ".join(f'"{v}"' for v in value)
+        else:
+            text = "true" if value else "false"
+        lines.append(f'    "{tag} {key}" [ {text} ]')
+    return lines
+
+
+def _statements(parts: list[_Part], name: str) -> list[str]:
+    """Leaves first (pbrt needs a name defined before a mix uses it), then a chain of mixes ending in ``name``."""
+    if len(parts) == 1:
+        return _statement(name, parts[0].kind, parts[0].params)
+    lines, names = [], []
+    for j, part in enumerate(parts):
+        names.append(f"{name}:{part.kind}-{j + 1}")
+        lines += _statement(names[-1], part.kind, part.params)
+    # mix(t, a, rest) = (1 − t) a + t rest; built from the last pair up.
+    rest, remaining = names[-1], parts[-1].weight
+    for j in range(len(parts) - 2, -1, -1):
+        remaining += parts[j].weight
+        mix = name if j == 0 else f"{name}:mix-{j + 1}"
+        lines += _statement(mix, "mix", [("string", "materials", [names[j], rest]),
+                                         ("float", "amount", 1.0 - parts[j].weight / remaining)])
+        rest = mix
+    return lines
+
+
+def write(model, name: str, header: list[str]):
+    """The pbrt-v4 statements of ``model``.
+
+    Arguments:
+        model: the brdffit model (1 or 3 channels).
+        name: the material name (the last statement; parts are named ``name:kind-j``).
+        header: comment lines that open the text.
+
+    Returns:
+        (text, a function (wi, wo) -> f_r of the written material by pbrt-v4's formulas, notes, `Deviation`).
+
+    Raises:
+        ExportError: a lobe with no equivalent, more than RGB channels, or a name with quotes or newlines.
+    """
+    check_channels(model, "pbrt-v4")
+    if '"' in name or "\n" in name:
+        raise tm.ExportError(f"a pbrt material name cannot hold quotes or newlines: {name!r}")
+    notes: list[str] = []
+    best = None
+    for parts, own in _candidates(model, notes):
+        body = "\n".join(_statements(parts, name)) + "\n"
+        materials = pbrt_reference.parse(body)
+
+        def written(wi, wo, materials=materials):
+            return pbrt_reference.evaluate(materials, name, wi, wo)
+
+        deviation = tm.measure(model, written)
+        if best is None or deviation.rms < best[2].rms:
+            best = (body, written, deviation, own)
+    body, written, deviation, own = best
+    notes = notes + own
+    lines = [f"# {line}" for line in header] + [f"# approximation: {note}" for note in notes]
+    lines.append(("# exact: " if deviation.exact() else "# measured deviation from the source model (pbrt-v4's "
+                  "formulas, brdffit.export.pbrt_reference): ") + deviation.describe())
+    return "\n".join(lines) + "\n" + body, written, notes, deviation

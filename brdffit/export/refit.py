@@ -1,0 +1,47 @@
+"""The ``fit`` option of an export: fit a model the renderer has exactly to the source model over the hemisphere.
+
+For a model whose lobes have no exact plugin (Oren-Nayar, Ward, Lafortune, V-cavity shadowing, a Schlick term
+too bright for Mitsuba's principled, ...), the export can instead fit ``lambert + ggx`` lobes (separable Smith,
+which Mitsuba 3 has exactly; conductor Fresnel where the source lobe is a conductor, dielectric otherwise) to
+the source's values at noise-free uniform direction pairs with brdffit's own fit and its default cosine-weighted
+loss (Ngan et al. 2005), and export that. The achieved error goes into the export's comments.
+"""
+
+from __future__ import annotations
+
+from ..models import Model
+
+__all__ = ["fit_exportable", "exportable_spec", "FIT_SAMPLES"]
+
+FIT_SAMPLES = 2000
+_DIFFUSE_LOBES = ("lambert", "oren-nayar", "toon-diffuse")
+
+
+def exportable_spec(model: Model) -> str:
+    """The spec of the exportable family fitted in place of ``model``: one lambert for the diffuse lobes, one
+    GGX lobe per other lobe (conductor Fresnel for a conductor lobe, dielectric otherwise)."""
+    diffuse = any(lobe.name in _DIFFUSE_LOBES for lobe in model.lobes)
+    specular = [f"ggx(fresnel={'conductor' if getattr(lobe, 'fresnel', None) == 'conductor' else 'dielectric'})"
+                for lobe in model.lobes if lobe.name not in _DIFFUSE_LOBES]
+    return "+".join((["lambert"] if diffuse else []) + specular)
+
+
+def fit_exportable(model: Model, seed: int = 0) -> tuple[Model, str]:
+    """Fit `exportable_spec` to ``model``.
+
+    Arguments:
+        model: the source model.
+        seed: seed of the direction pairs and of the fit.
+
+    Returns:
+        (the fitted model, a comment line naming the fit).
+    """
+    from ..fitting.api import fit
+    from ..synth import generate
+
+    spec = exportable_spec(model)
+    data = generate(model, "uniform", n=FIT_SAMPLES, seed=seed)
+    result = fit(data, spec, seed=seed)
+    return result.model, (f"fit: {spec} was fitted to the source model {model.spec} at {FIT_SAMPLES} uniform "
+                          f"direction pairs by brdffit's cosine-weighted least squares (status {result.status}); "
+                          "that fit is what is written")
