@@ -566,7 +566,7 @@ def _cmd_export(args) -> int:
     from . import FitResult
     from .export import export
 
-    text = export(FitResult.load(args.result, args.name), to=args.to, name=args.material)
+    text = export(FitResult.load(args.result, args.name), to=args.to, name=args.material, fit=args.fit)
     if args.out:
         from .io._common import atomic_path
 
@@ -760,7 +760,12 @@ def build_parser() -> argparse.ArgumentParser:
              ["brdffit export data/synthetic/plastic.brdffit/result.h5 --to mitsuba",
               "brdffit export out/result.h5 --to pbrt --out material.pbrt"], _cmd_export)
     p.add_argument("result", help="results file written by `brdffit fit` (result.h5)")
-    p.add_argument("--to", required=True, choices=["json", "mitsuba", "pbrt"], help="target format")
+    from .export import TARGETS
+
+    p.add_argument("--to", required=True, choices=list(TARGETS), help="target format: " + "; ".join(
+        f"{t.name}: {t.description}" for t in TARGETS.values()))
+    p.add_argument("--fit", action="store_true", help="renderers: fit lambert + GGX lobes the renderer has "
+                   "exactly to the fitted model and write that, with the achieved error (docs/export.md)")
     p.add_argument("--name", help="which fit in the file (default: the first)")
     p.add_argument("--material", default="material", help="material name in the output (default 'material')")
     p.add_argument("--out", help="output file (default: print to stdout)")

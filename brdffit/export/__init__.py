@@ -114,7 +114,7 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
         # The deviation a renderer writes is from the model it was given; the fit's source is the original.
         from .terms import measure
 
-        deviation = measure(model, written if not hasattr(written, "lobes") else written)
+        deviation = measure(model, written)
         text = text.replace("from the source model", f"from the fitted model {exported.spec}", 1)
         marker = "<!-- " if to == "mitsuba" else "# "
         closing = " -->" if to == "mitsuba" else ""
