@@ -9,6 +9,7 @@ Public API:
 - models: `models.names`, `models.get`, `Model`, `evaluate`, `evaluate_dirs`, `ParamSpec`;
 - data: `Measurements`, `MeasurementError`, `io.load`, `io.save`, `synth.generate`;
 - fitting: `fit`, `fit_many`, `FitResult`, `FitError`;
+- databases on a Dask cluster: `fit_database` (`brdffit.distributed`);
 - uncertainty: `posterior`, `Posterior`;
 - model selection: `select`, `Selection`, `fit_lobes`, `Scene` (and `scene.interpolate`, `scene.scene_error`);
 - physical checks: `properties`;
@@ -33,7 +34,7 @@ _PUBLIC = {
     "geometry": "geometry", "io": "io", "models": "models", "params": "params", "properties": "properties",
     "render": "render", "scene": "scene", "synth": "synth", "export": "export",
     "FitError": "fitting:FitError", "FitResult": "fitting:FitResult", "fit": "fitting:fit",
-    "fit_lobes": "fitting:fit_lobes", "fit_many": "fitting:fit_many",
+    "fit_lobes": "fitting:fit_lobes", "fit_many": "fitting:fit_many", "fit_database": "distributed:fit_database",
     "MeasurementError": "measurements:MeasurementError", "Measurements": "measurements:Measurements",
     "Posterior": "posterior:Posterior", "posterior": "posterior:posterior", "Scene": "scene:Scene",
     "Selection": "select:Selection", "select": "select:select", "Model": "models:Model",

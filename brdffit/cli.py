@@ -43,6 +43,50 @@ def enable_compilation_cache() -> None:
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
+def bounded(kind=int, low=None, high=None):
+    """The argparse ``type`` of a numeric option with its allowed range, declared with the option: e.g.
+    ``add_argument("--multistart", type=bounded(int, 0))``. A value outside is a usage error (exit 2) whose message
+    names the option (argparse adds it) and the range.
+
+    Arguments:
+        kind: int or float.
+        low, high: inclusive bounds; None leaves that side open (a float must be finite).
+    """
+    import math
+
+    word = "an integer" if kind is int else "a finite number"
+    allowed = " and ".join(part for part in (f">= {low:g}" if low is not None else "",
+                                             f"<= {high:g}" if high is not None else "") if part)
+    wanted = f"{word} {allowed}".strip()
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {word} (allowed: {wanted})") from None
+        if (kind is float and not math.isfinite(value)) or (low is not None and value < low) or (
+                high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"{text} is outside the allowed range: {wanted}")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+def _check_fixed(fixed: dict, specs) -> None:
+    """Refuse a ``--fixed`` value outside its parameter's declared bounds in any of the model ``specs``."""
+    from . import models
+
+    for spec in specs:
+        declared = {p.name: p for p in models.get(spec, channels=1).param_specs}
+        for name, value in fixed.items():
+            p = declared.get(name)
+            values = value if isinstance(value, list) else [value]
+            if p is not None and not all(p.lower <= v <= p.upper for v in values):
+                raise UsageError(f"--fixed {name}={','.join(f'{v:g}' for v in values)}: outside the allowed range "
+                                 f"of {name}, [{p.lower:g}, {p.upper:g}] (model {spec})")
+
+
 def _parse_fixed(items) -> dict:
     fixed = {}
     for item in items or ():
@@ -416,14 +460,17 @@ def _cmd_fit(args) -> int:
     if args.model == "auto":
         from .select import DEFAULT_CANDIDATES
 
+        _check_fixed(_parse_fixed(args.fixed), DEFAULT_CANDIDATES)
         selection = select(measurements, DEFAULT_CANDIDATES, criterion="bic", progress=_progress(args),
                            **_fit_options(args))
         result = selection.result
     elif args.lobes is None:
+        _check_fixed(_parse_fixed(args.fixed), [args.model])
         result = fit(measurements, args.model, multistart=args.multistart, progress=_progress(args),
                      **_fit_options(args))
     elif args.lobes == "auto":
         candidates = [_with_lobes(args.model, k) for k in range(1, args.max_lobes + 1)]
+        _check_fixed(_parse_fixed(args.fixed), candidates)
         selection = select(measurements, candidates, criterion="bic", progress=_progress(args),
                            **_fit_options(args))
         result = selection.result
@@ -432,6 +479,7 @@ def _cmd_fit(args) -> int:
             k = int(args.lobes)
         except ValueError:
             raise UsageError(f"--lobes {args.lobes!r}: give a number of lobes or 'auto'") from None
+        _check_fixed(_parse_fixed(args.fixed), [_with_lobes(args.model, k)])
         result = fit(measurements, _with_lobes(args.model, k), multistart=args.multistart, progress=_progress(args),
                      **_fit_options(args))
     out.mkdir(parents=True, exist_ok=True)
@@ -627,9 +675,9 @@ def _cmd_render(args) -> int:
 
 
 def _add_posterior_options(p):
-    p.add_argument("--walkers", type=int, default=32, help="emcee walkers (default 32)")
-    p.add_argument("--steps", type=int, default=5000, help="steps per walker in total (default 5000)")
-    p.add_argument("--max-samples", type=int, default=None, metavar="N",
+    p.add_argument("--walkers", type=bounded(int, 2), default=32, help="emcee walkers (default 32)")
+    p.add_argument("--steps", type=bounded(int, 1), default=5000, help="steps per walker in total (default 5000)")
+    p.add_argument("--max-samples", type=bounded(int, 1), default=None, metavar="N",
                    help="run the chain on a stratified subsample of N samples")
 
 
@@ -640,6 +688,7 @@ def _cmd_select(args) -> int:
 
     enable_compilation_cache()
     candidates = [c.strip() for c in args.candidates.split(";")] if args.candidates else list(DEFAULT_CANDIDATES)
+    _check_fixed(_parse_fixed(args.fixed), candidates)
     selection = select(measurements, candidates, criterion=args.criterion, folds=args.folds,
                        progress=_progress(args), **_fit_options(args))
     if args.json:
@@ -647,6 +696,49 @@ def _cmd_select(args) -> int:
     else:
         print(selection.summary())
     return EXIT_OK
+
+
+def _cmd_batch(args) -> int:
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers {args.workers}: give 1 or more worker processes")
+    if args.batch < 1:
+        raise UsageError(f"--batch {args.batch}: give 1 or more materials per task")
+    if args.scheduler and args.workers is not None:
+        raise UsageError("--workers sizes the local cluster; a --scheduler cluster has its own workers")
+    from .distributed.table import table_format
+
+    try:
+        table_format(args.out)
+    except (ValueError, ImportError) as exc:
+        raise UsageError(f"--out: {exc}") from None
+    from collections import Counter
+
+    from distributed import Client
+
+    from . import fit_database
+
+    enable_compilation_cache()
+    client = None
+    if args.scheduler:
+        try:
+            client = Client(args.scheduler, timeout="20s")
+        except (OSError, ValueError) as exc:
+            raise UsageError(f"--scheduler {args.scheduler}: cannot connect ({exc})") from None
+    try:
+        rows = fit_database(args.sources, args.model, client=client, batch=args.batch, out=args.out,
+                            resume=args.resume, workers=args.workers, read_options=_table_options(args) or None,
+                            cache_dir=cache_dir(), progress=_progress(args), **_fit_options(args))
+    finally:
+        if client is not None:
+            client.close()
+    counts = Counter(row["status"] for row in rows)
+    if args.json:
+        print(json.dumps({"out": str(args.out), "materials": len(rows), "statuses": dict(counts)}))
+    elif not args.quiet:
+        print(f"{len(rows)} materials: {', '.join(f'{n} {status}' for status, n in counts.most_common())}; "
+              f"wrote {args.out}")
+    converged = all(row["status"] in ("converged", "converged-at-bound") for row in rows)
+    return EXIT_OK if converged else EXIT_NOT_CONVERGED
 
 
 def _add_fit_options(p):
@@ -659,8 +751,8 @@ def _add_fit_options(p):
     p.add_argument("--solver", default="lm", choices=list(SOLVERS), help="least-squares solver (default lm)")
     p.add_argument("--fixed", action="append", metavar="NAME=VALUE",
                    help="hold a parameter at a value (repeatable; a colour takes R,G,B)")
-    p.add_argument("--seed", type=int, default=0, help="seed of subsamples and starts (default 0)")
-    p.add_argument("--max-steps", type=int, default=256, metavar="N", help="solver step limit (default 256)")
+    p.add_argument("--seed", type=bounded(int, 0), default=0, help="seed of subsamples and starts (default 0)")
+    p.add_argument("--max-steps", type=bounded(int, 1), default=256, metavar="N", help="solver step limit (default 256)")
 
 
 def _add(sub, name, help_text, examples, run):
@@ -708,9 +800,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lobes", metavar="K|auto",
                    help="number of Lafortune lobes in the model's Lafortune term, or 'auto' to choose 1.."
                         "--max-lobes by BIC")
-    p.add_argument("--max-lobes", type=int, default=3, metavar="K", help="largest K tried by --lobes auto")
+    p.add_argument("--max-lobes", type=bounded(int, 1), default=3, metavar="K", help="largest K tried by --lobes auto")
     _add_fit_options(p)
-    p.add_argument("--multistart", type=int, default=0, metavar="N", help="extra quasi-random starts")
+    p.add_argument("--multistart", type=bounded(int, 0), default=0, metavar="N", help="extra quasi-random starts")
     p.add_argument("--posterior", action="store_true",
                    help="also sample the parameter posterior with emcee (stored in result.h5, resumable)")
     p.add_argument("--no-report", dest="report", action="store_false",
@@ -726,7 +818,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("result", help="results file written by `brdffit fit` (result.h5)")
     p.add_argument("--name", help="which fit in the file (default: the first)")
     _add_posterior_options(p)
-    p.add_argument("--seed", type=int, default=0, help="seed of the walkers' start (default 0)")
+    p.add_argument("--seed", type=bounded(int, 0), default=0, help="seed of the walkers' start (default 0)")
     p.add_argument("--json", action="store_true", help="print the posterior summary as JSON")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "report", "write report.html and report.md (with figures) for a fit stored in a results file",
@@ -742,11 +834,11 @@ def build_parser() -> argparse.ArgumentParser:
               "--out ggx.h5"], _cmd_synth)
     p.add_argument("model", help="model spec")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="parameter value (repeatable)")
-    p.add_argument("--channels", type=int, default=3, help="number of channels (default 3)")
+    p.add_argument("--channels", type=bounded(int, 1), default=3, help="number of channels (default 3)")
     p.add_argument("--pattern", default="uniform", help="uniform, gonio-grid, in-plane, merl or half-diff")
-    p.add_argument("--n", type=int, default=None, help="number of samples")
+    p.add_argument("--n", type=bounded(int, 1), default=None, help="number of samples")
     p.add_argument("--noise", default=None, help="noise spec, e.g. relative:0.01 or gaussian:0.002")
-    p.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    p.add_argument("--seed", type=bounded(int, 0), default=0, help="seed (default 0)")
     p.add_argument("--out", required=True, help="output file (.h5 or .csv)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "convert", "convert measurements between CSV and HDF5, or tabulate a fit as a MERL file",
@@ -778,11 +870,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", action="store_true", help="render the measurements even if the file holds a fit")
     p.add_argument("--name", help="which fit of a results file (default: the first)")
     p.add_argument("--plane", action="store_true", help="a flat swatch instead of a sphere")
-    p.add_argument("--resolution", type=int, default=256, help="image size in pixels (default 256)")
+    p.add_argument("--resolution", type=bounded(int, 8, 4096), default=256, help="image size in pixels (default 256)")
     p.add_argument("--tonemap", default="reinhard", choices=["reinhard", "filmic", "clamp"],
                    help="tone curve before sRGB encoding (default reinhard)")
-    p.add_argument("--exposure", type=float, default=1.0, help="exposure multiplier (default 1)")
-    p.add_argument("--area-light", type=float, default=0.0, metavar="RADIUS",
+    p.add_argument("--exposure", type=bounded(float, 0.0), default=1.0, help="exposure multiplier (default 1)")
+    p.add_argument("--area-light", type=bounded(float, 0.0, 1.5), default=0.0, metavar="RADIUS",
                    help="make the key light an area light of this angular radius (radians), 16 samples")
     p.add_argument("--anisotropic", action="store_true", help="interpolate measured data as anisotropic")
     p.add_argument("--npy", action="store_true", help="also write the HDR image as float32 .npy")
@@ -796,9 +888,34 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file", help=MEASUREMENT_FILE)
     p.add_argument("--candidates", help="model specs separated by ';' (default: the standard candidate list)")
     p.add_argument("--criterion", default="bic", choices=["aic", "bic", "cv"], help="selection criterion")
-    p.add_argument("--folds", type=int, default=5, help="folds of --criterion cv (default 5)")
+    p.add_argument("--folds", type=bounded(int, 2), default=5, help="folds of --criterion cv (default 5)")
     _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print the selection as one JSON object")
+    _add_table_options(p)
+    p = _add(sub, "batch", "fit every material of a database on a Dask cluster into one results table",
+             ["brdffit batch 'merl/*.binary' --model lambert+ggx --out merl.h5",
+              "brdffit batch textures.h5 --model lambert+ggx --out texels.parquet --scheduler tcp://host:8786",
+              "brdffit batch scans/ --model auto --out scans.csv --workers 2   # reruns complete a table"],
+             _cmd_batch)
+    p.add_argument("sources", nargs="+", metavar="PATH_OR_GLOB",
+                   help="measurement files (any format brdffit reads), folders, globs, multi-material brdffit HDF5 "
+                        "files (every material group) or FILE.h5::GROUP")
+    p.add_argument("--model", default=DEFAULT_MODEL,
+                   help="model spec fitted to every material, or 'auto' (the default): a selection by BIC among "
+                        "the standard candidates per material (slow)")
+    p.add_argument("--out", required=True, help="results table: .h5, .csv or .parquet (needs pyarrow)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="a running Dask scheduler (tcp://HOST:8786, started with `dask scheduler` and `dask worker`); "
+                        "default: a local cluster on this machine's cores")
+    p.add_argument("--workers", type=int, metavar="N", help="worker processes of the local cluster (default: one "
+                                                            "per core)")
+    p.add_argument("--batch", type=int, default=32, metavar="N",
+                   help="the most equally shaped materials one task fits together (default 32)")
+    p.add_argument("--no-resume", dest="resume", action="store_false",
+                   help="start a new table (default: keep the rows of --out and fit only the rest and the errors)")
+    _add_fit_options(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object: out, materials, statuses")
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
     _add_table_options(p)
     return parser
 

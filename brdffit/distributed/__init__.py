@@ -1,0 +1,19 @@
+"""Fitting a whole database on Dask distributed (docs/batch.md), one concept per module:
+
+- `sources`: what is read: a file per material, or the material groups of a multi-material HDF5 file;
+- `tasks`: what the workers do: read shapes, fit a batch of equally shaped materials, make rows;
+- `table`: the results table (``.h5``, ``.csv``, ``.parquet``), written atomically;
+- `database`: `fit_database`, the client that plans the batches and records the rows.
+
+The public names are imported on first use (`brdffit._lazy`), so that importing brdffit never loads Dask.
+"""
+
+from .._lazy import exports as _exports
+
+_PUBLIC = {"fit_database": "database:fit_database", "DEFAULT_BATCH": "database:DEFAULT_BATCH",
+           "Source": "sources:Source", "expand_sources": "sources:expand_sources",
+           "read_results": "table:read_results", "write_results": "table:write_results",
+           "TABLE_FORMATS": "table:TABLE_FORMATS"}
+_exports(__name__, _PUBLIC)
+
+__all__ = sorted(_PUBLIC)

@@ -1,0 +1,212 @@
+"""`fit_database`: fit every material of a database on a Dask distributed cluster (issue 19, docs/batch.md).
+
+The client plans and records; the workers read and fit (`brdffit.distributed.tasks`):
+
+1. the sources are expanded (`expand_sources`); with ``resume`` the rows already in the results table are kept
+   and their materials skipped (all but ``"error"`` rows, which are tried again);
+2. a first round of tasks reads every material and reports its shape; an unreadable one gets its error row;
+3. the materials are grouped by shape (samples, channels) in the order given, and each group cut into batches of
+   at most ``batch``; one task fits a batch with one `brdffit.fit_many`, so a worker compiles a program per shape
+   and reuses it. Materials of other shapes are not padded into a batch: missing samples would change the
+   engine's seeded subsamples, and the answer would no longer be the material's own fit;
+4. the rows are written as each task's result arrives (the whole table, atomically), and a progress line counts
+   them with an estimate of the time left.
+
+Faults: the scheduler reruns the tasks of a worker that dies on the other workers (Dask's
+``distributed.scheduler.allowed-failures``, 3 by default); a batch that still fails gets error rows naming the
+reason. An interrupted client leaves the rows received so far, which ``resume`` keeps. Each material's result is
+the one `brdffit.fit` gives it alone (`fit_many`'s contract), whichever worker and batch fitted it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import inspect
+import os
+import time
+from pathlib import Path
+
+from ..progress import Progress
+from .sources import expand_sources
+from .table import read_results, table_format, write_results
+from .tasks import describe, error_row, fit_batch
+
+__all__ = ["fit_database", "DEFAULT_BATCH"]
+
+DEFAULT_BATCH = 32
+
+
+def _model_argument(model):
+    """A spec string, or the candidates of a per-material selection (``"auto"``: the standard candidates)."""
+    from .. import models
+    from ..select import DEFAULT_CANDIDATES
+
+    if model == "auto":
+        return tuple(DEFAULT_CANDIDATES)
+    if isinstance(model, str):
+        models.get(model)  # an unknown lobe or option fails here, before any work
+        return model
+    if isinstance(model, models.Model):
+        return model.spec
+    candidates = tuple(model)
+    if not candidates or not all(isinstance(c, str) for c in candidates):
+        raise ValueError(f"model must be a spec, 'auto', or a sequence of candidate specs; got {model!r}")
+    for candidate in candidates:
+        models.get(candidate)
+    return candidates
+
+
+def _check_fit_options(fit_options: dict, selecting: bool) -> None:
+    """Refuse, before any work, keywords that every task would fail on."""
+    from ..fitting import fit, fit_many
+    from ..select import select
+
+    takers = (fit, select) if selecting else (fit_many,)
+    accepted = {name for taker in takers for name, p in inspect.signature(taker).parameters.items()
+                if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD}
+    accepted -= {"measurements", "measurements_list", "model", "candidates", "progress"}
+    unknown = sorted(set(fit_options) - accepted)
+    if unknown:
+        raise TypeError(f"fit_database: unknown fit option(s) {', '.join(unknown)}; it takes {', '.join(sorted(accepted))}")
+
+
+@contextlib.contextmanager
+def _connected(client, workers: int | None):
+    """A `distributed.Client`: the one given, one connected to a scheduler address, or one on a LocalCluster of
+    ``workers`` single-threaded processes (default: one per core), closed afterwards."""
+    from distributed import Client, LocalCluster
+
+    if client is not None and workers is not None:
+        raise ValueError("workers= sizes the local cluster that fit_database starts; a given client or scheduler "
+                         "has its own workers")
+    if isinstance(client, str):
+        with Client(client) as connected:
+            yield connected
+    elif client is not None:
+        yield client
+    else:
+        count = workers or os.cpu_count() or 1
+        with LocalCluster(n_workers=count, threads_per_worker=1, processes=True, host="127.0.0.1",
+                          dashboard_address=None) as cluster, Client(cluster) as connected:
+            yield connected
+
+
+def _batches(sources: list, shapes: list, size: int) -> list[list]:
+    """Sources of one shape together, in the order given, cut into batches of at most ``size``."""
+    groups: dict[tuple, list] = {}
+    for source, shape in zip(sources, shapes):
+        groups.setdefault(shape, []).append(source)
+    return [group[i:i + size] for group in groups.values() for i in range(0, len(group), size)]
+
+
+class _Record:
+    """The rows so far, written to the results table (when there is one) each time new rows arrive."""
+
+    def __init__(self, out, order: list[str], kept: list[dict], bar: Progress, todo: int):
+        self.out, self.bar, self.todo = out, bar, todo
+        self.rows = {row["source"]: row for row in kept}
+        # Rows of sources not in this run stay in the table, first; then the sources in the order given.
+        self.order = list(dict.fromkeys([*self.rows, *order]))
+        self.done = self.failed = 0
+        self.start = time.perf_counter()
+
+    def add(self, rows: list[dict]) -> None:
+        for row in rows:
+            self.rows[row["source"]] = row
+        self.done += len(rows)
+        self.failed += sum(row["status"] == "error" for row in rows)
+        if self.out is not None and rows:
+            write_results(self.table(), self.out)
+        if self.done:
+            left = (time.perf_counter() - self.start) / self.done * (self.todo - self.done)
+            self.bar.update(self.done, f"{self.failed} failed, ETA {left:.0f} s" if self.done < self.todo else "")
+
+    def table(self) -> list[dict]:
+        return [self.rows[key] for key in self.order if key in self.rows]
+
+
+def fit_database(sources, model, *, client=None, batch: int = DEFAULT_BATCH, out=None, resume: bool = True,
+                 workers: int | None = None, read_options: dict | None = None, cache_dir=None,
+                 progress: bool = False, **fit_options) -> list[dict]:
+    """Fit one model (or a per-material selection) to every material of a database, on a Dask cluster.
+
+    Arguments:
+        sources: files of any format `brdffit.io.load` reads, folders, globs, ``FILE::GROUP`` names of a
+            multi-material brdffit HDF5 file (a file alone stands for all its material groups), or
+            `brdffit.distributed.Source` objects (`expand_sources`).
+        model: a spec (``"lambert+ggx"``) or `Model` (fitted with `brdffit.fit_many` in batches), ``"auto"`` (a
+            `brdffit.select` among the standard candidates for each material: slow), or a sequence of candidate
+            specs to select among.
+        client: a `distributed.Client`, or a scheduler address (``"tcp://host:8786"``, a cluster started with
+            ``dask scheduler`` and ``dask worker``); None starts a LocalCluster on this machine and closes it at
+            the end.
+        batch: the most materials one task fits together (>= 1).
+        out: the results table, ``.h5`` / ``.hdf5`` / ``.csv`` / ``.parquet`` (`brdffit.distributed.table`),
+            rewritten atomically as rows arrive; None keeps the rows in memory only.
+        resume: keep the rows already in ``out`` and skip their materials (rows with status ``"error"`` are
+            tried again); False starts a new table.
+        workers: processes of the LocalCluster started when ``client`` is None (default: one per core).
+        read_options: keywords of `brdffit.io.load` for every file (table options, MERL ``subsample``, ...).
+        cache_dir: a folder for JAX's persistent compilation cache on the workers (shared by the workers of one
+            machine); None leaves the workers' JAX as it is.
+        progress: a progress line on stderr: materials done, failures, time, estimated time left.
+        **fit_options: keywords of `brdffit.fit_many` (``loss``, ``solver``, ``fixed``, ``max_steps``, ``seed``,
+            ...); of `brdffit.fit` for a selection.
+
+    Returns:
+        The rows of the given sources, in order (dicts column -> text or number, the columns of
+        `brdffit.distributed.table`), those kept from ``out`` included.
+
+    Raises:
+        ValueError: a bad ``batch``, ``workers``, ``model`` or ``out`` extension; no sources.
+        TypeError: an unknown fit option. ImportError: a ``.parquet`` table without pyarrow.
+        FileNotFoundError: a source that does not exist.
+    """
+    if not isinstance(batch, int) or batch < 1:
+        raise ValueError(f"batch must be an integer >= 1, got {batch!r}")
+    if workers is not None and (not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    if out is not None:
+        table_format(out)
+    model = _model_argument(model)
+    _check_fit_options(fit_options, selecting=not isinstance(model, str))
+    items = expand_sources(sources)
+    kept = []
+    if resume and out is not None and Path(out).exists():
+        kept = [row for row in read_results(out) if row["status"] != "error"]
+    done = {row["source"] for row in kept}
+    todo = [source for source in items if source.key not in done]
+    bar = Progress("batch", len(todo), enabled=progress, unit="materials")
+    record = _Record(out, [source.key for source in items], kept, bar, len(todo))
+    cache = None if cache_dir is None else str(Path(cache_dir).resolve())
+    if todo:
+        with _connected(client, workers) as connected:
+            _run(connected, todo, model, batch, read_options, fit_options, cache, record)
+    bar.close(f"{record.done} fitted ({record.failed} failed), {len(done & {s.key for s in items})} already done")
+    return [record.rows[source.key] for source in items]
+
+
+def _run(client, todo: list, model, batch: int, read_options, fit_options: dict, cache, record: _Record) -> None:
+    """Read the shapes, submit the batches and record their rows as they arrive."""
+    from distributed import as_completed
+
+    label = model if isinstance(model, str) else "auto"
+    chunks = [todo[i:i + batch] for i in range(0, len(todo), batch)]
+    described = client.gather(client.map(describe, chunks, read_options=read_options, pure=False))
+    readable, shapes, unreadable = [], [], []
+    for source, (shape, error) in zip(todo, (d for chunk in described for d in chunk)):
+        if shape is None:
+            unreadable.append(error_row(source.key, error, label))
+        else:
+            readable.append(source)
+            shapes.append(shape)
+    record.add(unreadable)
+    futures = {client.submit(fit_batch, group, model, read_options, fit_options, cache, pure=False): group
+               for group in _batches(readable, shapes, batch)}
+    for future in as_completed(futures):
+        try:
+            rows = future.result()
+        except Exception as err:  # the batch's workers kept dying (KilledWorker), or the task could not run
+            rows = [error_row(source.key, f"{type(err).__name__}: {err}", label) for source in futures[future]]
+        record.add(rows)
+        future.release()
