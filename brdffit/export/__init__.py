@@ -49,7 +49,8 @@ class Export:
 
     Attributes:
         text: the output.
-        written: the written material, as a brdffit `Model` (Mitsuba) or a function (wi, wo) -> f_r (pbrt).
+        written: the written material as a function (wi, wo) -> f_r, ``(n, 3)`` (or ``(n, channels)``), by the
+            renderer's formulas (Mitsuba's parts in brdffit terms with its Beckmann G1; pbrt-v4's BxDFs).
         source: the model that was exported (the fit's model; before the ``fit`` option).
         notes: the approximations made.
         deviation: `brdffit.export.terms.Deviation` of ``written`` from ``source``.

@@ -21,7 +21,7 @@ from ..models.diffuse import Lambert
 from ..models.layout import layout
 from ..models.model import evaluate_dirs
 
-__all__ = ["ExportError", "Term", "terms", "assemble", "f0_to_eta", "schlick_to_conductor", "Deviation",
+__all__ = ["ExportError", "Term", "terms", "assemble", "evaluate_dirs", "f0_to_eta", "schlick_to_conductor", "Deviation",
            "measure", "random_pairs", "number", "rgb"]
 
 MICROFACET_LOBES = ("cook-torrance", "ggx")
