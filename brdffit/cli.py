@@ -1,9 +1,10 @@
 """The ``brdffit`` command line: a thin layer that parses arguments, calls one API function and prints or writes
-its result. Exit codes: 0 success, 1 a fit did not converge, 2 bad input or usage (docs/cli.md)."""
+its result. Exit codes: 0 success, 1 a fit did not converge, 2 bad input or usage, 130 interrupted (docs/cli.md)."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -14,6 +15,7 @@ from typing import NamedTuple
 from . import __version__
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command stopped by Ctrl-C
 DEFAULT_MODEL = "auto"
 
 
@@ -307,6 +309,96 @@ def _check_writable(out: Path) -> None:
                          "with --out")
 
 
+# What `brdffit fit` writes into its output folder (the report's figures are PNG files beside report.html).
+OUTPUT_NAMES = ("result.h5", "result.json", "summary.txt", "posterior.json", "selection.json", "report.html",
+                "report.md")
+STAGE_MARK = ".new-"  # a folder being written: .<out name>.new-<pid>-<random> beside the output folder
+
+
+def _earlier_result(out: Path) -> list[str]:
+    """The names in ``out`` (an earlier result); raises UsageError if any of them is not brdffit's output."""
+    if not out.is_dir():
+        return []
+    names = sorted(os.listdir(out))
+    foreign = [n for n in names if n not in OUTPUT_NAMES and not n.endswith(".png")]
+    if foreign:
+        raise UsageError(f"the output folder {out} holds files brdffit did not write ({', '.join(foreign[:5])}); "
+                         "choose another --out")
+    return names
+
+
+def _check_output_folder(out: Path, force: bool) -> None:
+    """Refuse, before any work, to replace an earlier result without ``--force`` (it would lose that fit)."""
+    earlier = _earlier_result(out)
+    if earlier and not force:
+        raise UsageError(f"the output folder {out} holds an earlier result ({', '.join(earlier[:4])}"
+                         f"{', ...' if len(earlier) > 4 else ''}); pass --force to replace it, or choose another "
+                         "--out")
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths in one atomic step (Linux renameat2 with RENAME_EXCHANGE); False where it is unavailable."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2  # <fcntl.h> AT_FDCWD, <linux/fs.h> RENAME_EXCHANGE
+    return renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
+
+
+def _remove_abandoned(out: Path) -> None:
+    """Delete the staging folders beside ``out`` of earlier runs that were killed (their process is gone)."""
+    import shutil
+
+    prefix = f".{out.name}{STAGE_MARK}"
+    for entry in out.parent.glob(prefix + "*") if out.parent.is_dir() else ():
+        pid = entry.name[len(prefix):].split("-", 1)[0]
+        if not pid.isdigit():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            shutil.rmtree(entry, ignore_errors=True)
+        except PermissionError:
+            pass  # another user's live process
+
+
+@contextlib.contextmanager
+def staged_folder(out: Path):
+    """Yield a new, empty folder beside ``out`` to write a result into; on success it takes ``out``'s place.
+
+    The folder holds either the complete earlier result or the complete new one at every moment: the new files are
+    written under the staging name, and the staging folder and ``out`` are exchanged in one atomic rename
+    (renameat2 RENAME_EXCHANGE; where the system lacks it, two renames leave a moment without ``out``); the earlier
+    result is deleted only then. On failure the staging folder is deleted and ``out`` is untouched. A staging
+    folder left by a killed run (``.<name>.new-<pid>-*``) is deleted by the next run.
+    """
+    import shutil
+    import tempfile
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    _remove_abandoned(out)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}{STAGE_MARK}{os.getpid()}-", dir=out.parent))
+    umask = os.umask(0o022)
+    os.umask(umask)
+    try:
+        os.chmod(stage, 0o777 & ~umask)  # what mkdir would have given the folder (mkdtemp makes it private)
+        yield stage
+        if not out.exists():
+            os.rename(stage, out)
+        elif not _exchange(stage, out):
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}{STAGE_MARK}{os.getpid()}-", dir=out.parent))
+            os.rename(out, old / out.name)
+            os.rename(stage, out)
+            shutil.rmtree(old, ignore_errors=True)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)  # after an exchange it holds the earlier result
+
+
 def _cmd_models(args) -> int:
     from . import models
 
@@ -452,6 +544,7 @@ def _cmd_fit(args) -> int:
     path = Path(args.file)
     out = Path(args.out) if args.out else _default_out(path)
     _check_writable(out)
+    _check_output_folder(out, args.force)
     measurements = _load(path, args)  # first: a file that cannot be read is reported before JAX is loaded
     from . import fit, io, select
 
@@ -482,26 +575,28 @@ def _cmd_fit(args) -> int:
         _check_fixed(_parse_fixed(args.fixed), [_with_lobes(args.model, k)])
         result = fit(measurements, _with_lobes(args.model, k), multistart=args.multistart, progress=_progress(args),
                      **_fit_options(args))
-    out.mkdir(parents=True, exist_ok=True)
-    h5 = out / "result.h5"
-    io.save(measurements, h5)
-    result.save(h5)
-    summary = result.to_dict()
-    (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (out / "summary.txt").write_text(result.summary() + "\n")
-    files = [str(h5), str(out / "result.json"), str(out / "summary.txt")]
-    posterior_summary = None
-    if args.posterior:
-        post = _run_posterior(result, measurements, h5, args)
-        posterior_summary = post.to_dict()
-        (out / "posterior.json").write_text(json.dumps(posterior_summary, indent=2) + "\n")
-        files.append(str(out / "posterior.json"))
-    if selection is not None:
-        (out / "selection.json").write_text(json.dumps(selection.to_dict(), indent=2) + "\n")
-        files.append(str(out / "selection.json"))
-    if args.report:
-        written = _write_report(out, measurements, result, post if args.posterior else None, selection, args)
-        files.extend([written["html"], written["md"]])
+    final = out
+    with staged_folder(final) as out:  # the new files appear in `final` together, replacing the earlier ones
+        h5 = out / "result.h5"
+        io.save(measurements, h5)
+        result.save(h5)
+        summary = result.to_dict()
+        (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (out / "summary.txt").write_text(result.summary() + "\n")
+        files = [h5, out / "result.json", out / "summary.txt"]
+        posterior_summary = None
+        if args.posterior:
+            post = _run_posterior(result, measurements, h5, args)
+            posterior_summary = post.to_dict()
+            (out / "posterior.json").write_text(json.dumps(posterior_summary, indent=2) + "\n")
+            files.append(out / "posterior.json")
+        if selection is not None:
+            (out / "selection.json").write_text(json.dumps(selection.to_dict(), indent=2) + "\n")
+            files.append(out / "selection.json")
+        if args.report:
+            written = _write_report(out, measurements, result, post if args.posterior else None, selection, args)
+            files.extend([Path(written["html"]), Path(written["md"])])
+    files = [str(final / f.name) for f in files]
     if args.json:
         print(json.dumps({"model": summary["model"], "params": summary["params"], "stderr": summary["stderr"],
                           "posterior": posterior_summary, "metrics": summary["metrics"], "status": summary["status"],
@@ -809,6 +904,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip report.html / report.md and their figures")
     _add_posterior_options(p)
     p.add_argument("--out", help="output folder (default: next to the input, <name>.brdffit/)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an earlier result in the output folder (without it, such a folder is refused)")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON summary to stdout")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     _add_table_options(p)
@@ -941,6 +1038,9 @@ def main(argv=None) -> int:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"brdffit {args.command}: error: {message}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except KeyboardInterrupt as exc:  # one line, no traceback; what was kept is said by the exception, if anything
+        print(f"brdffit {args.command}: interrupted{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -314,3 +314,32 @@ def test_digits_that_are_not_ascii_numbers_are_rejected(tmp_path, cell, python_r
     with pytest.raises(FormatError) as info:
         bio.load(table)
     assert str(info.value) == f"{table}: line 3, column 1 ('theta_i'): cannot read {cell!r} as a number"
+
+
+# --------------------------------------------------------------------------------------- option values
+ROOT = Path(__file__).resolve().parents[1]
+PLASTIC = ROOT / "data" / "synthetic" / "plastic.h5"
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["fit", PLASTIC, "--multistart", "-3"], "argument --multistart: -3 is outside the allowed range: an integer >= 0"),
+    (["fit", PLASTIC, "--max-steps", "-1"], "argument --max-steps: -1 is outside the allowed range: an integer >= 1"),
+    (["fit", PLASTIC, "--max-steps", "many"], "argument --max-steps: 'many' is not an integer (allowed: an integer "
+                                              ">= 1)"),
+    (["posterior", "r.h5", "--walkers", "1"], "argument --walkers: 1 is outside the allowed range: an integer >= 2"),
+    (["render", PLASTIC, "--exposure", "nan"], "argument --exposure: nan is outside the allowed range: a finite "
+                                               "number >= 0"),
+    (["render", PLASTIC, "--resolution", "100000"], "argument --resolution: 100000 is outside the allowed range: an "
+                                                    "integer >= 8 and <= 4096"),
+    (["fit", PLASTIC, "--model", "lambert", "--fixed", "rho_d=2"],
+     "--fixed rho_d=2: outside the allowed range of rho_d, [0, 1] (model lambert)"),
+    (["fit", PLASTIC, "--model", "lambert+ggx", "--fixed", "rho_d=0.5,0.5,-0.1"],
+     "--fixed rho_d=0.5,0.5,-0.1: outside the allowed range of rho_d, [0, 1] (model lambert+ggx)"),
+    (["select", PLASTIC, "--candidates", "lambert;lambert+ggx", "--fixed", "alpha=nan"],
+     "--fixed alpha=nan: outside the allowed range of alpha"),
+])
+def test_option_values_outside_their_range_exit_2_naming_option_and_range(tmp_path, capsys, argv, message):
+    argv = [str(a) for a in argv] + (["--out", str(tmp_path / "o")] if argv[0] == "fit" else [])
+    assert main(argv) == EXIT_BAD_INPUT
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()  # refused before anything is fitted or written
