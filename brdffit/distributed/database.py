@@ -28,7 +28,7 @@ from pathlib import Path
 
 from ..progress import Progress
 from .sources import expand_sources
-from .table import read_results, table_format, write_results
+from .table import complete, read_results, table_format, write_results
 from .tasks import describe, error_row, fit_batch
 
 __all__ = ["fit_database", "DEFAULT_BATCH"]
@@ -106,7 +106,8 @@ class _Record:
         self.out, self.bar, self.todo = out, bar, todo
         self.rows = {row["source"]: row for row in kept}
         # Rows of sources not in this run stay in the table, first; then the sources in the order given.
-        self.order = list(dict.fromkeys([*self.rows, *order]))
+        given = set(order)
+        self.order = [key for key in self.rows if key not in given] + order
         self.done = self.failed = 0
         self.start = time.perf_counter()
 
@@ -122,7 +123,7 @@ class _Record:
             self.bar.update(self.done, f"{self.failed} failed, ETA {left:.0f} s" if self.done < self.todo else "")
 
     def table(self) -> list[dict]:
-        return [self.rows[key] for key in self.order if key in self.rows]
+        return complete([self.rows[key] for key in self.order if key in self.rows])
 
 
 def fit_database(sources, model, *, client=None, batch: int = DEFAULT_BATCH, out=None, resume: bool = True,
@@ -154,8 +155,8 @@ def fit_database(sources, model, *, client=None, batch: int = DEFAULT_BATCH, out
             ...); of `brdffit.fit` for a selection.
 
     Returns:
-        The rows of the given sources, in order (dicts column -> text or number, the columns of
-        `brdffit.distributed.table`), those kept from ``out`` included.
+        The rows of the given sources, in order, those kept from ``out`` included: dicts with every column of
+        the table (`brdffit.distributed.table`; text, or a float that is NaN where the row has no such number).
 
     Raises:
         ValueError: a bad ``batch``, ``workers``, ``model`` or ``out`` extension; no sources.
@@ -183,7 +184,7 @@ def fit_database(sources, model, *, client=None, batch: int = DEFAULT_BATCH, out
         with _connected(client, workers) as connected:
             _run(connected, todo, model, batch, read_options, fit_options, cache, record)
     bar.close(f"{record.done} fitted ({record.failed} failed), {len(done & {s.key for s in items})} already done")
-    return [record.rows[source.key] for source in items]
+    return complete([record.rows[source.key] for source in items])
 
 
 def _run(client, todo: list, model, batch: int, read_options, fit_options: dict, cache, record: _Record) -> None:

@@ -24,7 +24,7 @@ import numpy as np
 from ..io._common import FormatError, atomic_path
 
 __all__ = ["TABLE_FORMATS", "TEXT_COLUMNS", "LEADING_COLUMNS", "TABLE_GROUP", "table_format", "columns",
-           "write_results", "read_results"]
+           "complete", "write_results", "read_results"]
 
 TABLE_FORMATS = {".h5": "hdf5", ".hdf5": "hdf5", ".csv": "csv", ".parquet": "parquet"}
 TEXT_COLUMNS = ("source", "status", "model", "error")
@@ -68,6 +68,14 @@ def _column(rows, name: str) -> list:
     if name in TEXT_COLUMNS:
         return [str(row.get(name, "")) for row in rows]
     return [float(row.get(name, math.nan)) for row in rows]
+
+
+def complete(rows) -> list[dict]:
+    """The rows with every column of the table, in its order: "" for missing text, NaN for a missing number (as
+    `read_results` gives them back)."""
+    rows = list(rows)
+    names = columns(rows)
+    return _rows({name: _column(rows, name) for name in names}, names)
 
 
 def write_results(rows, path) -> None:
