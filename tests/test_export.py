@@ -9,9 +9,11 @@ import numpy as np
 import pytest
 
 import brdffit
+import brdffit.export.refit
 from brdffit import synth
 from brdffit.export import EXPORT_FORMATS, TARGETS, ExportError, export, export_details, f0_to_eta
 from brdffit.export import pbrt_reference as pr
+from brdffit.export.mitsuba import evaluate_in_mitsuba
 from brdffit.export.terms import measure, random_pairs, schlick_to_conductor
 from brdffit.models import fresnel, get, model_from_dict
 from brdffit.models.microfacet import DISTRIBUTIONS
@@ -33,21 +35,9 @@ def pairs():
     return random_pairs(N_PAIRS, seed=7)
 
 
-def _mitsuba_f(mi, bsdf, wi, wo):
-    """f_r from Mitsuba: its eval(ctx, si, wo_mi) is f_r cosθ(wo_mi); si.wi is brdffit's ωo (the detector side),
-    its wo is brdffit's ωi (the light side), as test_mitsuba_eval_convention checks."""
-    ctx = mi.BSDFContext()
-    si = mi.SurfaceInteraction3f()
-    si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
-    out = np.empty((len(wi), 3))
-    for j in range(len(wi)):
-        si.wi = mi.Vector3f(*wo[j])
-        out[j] = np.array(bsdf.eval(ctx, si, mi.Vector3f(*wi[j]))) / wi[j, 2]
-    return out
-
-
 def test_mitsuba_eval_convention(mi):
-    # A diffuse BSDF: eval = rho/pi * cos of the *sampled* direction, not of si.wi.
+    # evaluate_in_mitsuba divides Mitsuba's eval by cos of its sampled direction wo (brdffit's wi, the light):
+    # a diffuse BSDF returns rho/pi * cos(wo), whatever si.wi is.
     bsdf = mi.load_string('<bsdf version="3.0.0" type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>')
     si = mi.SurfaceInteraction3f()
     si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
@@ -55,6 +45,12 @@ def test_mitsuba_eval_convention(mi):
     light = np.array([0.8, 0.0, 0.6])
     value = np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*light)))
     np.testing.assert_allclose(value, 0.5 / np.pi * 0.6, rtol=1e-6)
+    # The BRDFs are reciprocal, so only that cosine distinguishes the two directions; one roughconductor pair:
+    model = get("ggx(fresnel=conductor)", alpha=0.3)
+    wi, wo = np.array([[0.8, 0.0, 0.6]]), np.array([[0.0, 0.28, 0.96]])
+    text = export(model, "mitsuba")
+    f = np.asarray(evaluate_dirs(model, wi, wo))
+    np.testing.assert_allclose(evaluate_in_mitsuba(text, wi, wo), f, rtol=1e-5)
 
 
 EXACT = {
@@ -79,10 +75,9 @@ def test_exact_mappings_agree_in_mitsuba(mi, pairs, case):
     result = export_details(model, "mitsuba", name="m")
     assert result.deviation.exact(), result.deviation
     assert "<!-- exact:" in result.text and "approximation" not in result.text
-    bsdf = mi.load_string(result.text)
     wi, wo = pairs
     f = np.broadcast_to(np.asarray(brdffit.evaluate(model, *_angles(wi), *_angles(wo))), (N_PAIRS, 3))
-    g = _mitsuba_f(mi, bsdf, wi, wo)
+    g = evaluate_in_mitsuba(result.text, wi, wo)
     np.testing.assert_allclose(g, f, rtol=1e-4, atol=1e-7 * f.max())
 
 
@@ -116,9 +111,8 @@ APPROXIMATE = {
 def test_approximate_mappings_load_and_state_their_measured_error(mi, case):
     model = APPROXIMATE[case]
     result = export_details(model, "mitsuba")
-    bsdf = mi.load_string(result.text)
     wi, wo = random_pairs()     # the export's own pairs: the stated error is recomputed from Mitsuba's values
-    g = _mitsuba_f(mi, bsdf, wi, wo)
+    g = evaluate_in_mitsuba(result.text, wi, wo)
     written = np.broadcast_to(result.written(wi, wo), g.shape)
     # What Mitsuba renders is what the export says it wrote (with Mitsuba's rational Beckmann G1).
     np.testing.assert_allclose(g, written, rtol=1e-4, atol=1e-7 * written.max())
@@ -142,9 +136,22 @@ def test_every_shipped_synthetic_model_exports_and_loads(mi, path):
     result = export_details(model, "mitsuba", fit=fit)
     mi.load_string(result.text)
     assert ("achieved by the fit" in result.text) == fit
-    assert np.isfinite(result.deviation.rms)
-    pbrt = export_details(model, "pbrt", fit=fit)
+    assert f"{result.deviation.rms:.3g}" in result.text
+    # pbrt: the direct mapping, or the same fit's mapping (its refinement is tested on clay and gold below).
+    exported = brdffit.export.refit.fit_exportable(model)[0] if fit else model
+    pbrt = export_details(exported, "pbrt")
     assert pr.parse(pbrt.text)["material"]["type"] in ("diffuse", "conductor", "mix")
+
+
+def test_pbrt_fit_option_refines_pbrts_own_parameters():
+    clay = synth.truth_model(brdffit.io.load(SYNTHETIC / "clay.h5"))
+    result = export_details(clay, "pbrt", fit=True)
+    assert "achieved by the fit" in result.text and "refined by least squares" in result.text
+    assert result.deviation.rms < measure(clay, get("lambert", rho_d=clay.params["rho_d"])).rms
+    gold = EXACT["gold.h5 truth"]
+    direct, refined = export_details(gold, "pbrt"), export_details(gold, "pbrt", fit=True)
+    assert refined.deviation.rms < 0.8 * direct.deviation.rms
+    assert f"{refined.deviation.rms:.3g}" in refined.text
 
 
 def test_fit_option_reduces_the_error_of_an_approximate_mapping():

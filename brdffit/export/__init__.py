@@ -26,7 +26,8 @@ class Target:
     Attributes:
         name: the ``to=`` / ``--to`` name.
         description: one line for help texts.
-        write: for a renderer, ``write(model, name, header) -> (text, written, notes, deviation)``; None for
+        write: for a renderer, ``write(model, name, header, source=None) -> (text, written, notes, deviation)``
+            (``source``: the original model under the fit option); None for
             JSON, which `native.write` handles (it takes fits with one model per channel).
     """
 
@@ -110,7 +111,7 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
 
         exported, line = fit_exportable(model)
         header.append(line)
-    text, written, notes, deviation = target.write(exported, name, header)
+    text, written, notes, deviation = target.write(exported, name, header, source=model if fit else None)
     if fit:
         # The deviation a renderer writes is from the model it was given; the fit's source is the original.
         from .terms import measure

@@ -33,7 +33,7 @@ import numpy as np
 
 from . import terms as tm
 
-__all__ = ["write", "EXPORTABLE"]
+__all__ = ["write", "evaluate_in_mitsuba", "check_channels", "EXPORTABLE"]
 
 EXPORTABLE = ("lambert (any number, summed) and cook-torrance or ggx lobes with any Fresnel mode, any number, "
               "summed")
@@ -258,13 +258,15 @@ def _comment(text: str) -> str:
     return f"<!-- {text.rstrip('-')} -->"
 
 
-def write(model: tm.Model, name: str, header: list[str]):
+def write(model: tm.Model, name: str, header: list[str], source=None):
     """The Mitsuba 3 document of ``model``.
 
     Arguments:
         model: the brdffit model (1 or 3 channels).
         name: the ``id`` of the root ``<bsdf>``.
         header: comment lines that open the document (source, version, fit notes).
+        source: unused: for the fit option, ``model`` is already brdffit's fit of Mitsuba's own plugins
+            (lambert + GGX lobes, written exactly) to the source (`brdffit.export.refit`).
 
     Returns:
         (text, a function (wi, wo) -> f_r of the written material as Mitsuba evaluates it, notes, `Deviation` from
@@ -293,3 +295,35 @@ def check_channels(model, target: str):
         raise tm.ExportError(f"{target} takes RGB colours; model {model.spec!r} has {model.channels} channels "
                              "(spectral data need the wavelengths, which a model does not carry); fit RGB or "
                              "single-channel data")
+
+
+def evaluate_in_mitsuba(text: str, wi, wo) -> np.ndarray:
+    """Load an export with Mitsuba 3 (``scalar_rgb``) and evaluate its BSDF, as a check of what it renders.
+
+    Mitsuba's ``eval(ctx, si, wo)`` takes ``si.wi`` towards the viewer (brdffit's ωo) and ``wo`` towards the
+    light (brdffit's ωi) and returns f_r cosθ of the latter, which is divided out here. Switches Mitsuba to the
+    ``scalar_rgb`` variant if another one is active.
+
+    Arguments:
+        text: the export.
+        wi, wo: ``(n, 3)`` unit vectors above the surface (brdffit's convention).
+
+    Returns:
+        ``(n, 3)`` f_r in 1/sr.
+
+    Raises:
+        ImportError: Mitsuba 3 is not installed (``pip install mitsuba``; it is in brdffit's test extra).
+    """
+    import mitsuba as mi
+
+    if mi.variant() != "scalar_rgb":
+        mi.set_variant("scalar_rgb")
+    bsdf = mi.load_string(text)
+    ctx = mi.BSDFContext()
+    si = mi.SurfaceInteraction3f()
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
+    out = np.empty((len(wi), 3))
+    for j in range(len(wi)):
+        si.wi = mi.Vector3f(*wo[j])
+        out[j] = np.array(bsdf.eval(ctx, si, mi.Vector3f(*wi[j]))) / wi[j, 2]
+    return out

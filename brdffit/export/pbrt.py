@@ -140,16 +140,80 @@ def _statements(parts: list[_Part], name: str) -> list[str]:
     return lines
 
 
-def write(model, name: str, header: list[str]):
+def _evaluator(parts: list[_Part], name: str):
+    """(text of the statements, f_r of the written material by pbrt-v4's formulas, read back from that text)."""
+    body = "\n".join(_statements(parts, name)) + "\n"
+    materials = pbrt_reference.parse(body)
+
+    def written(wi, wo):
+        return pbrt_reference.evaluate(materials, name, wi, wo)
+
+    return body, written
+
+
+# Bounds of pbrt-v4's parameters in the refinement: reflectance as pbrt clamps it, the index as brdffit's
+# conductor lobe declares it, roughness as brdffit's widths.
+_BOUNDS = {"weight": (1e-6, 1.0), "reflectance": (0.0, 1.0), "eta": (1e-3, 10.0), "k": (0.0, 20.0),
+           "roughness": (1e-3, 1.0)}
+
+
+def _refine(parts: list[_Part], source, name: str) -> list[_Part]:
+    """The fit option: pbrt-v4's own parameters (mix weights, reflectance, roughness, η, k) of ``parts`` refined
+    by least squares on the cosine-weighted residual (f_pbrt − f) cosθi against ``source`` at the pairs of the
+    stated deviation (so the comment states the achieved error); pbrt's formulas are evaluated on the written
+    text itself."""
+    from scipy.optimize import least_squares
+
+    wi, wo = tm.random_pairs()
+    f = np.broadcast_to(np.asarray(tm.evaluate_dirs(source, wi, wo), dtype=float), (len(wi), 3))
+    cos = wi[:, 2:3]
+    slots, x0 = [], []                                  # (part, parameter index or None for the weight, size)
+    for j, part in enumerate(parts):
+        entries = [(None, "weight", [part.weight])]
+        entries += [(i, key, tm.rgb(value) if tag == "rgb" else [float(value)])
+                    for i, (tag, key, value) in enumerate(part.params) if key in _BOUNDS]
+        for i, key, values in entries:
+            slots.append((j, i, key, len(values)))
+            x0.extend(np.clip(values, *_BOUNDS[key]))
+    lo = [_BOUNDS[key][0] for _, _, key, size in slots for _ in range(size)]
+    hi = [_BOUNDS[key][1] for _, _, key, size in slots for _ in range(size)]
+
+    def build(x):
+        new = [dataclasses.replace(part, params=list(part.params)) for part in parts]
+        at = 0
+        for j, i, key, size in slots:
+            values = np.asarray(x[at:at + size])
+            at += size
+            if i is None:
+                new[j].weight = float(values[0])
+            else:
+                tag, _, _ = new[j].params[i]
+                new[j].params[i] = (tag, key, values if tag == "rgb" else float(values[0]))
+        total = sum(part.weight for part in new)
+        for part in new:
+            part.weight /= total
+        return new
+
+    def residual(x):
+        _, written = _evaluator(build(x), name)
+        return ((written(wi, wo) - f) * cos).ravel()
+
+    return build(least_squares(residual, x0, bounds=(lo, hi), diff_step=1e-4, max_nfev=25).x)
+
+
+def write(model, name: str, header: list[str], source=None):
     """The pbrt-v4 statements of ``model``.
 
     Arguments:
         model: the brdffit model (1 or 3 channels).
         name: the material name (the last statement; parts are named ``name:kind-j``).
         header: comment lines that open the text.
+        source: for the fit option, the model that pbrt-v4's parameters of the mapping of ``model`` are then
+            refined against (`_refine`); None writes the mapping.
 
     Returns:
-        (text, a function (wi, wo) -> f_r of the written material by pbrt-v4's formulas, notes, `Deviation`).
+        (text, a function (wi, wo) -> f_r of the written material by pbrt-v4's formulas, notes, `Deviation` from
+        ``model``).
 
     Raises:
         ExportError: a lobe with no equivalent, more than RGB channels, or a name with quotes or newlines.
@@ -160,17 +224,17 @@ def write(model, name: str, header: list[str]):
     notes: list[str] = []
     best = None
     for parts, own in _candidates(model, notes):
-        body = "\n".join(_statements(parts, name)) + "\n"
-        materials = pbrt_reference.parse(body)
-
-        def written(wi, wo, materials=materials):
-            return pbrt_reference.evaluate(materials, name, wi, wo)
-
-        deviation = tm.measure(model, written)
-        if best is None or deviation.rms < best[2].rms:
-            best = (body, written, deviation, own)
-    body, written, deviation, own = best
+        deviation = tm.measure(model, _evaluator(parts, name)[1])
+        if best is None or deviation.rms < best[1].rms:
+            best = (parts, deviation, own)
+    parts, deviation, own = best
     notes = notes + own
+    if source is not None:
+        parts = _refine(parts, source, name)
+        notes.append("fit: pbrt-v4's own parameters (mix weights, reflectance, roughness, eta, k) were then refined "
+                     "by least squares on the cosine-weighted error against the source model")
+    body, written = _evaluator(parts, name)
+    deviation = tm.measure(model, written)
     lines = [f"# {line}" for line in header] + [f"# approximation: {note}" for note in notes]
     lines.append(("# exact: " if deviation.exact() else "# measured deviation from the source model (pbrt-v4's "
                   "formulas, brdffit.export.pbrt_reference): ") + deviation.describe())

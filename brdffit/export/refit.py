@@ -9,6 +9,8 @@ loss (Ngan et al. 2005), and export that. The achieved error goes into the expor
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..models import Model
 
 __all__ = ["fit_exportable", "exportable_spec", "FIT_SAMPLES"]
@@ -26,8 +28,13 @@ def exportable_spec(model: Model) -> str:
     return "+".join((["lambert"] if diffuse else []) + specular)
 
 
+# (spec, channels, parameter values, seed) -> (fitted model, comment): exporting one model to both renderers
+# fits once.
+_FITS: dict = {}
+
+
 def fit_exportable(model: Model, seed: int = 0) -> tuple[Model, str]:
-    """Fit `exportable_spec` to ``model``.
+    """Fit `exportable_spec` to ``model`` (remembered per model and seed).
 
     Arguments:
         model: the source model.
@@ -39,9 +46,13 @@ def fit_exportable(model: Model, seed: int = 0) -> tuple[Model, str]:
     from ..fitting.api import fit
     from ..synth import generate
 
-    spec = exportable_spec(model)
-    data = generate(model, "uniform", n=FIT_SAMPLES, seed=seed)
-    result = fit(data, spec, seed=seed)
-    return result.model, (f"fit: {spec} was fitted to the source model {model.spec} at {FIT_SAMPLES} uniform "
-                          f"direction pairs by brdffit's cosine-weighted least squares (status {result.status}); "
-                          "that fit is what is written")
+    key = (model.spec, model.channels, seed,
+           tuple((name, np.asarray(value, dtype=float).tobytes()) for name, value in sorted(model.params.items())))
+    if key not in _FITS:
+        spec = exportable_spec(model)
+        data = generate(model, "uniform", n=FIT_SAMPLES, seed=seed)
+        result = fit(data, spec, seed=seed)
+        _FITS[key] = (result.model, f"fit: {spec} was fitted to the source model {model.spec} at {FIT_SAMPLES} "
+                                    "uniform direction pairs by brdffit's cosine-weighted least squares (status "
+                                    f"{result.status}); that fit is what is written")
+    return _FITS[key]

@@ -167,11 +167,11 @@ def schlick_to_conductor(f0: float) -> tuple[float, float, float]:
         return (_conductor_fresnel(c, x[0], x[1]) - target) / (target + 0.05)
 
     best = None
-    for eta0 in (f0_to_eta(min(f0, 0.99)), 1.0 + 1e-3, 0.5, 0.2):
-        for k0 in (0.0, 1.0, 3.0):
-            sol = least_squares(residual, [eta0, k0], bounds=([1e-3, 0.0], [10.0, 20.0]))
-            if best is None or sol.cost < best.cost:
-                best = sol
+    # Starts: the dielectric of the same f0, a weak and a strong conductor.
+    for start in ((f0_to_eta(min(f0, 0.99)), 0.0), (1.0, 0.3), (0.5, 2.0)):
+        sol = least_squares(residual, start, bounds=([1e-3, 0.0], [10.0, 20.0]))
+        if best is None or sol.cost < best.cost:
+            best = sol
     eta, k = (float(v) for v in best.x)
     return eta, k, float(np.max(np.abs(_conductor_fresnel(c, eta, k) - target)))
 
