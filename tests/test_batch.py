@@ -28,7 +28,8 @@ import pytest
 import brdffit
 from brdffit import io, models, synth
 from brdffit.cli import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_OK, main
-from brdffit.distributed import expand_sources, fit_database, read_results, write_results
+from brdffit.distributed import expand_sources, fit_database, read_results, tasks, write_results
+from brdffit.distributed.sources import read_sources
 from brdffit.distributed.tasks import fit_batch, result_row
 from brdffit.io.hdf5 import write_measurements_group
 
@@ -115,8 +116,8 @@ def _same(rows) -> list[dict]:
 
 
 def _assert_rows_equal_serial(rows, database, serial):
-    assert [row["source"] for row in rows] == [s.key for s in expand_sources(str(database["folder"]))]
-    assert {row["source"] for row in rows} == set(database["materials"]), "one row per material"
+    # In the order given, a multi-material file's members in its place.
+    assert [row["source"] for row in rows] == sorted(database["materials"])
     for row in rows:
         key = row["source"]
         if database["materials"][key] is None:
@@ -177,26 +178,23 @@ def test_resume_keeps_done_rows_and_fits_the_rest(local_run, database, serial, c
 def test_failing_fit_gets_its_row_and_spares_the_batch(database, serial, monkeypatch):
     """A batch whose fit_many raises is fitted one material at a time: only the failing one gets an error row
     (the engine has no data that makes it raise, so a stand-in fit_many refuses one marked material)."""
-    real = brdffit.fit_many
+    real_fit_many, real_read = brdffit.fit_many, tasks.read_sources
     keys = [k for k, m in database["materials"].items() if m is not None and m.n == 300][:3]
     poisoned = keys[1]
 
     def refusing(items, model, **options):
         if any(m.meta.get("poison") for m in items):
             raise FloatingPointError("the solve blew up")
-        return real(items, model, **options)
+        return real_fit_many(items, model, **options)
+
+    def marking(sources, read_options=None):
+        return [read._replace(measurements=read.measurements.replace(meta={"poison": True}))
+                if read.source.key == poisoned else read for read in real_read(sources, read_options)]
 
     monkeypatch.setattr(brdffit, "fit_many", refusing)
-    sources = expand_sources(keys)
-    original = brdffit.distributed.sources.Source.load
-
-    def load(self, read_options=None):
-        m = original(self, read_options)
-        return m.replace(meta={**m.meta, "poison": True}) if self.key == poisoned else m
-
-    monkeypatch.setattr(brdffit.distributed.sources.Source, "load", load)
-    rows = fit_batch(sources, SPEC, None, {}, None)
-    assert [row["source"] for row in rows] == keys
+    monkeypatch.setattr(tasks, "read_sources", marking)
+    rows, members = fit_batch(expand_sources(keys), SPEC, None, {}, None)
+    assert [row["source"] for row in rows] == keys and members == []
     assert rows[1] == {"source": poisoned, "status": "error", "model": SPEC,
                        "error": "FloatingPointError: the solve blew up"}
     for row in (rows[0], rows[2]):  # each fitted alone: the serial fit, bit for bit
@@ -262,12 +260,17 @@ def test_tables_round_trip_and_refuse_what_they_cannot_read(tmp_path, monkeypatc
 def test_sources_expand_globs_folders_and_material_groups(database):
     folder = database["folder"]
     keys = [s.key for s in expand_sources(str(folder))]
-    assert keys == sorted(keys, key=lambda k: k.split("::")[0]) and set(keys) == set(database["materials"])
+    assert keys == sorted(str(p.resolve()) for p in folder.iterdir())
     assert [s.key for s in expand_sources([str(folder / "m*.csv"), str(folder / "m6.csv")])] == [
         str((folder / "m6.csv").resolve()), str((folder / "m7.csv").resolve())]
     texels = expand_sources(str(folder / "texels.h5"))
-    assert [(s.group, s.load().n) for s in texels] == [("texels/a", 300), ("texels/b", 300)]
-    assert expand_sources(f"{folder / 'texels.h5'}::/texels/b")[0].group == "texels/b"
+    assert [s.group for s in texels] == [None], "the client opens no file"
+    (whole,) = read_sources(texels)
+    assert [m.group for m in whole.members] == ["texels/a", "texels/b"] and whole.measurements is None
+    named = read_sources(expand_sources([f"{folder / 'texels.h5'}::/texels/b", f"{folder / 'texels.h5'}::c",
+                                         str(folder / "m0.h5"), str(folder / "broken.csv")]))
+    assert named[0].measurements.n == 300 and "no group /c" in named[1].error
+    assert named[2].measurements.n == 300 and "cannot read 'zero' as a number" in named[3].error
     with pytest.raises(FileNotFoundError, match="no file matches"):
         expand_sources(str(folder / "*.binary"))
 

@@ -2,20 +2,26 @@
 
 The client plans and records; the workers read and fit (`brdffit.distributed.tasks`):
 
-1. the sources are expanded (`expand_sources`); with ``resume`` the rows already in the results table are kept
-   and their materials skipped (all but ``"error"`` rows, which are tried again);
-2. a first round of tasks reads every material and reports its shape; an unreadable one gets its error row;
-3. the materials are grouped by shape (samples, channels) in the order given, and each group cut into batches of
-   at most ``batch``; one task fits a batch with one `brdffit.fit_many`, so a worker compiles a program per shape
-   and reuses it. Materials of other shapes are not padded into a batch: missing samples would change the
-   engine's seeded subsamples, and the answer would no longer be the material's own fit;
+1. the sources are expanded (`expand_sources`: paths, folders, globs; no file is opened on the client); with
+   ``resume`` the rows already in the results table are kept and their materials skipped (all but ``"error"``
+   rows, which are tried again);
+2. the sources are cut, in the order given, into batches of at most ``batch``; a task reads its batch once and
+   fits the materials of one shape (samples, channels) together with one `brdffit.fit_many`, so a worker compiles
+   a program per shape and reuses it. A database of one shape (MERL, the texels of a scan, one instrument's
+   archive) thus gives batches of equally shaped materials; a mixed one is best given grouped by shape.
+   Materials of other shapes are not padded into a batch: missing samples would change the engine's seeded
+   subsamples. The shapes are not read first in a round of their own: that would read every file twice (an
+   opening of a brdffit HDF5 file inspects all of it in a child process, ~0.1 s);
+3. a multi-material HDF5 file given as a whole is found to be one when its task reads it: the task returns its
+   member groups, which the client cuts into batches of their own (a table row per member);
 4. the rows are written as each task's result arrives (the whole table, atomically), and a progress line counts
    them with an estimate of the time left.
 
 Faults: the scheduler reruns the tasks of a worker that dies on the other workers (Dask's
 ``distributed.scheduler.allowed-failures``, 3 by default); a batch that still fails gets error rows naming the
-reason. An interrupted client leaves the rows received so far, which ``resume`` keeps. Each material's result is
-the one `brdffit.fit` gives it alone (`fit_many`'s contract), whichever worker and batch fitted it.
+reason. An interrupted client leaves the rows received so far, which ``resume`` keeps. The same batches give the
+same numbers on any worker; a batch of several materials agrees with the materials' serial fits to the solver's
+tolerance, not bit for bit (docs/batch.md).
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ from pathlib import Path
 from ..progress import Progress
 from .sources import expand_sources
 from .table import complete, read_results, table_format, write_results
-from .tasks import describe, error_row, fit_batch
+from .tasks import error_row, fit_batch
 
 __all__ = ["fit_database", "DEFAULT_BATCH"]
 
@@ -100,16 +106,24 @@ def _batches(sources: list, shapes: list, size: int) -> list[list]:
 
 
 class _Record:
-    """The rows so far, written to the results table (when there is one) each time new rows arrive."""
+    """The rows so far, written to the results table (when there is one) each time new rows arrive, and the
+    progress line."""
 
-    def __init__(self, out, order: list[str], kept: list[dict], bar: Progress, todo: int):
+    def __init__(self, out, given: list[str], kept: list[dict], bar: Progress, todo: int):
         self.out, self.bar, self.todo = out, bar, todo
         self.rows = {row["source"]: row for row in kept}
-        # Rows of sources not in this run stay in the table, first; then the sources in the order given.
-        given = set(order)
-        self.order = [key for key in self.rows if key not in given] + order
+        self.kept = set(self.rows)
+        self.given = list(given)  # the sources' keys in order, multi-material files replaced by their members
         self.done = self.failed = 0
         self.start = time.perf_counter()
+
+    def expand(self, key: str, members: list[str], fresh: int) -> None:
+        """A multi-material file turned out to stand for ``members``, ``fresh`` of which are still to fit."""
+        rest = [k for k in self.given if k not in members]
+        at = rest.index(key)
+        self.given = rest[:at] + members + rest[at + 1:]
+        self.todo += fresh - 1
+        self.bar.total = max(self.todo, 1)
 
     def add(self, rows: list[dict]) -> None:
         for row in rows:
@@ -123,7 +137,13 @@ class _Record:
             self.bar.update(self.done, f"{self.failed} failed, ETA {left:.0f} s" if self.done < self.todo else "")
 
     def table(self) -> list[dict]:
-        return complete([self.rows[key] for key in self.order if key in self.rows])
+        """Rows of sources not in this run first (they stay in the table), then the sources in order."""
+        given = set(self.given)
+        order = [key for key in self.rows if key not in given] + self.given
+        return complete([self.rows[key] for key in order if key in self.rows])
+
+    def result(self) -> list[dict]:
+        return complete([self.rows[key] for key in self.given if key in self.rows])
 
 
 def fit_database(sources, model, *, client=None, batch: int = DEFAULT_BATCH, out=None, resume: bool = True,
@@ -183,31 +203,38 @@ def fit_database(sources, model, *, client=None, batch: int = DEFAULT_BATCH, out
     if todo:
         with _connected(client, workers) as connected:
             _run(connected, todo, model, batch, read_options, fit_options, cache, record)
-    bar.close(f"{record.done} fitted ({record.failed} failed), {len(done & {s.key for s in items})} already done")
-    return complete([record.rows[source.key] for source in items])
+    rows = record.result()
+    bar.close(f"{record.done} fitted ({record.failed} failed), {sum(r['source'] in record.kept for r in rows)} "
+              "already done")
+    return rows
 
 
 def _run(client, todo: list, model, batch: int, read_options, fit_options: dict, cache, record: _Record) -> None:
-    """Read the shapes, submit the batches and record their rows as they arrive."""
+    """Submit the batches, record their rows as they arrive, and batch the members of multi-material files."""
     from distributed import as_completed
 
     label = model if isinstance(model, str) else "auto"
-    chunks = [todo[i:i + batch] for i in range(0, len(todo), batch)]
-    described = client.gather(client.map(describe, chunks, read_options=read_options, pure=False))
-    readable, shapes, unreadable = [], [], []
-    for source, (shape, error) in zip(todo, (d for chunk in described for d in chunk)):
-        if shape is None:
-            unreadable.append(error_row(source.key, error, label))
-        else:
-            readable.append(source)
-            shapes.append(shape)
-    record.add(unreadable)
-    futures = {client.submit(fit_batch, group, model, read_options, fit_options, cache, pure=False): group
-               for group in _batches(readable, shapes, batch)}
-    for future in as_completed(futures):
+    pending = {}
+
+    def submit(group: list):
+        future = client.submit(fit_batch, group, model, read_options, fit_options, cache, pure=False)
+        pending[future] = group
+        return future
+
+    arrived = as_completed([submit(todo[i:i + batch]) for i in range(0, len(todo), batch)])
+    for future in arrived:
+        group = pending.pop(future)
         try:
-            rows = future.result()
+            rows, members = future.result()
         except Exception as err:  # the batch's workers kept dying (KilledWorker), or the task could not run
-            rows = [error_row(source.key, f"{type(err).__name__}: {err}", label) for source in futures[future]]
-        record.add(rows)
+            rows, members = [error_row(source.key, f"{type(err).__name__}: {err}", label) for source in group], []
         future.release()
+        fresh = []
+        for path in dict.fromkeys(member.path for member in members):
+            mine = [member for member in members if member.path == path]
+            new = [member for member in mine if member.key not in record.kept and member.key not in record.given]
+            record.expand(path, [member.key for member in mine], len(new))
+            fresh.extend(new)
+        record.add(rows)
+        for i in range(0, len(fresh), batch):
+            arrived.add(submit(fresh[i:i + batch]))

@@ -4,7 +4,9 @@ of a multi-material brdffit HDF5 file (docs/batch.md).
 A multi-material HDF5 file holds several groups in the layout of ``/measurements`` (docs/formats.md), e.g.
 ``/materials/red`` and ``/materials/blue``, written with `brdffit.io.update_hdf5` and
 `brdffit.io.hdf5.write_measurements_group`. A source names one of them as ``FILE::GROUP``; the file alone stands
-for all of them (or for its ``/measurements`` group where it has one).
+for all of them (or for its ``/measurements`` group where it has one). Every opening of a brdffit HDF5 file
+inspects all of it in a child process (`brdffit.io.hdf5.inspect_hdf5`), so the groups of one file that a task
+reads are read through one opening.
 """
 
 from __future__ import annotations
@@ -12,12 +14,13 @@ from __future__ import annotations
 import dataclasses
 import glob
 from pathlib import Path
+from typing import NamedTuple
 
-from ..io import FORMATS, FormatError, detect_format, load, read_hdf5
-from ..io.hdf5 import MEASUREMENTS_GROUP, open_hdf5
+from ..io import FORMATS, FormatError, detect_format, load
+from ..io.hdf5 import MEASUREMENTS_GROUP, open_hdf5, read_measurements_group
 from ..measurements import Measurements
 
-__all__ = ["Source", "GROUP_SEPARATOR", "expand_sources", "material_groups"]
+__all__ = ["Source", "Read", "GROUP_SEPARATOR", "expand_sources", "read_sources", "material_groups"]
 
 GROUP_SEPARATOR = "::"
 
@@ -27,11 +30,12 @@ _MATERIAL_DATASETS = ("theta_i", "phi_i", "theta_o", "phi_o", "values")
 
 @dataclasses.dataclass(frozen=True)
 class Source:
-    """One material of a database.
+    """One material of a database, or a multi-material HDF5 file that stands for its material groups.
 
     Attributes:
         path: the file, absolute (workers may run in another folder).
-        group: the HDF5 group holding the material, or None for a file that is one material.
+        group: the HDF5 group holding the material; None for a file (one material, or a brdffit HDF5 file without
+            ``/measurements``, whose material groups `read_sources` lists).
     """
 
     path: str
@@ -42,38 +46,93 @@ class Source:
         """The source's name in the results table: ``PATH`` or ``PATH::GROUP``."""
         return self.path if self.group is None else f"{self.path}{GROUP_SEPARATOR}{self.group}"
 
-    def load(self, read_options: dict | None = None) -> Measurements:
-        """Read the material.
 
-        Arguments:
-            read_options: keywords of `brdffit.io.load` (table options, MERL ``subsample``, ...); not for groups.
+class Read(NamedTuple):
+    """What reading a source gave: its measurements, the member sources of a multi-material file, or an error."""
 
-        Returns:
-            The `Measurements`.
-
-        Raises:
-            FormatError, MeasurementError, FileNotFoundError: from the reader, naming the file.
-        """
-        if self.group is None:
-            return load(self.path, **(read_options or {}))
-        return read_hdf5(self.path, group=self.group)
+    source: Source
+    measurements: Measurements | None = None
+    members: tuple = ()
+    error: str = ""
 
 
-def material_groups(path) -> list[str]:
-    """The groups of a brdffit HDF5 file that hold a material, in file order (``/measurements`` first).
-
-    Raises:
-        FormatError: not a brdffit HDF5 file.
-    """
+def material_groups(f) -> list[str]:
+    """The groups of an open brdffit HDF5 file (`brdffit.io.hdf5.open_hdf5`) that hold a material, in file order
+    (``/measurements`` first)."""
     import h5py
 
     found = []
-    with open_hdf5(path) as f:
-        def visit(name, obj):
-            if isinstance(obj, h5py.Group) and all(isinstance(obj.get(d), h5py.Dataset) for d in _MATERIAL_DATASETS):
-                found.append(name)
-        f.visititems(visit)
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Group) and all(isinstance(obj.get(d), h5py.Dataset) for d in _MATERIAL_DATASETS):
+            found.append(name)
+
+    f.visititems(visit)
     return sorted(found, key=lambda name: name != MEASUREMENTS_GROUP)
+
+
+def _message(err: BaseException) -> str:
+    return f"{type(err).__name__}: {err}"
+
+
+def _read_hdf5(path: str, sources: list[Source]) -> list[Read]:
+    """Read sources of one brdffit HDF5 file with one opening (each opening inspects the whole file, brdffit.io.hdf5):
+    the named groups, and for the file itself its ``/measurements`` or the list of its material groups."""
+    try:
+        f = open_hdf5(path)
+    except Exception as err:  # noqa: BLE001 - every source of the file gets the reason
+        return [Read(source, error=_message(err)) for source in sources]
+    reads = []
+    with f:
+        for source in sources:
+            try:
+                if source.group is not None:
+                    if source.group not in f:
+                        raise FormatError(path, f"no group /{source.group}")
+                    reads.append(Read(source, read_measurements_group(f[source.group], path)))
+                    continue
+                groups = material_groups(f)
+                if not groups:
+                    raise FormatError(path, f"no group holds a material (datasets {', '.join(_MATERIAL_DATASETS)})")
+                if MEASUREMENTS_GROUP in groups:
+                    reads.append(Read(source, read_measurements_group(f[MEASUREMENTS_GROUP], path)))
+                else:
+                    reads.append(Read(source, members=tuple(Source(path, group) for group in groups)))
+            except Exception as err:  # noqa: BLE001 - a damaged group is that material's error
+                reads.append(Read(source, error=_message(err)))
+    return reads
+
+
+def read_sources(sources, read_options: dict | None = None) -> list[Read]:
+    """Read materials, each failure kept as its own error.
+
+    Arguments:
+        sources: `Source` objects.
+        read_options: keywords of `brdffit.io.load` for files that are not brdffit HDF5 (table options, MERL
+            ``subsample``, ...).
+
+    Returns:
+        One `Read` per source, in order.
+    """
+    sources = list(sources)
+    by_file: dict[str, list[Source]] = {}
+    reads = {}
+    for source in sources:
+        try:
+            hdf5 = source.group is not None or detect_format(source.path) == "hdf5"
+        except Exception as err:  # noqa: BLE001
+            reads[source] = Read(source, error=_message(err))
+            continue
+        if hdf5:
+            by_file.setdefault(source.path, []).append(source)
+            continue
+        try:
+            reads[source] = Read(source, load(source.path, **(read_options or {})))
+        except Exception as err:  # noqa: BLE001 - an unreadable material is its row's error
+            reads[source] = Read(source, error=_message(err))
+    for path, members in by_file.items():
+        reads.update((read.source, read) for read in _read_hdf5(path, members))
+    return [reads[source] for source in sources]
 
 
 def _files(item: str) -> list[Path]:
@@ -92,11 +151,9 @@ def _files(item: str) -> list[Path]:
 
 
 def expand_sources(items) -> list[Source]:
-    """The materials named by paths, folders, globs, ``FILE::GROUP`` strings and `Source` objects, in order,
-    each once.
-
-    A brdffit HDF5 file with a ``/measurements`` group is one material; one without it stands for every group that
-    holds a material (`material_groups`).
+    """The sources named by paths, folders, globs, ``FILE::GROUP`` strings and `Source` objects, in order, each
+    once. No file is opened here: a brdffit HDF5 file without ``/measurements`` is found to stand for its material
+    groups when a worker reads it (`read_sources`).
 
     Arguments:
         items: a path, a glob, or a sequence of them (str, Path, `Source`).
@@ -106,7 +163,6 @@ def expand_sources(items) -> list[Source]:
 
     Raises:
         FileNotFoundError: a path that does not exist or a glob that matches nothing.
-        FormatError: an HDF5 file brdffit cannot read, or one with no material in it.
         ValueError: no sources at all.
     """
     if isinstance(items, (str, Path, Source)):
@@ -123,22 +179,9 @@ def expand_sources(items) -> list[Source]:
             for path in _files(str(item)):
                 if not path.exists():
                     raise FileNotFoundError(f"{path}: no such file")
-                found.extend(_file_sources(path.resolve()))
+                found.append(Source(str(path.resolve())))
         for source in found:
             sources.setdefault(source.key, source)
     if not sources:
         raise ValueError("no sources: give files, folders, globs or FILE::GROUP names")
     return list(sources.values())
-
-
-def _file_sources(path: Path) -> list[Source]:
-    """One source for a file, or one per material group of a multi-material HDF5 file."""
-    try:
-        if detect_format(path) != "hdf5":
-            return [Source(str(path))]
-        groups = material_groups(path)
-    except (FormatError, OSError):
-        return [Source(str(path))]  # reading it reports the problem in its row, without stopping the others
-    if MEASUREMENTS_GROUP in groups or not groups:
-        return [Source(str(path))]
-    return [Source(str(path), group) for group in groups]

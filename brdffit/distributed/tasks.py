@@ -1,5 +1,5 @@
-"""The work of a database fit that runs on the Dask workers: read the materials' shapes, fit a batch of equally
-shaped materials with one `brdffit.fit_many` (one compiled program per worker and shape), turn results into rows.
+"""The work of a database fit that runs on the Dask workers: read a batch of materials, fit those of one shape
+with one `brdffit.fit_many` (one compiled program per worker and shape), turn the results into rows.
 
 Every task catches the failure of a material and returns it as that material's row (status ``"error"``), so a
 bad file or a failed fit never stops the batch (docs/batch.md).
@@ -12,9 +12,9 @@ import time
 
 import numpy as np
 
-from .sources import Source
+from .sources import Source, _message, read_sources
 
-__all__ = ["configure", "describe", "fit_batch", "result_row", "error_row"]
+__all__ = ["configure", "fit_batch", "result_row", "error_row"]
 
 
 @functools.cache
@@ -31,26 +31,6 @@ def configure(cache_dir: str | None) -> None:
 
     jax.config.update("jax_compilation_cache_dir", str(cache_dir))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-
-
-def _message(err: BaseException) -> str:
-    return f"{type(err).__name__}: {err}"
-
-
-def describe(sources: list[Source], read_options: dict | None) -> list[tuple]:
-    """Read each material and report its shape.
-
-    Returns:
-        One ``(shape, error)`` per source: ``((n_samples, n_channels), "")`` or ``(None, message)``.
-    """
-    described = []
-    for source in sources:
-        try:
-            m = source.load(read_options)
-            described.append(((m.n, m.n_channels), ""))
-        except Exception as err:  # a material that cannot be read becomes an error row
-            described.append((None, _message(err)))
-    return described
 
 
 def _flat(name: str, value):
@@ -116,29 +96,36 @@ def _select_one(item, candidates: tuple, fit_options: dict) -> dict:
 
 
 def fit_batch(sources: list[Source], model, read_options: dict | None, fit_options: dict,
-              cache_dir: str | None) -> list[dict]:
-    """Fit a batch of equally shaped materials and return their rows, in order.
+              cache_dir: str | None) -> tuple[list[dict], list[Source]]:
+    """Read a batch of materials and fit them: those of one shape (samples, channels) together.
 
     Arguments:
         sources: the materials.
-        model: a spec string (one `fit_many` for the batch), or a tuple of candidate specs (a `brdffit.select`
-            per material).
+        model: a spec string (one `fit_many` per shape), or a tuple of candidate specs (a `brdffit.select` per
+            material).
         read_options: keywords of `brdffit.io.load`.
         fit_options: keywords of `brdffit.fit_many` (and of the candidates' fits for a selection).
         cache_dir: JAX's persistent compilation cache on this worker (`configure`).
 
     Returns:
-        One row per source (an error row where it could not be read or fitted).
+        The rows of the materials, in order (an error row where one could not be read or fitted), and the member
+        sources of the multi-material files among ``sources`` (which get no row: their members will).
     """
     configure(cache_dir)
-    rows, loaded = {}, []
-    for source in sources:
-        try:
-            loaded.append((source, source.load(read_options)))
-        except Exception as err:  # it was readable when the batch was planned; a changed file is its own error
-            rows[source.key] = error_row(source.key, _message(err), model if isinstance(model, str) else "auto")
-    if loaded and isinstance(model, str):
-        rows.update((row["source"], row) for row in _fit_together(loaded, model, fit_options))
-    elif loaded:
-        rows.update((item[0].key, _select_one(item, model, fit_options)) for item in loaded)
-    return [rows[source.key] for source in sources]
+    label = model if isinstance(model, str) else "auto"
+    rows, members, shapes = {}, [], {}
+    for read in read_sources(sources, read_options):
+        key = read.source.key
+        if read.error:
+            rows[key] = error_row(key, read.error, label)
+        elif read.members:
+            members.extend(read.members)
+        else:
+            m = read.measurements
+            shapes.setdefault((m.n, m.n_channels), []).append((read.source, m))
+    for loaded in shapes.values():
+        if isinstance(model, str):
+            rows.update((row["source"], row) for row in _fit_together(loaded, model, fit_options))
+        else:
+            rows.update((item[0].key, _select_one(item, model, fit_options)) for item in loaded)
+    return [rows[source.key] for source in sources if source.key in rows], members

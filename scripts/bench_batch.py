@@ -1,0 +1,105 @@
+"""Benchmark of `brdffit.fit_database` (issue 19): a database of small materials on a LocalCluster, throughput
+against the number of workers, after compilation (docs/benchmarks.md).
+
+The database: ``--materials`` files (default 1,000) of ``--samples`` uniform samples (default 2,000) of Lambert +
+GGX materials with 1% relative noise, each its own brdffit HDF5 file. For each worker count a LocalCluster of
+single-threaded worker processes is started, every worker compiles on a warm-up run of one batch per worker (its
+rows are discarded), then the whole database is fitted into a CSV table; the wall time of that run is the figure.
+A serial baseline fits ``--serial`` of the materials one by one with `brdffit.fit` in this process.
+
+    python scripts/bench_batch.py [--materials 1000] [--samples 2000] [--workers 1,2] [--batch 32] [--serial 50]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("JAX_PLATFORMS", "cpu")
+
+SPEC = "lambert+ggx"
+
+
+def make_database(folder: Path, count: int, samples: int) -> list[str]:
+    """``count`` Lambert + GGX materials with varied parameters, one HDF5 file each."""
+    from brdffit import io, models, synth
+
+    paths = []
+    for i in range(count):
+        truth = models.get(SPEC, alpha=0.05 + 0.4 * (i % 97) / 97, ks=[0.05 + 0.3 * (i % 13) / 13] * 3,
+                           rho_d=[0.2 + 0.6 * (i % 7) / 7] * 3)
+        path = folder / f"m{i:04d}.h5"
+        io.save(synth.generate(truth, n=samples, noise="relative:0.01", seed=i), path)
+        paths.append(str(path))
+    return paths
+
+
+def run(paths: list[str], workers: int, batch: int, cache: str, out: Path) -> dict:
+    """Fit the database on a fresh LocalCluster of ``workers`` processes, after a warm-up that compiles."""
+    from distributed import Client, LocalCluster
+
+    from brdffit import fit_database
+
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        start = time.perf_counter()
+        fit_database(paths[:batch * workers], SPEC, client=client, batch=batch, cache_dir=cache)
+        warm = time.perf_counter() - start
+        start = time.perf_counter()
+        rows = fit_database(paths, SPEC, client=client, batch=batch, out=out, resume=False, cache_dir=cache)
+        wall = time.perf_counter() - start
+    converged = sum(row["status"] in ("converged", "converged-at-bound") for row in rows)
+    return {"workers": workers, "warm-up": warm, "wall": wall, "throughput": len(rows) / wall,
+            "median time": statistics.median(row["time"] for row in rows), "converged": converged,
+            "rows": len(rows)}
+
+
+def serial(paths: list[str]) -> dict:
+    """One `brdffit.fit` after another in this process (the first, which compiles, not counted)."""
+    import brdffit
+    from brdffit import io
+
+    brdffit.fit(io.load(paths[0]), SPEC)
+    times = []
+    for path in paths:
+        m = io.load(path)
+        start = time.perf_counter()
+        brdffit.fit(m, SPEC)
+        times.append(time.perf_counter() - start)
+    return {"fits": len(paths), "median": statistics.median(times), "throughput": 1 / statistics.median(times)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--materials", type=int, default=1000)
+    parser.add_argument("--samples", type=int, default=2000)
+    parser.add_argument("--workers", default="1,2", help="comma-separated worker counts")
+    parser.add_argument("--batch", type=int, default=32)
+    parser.add_argument("--serial", type=int, default=50, help="materials fitted one by one for the baseline")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory(prefix="bench-batch-") as tmp:
+        tmp = Path(tmp)
+        (tmp / "data").mkdir()
+        start = time.perf_counter()
+        paths = make_database(tmp / "data", args.materials, args.samples)
+        print(f"{len(paths)} materials of {args.samples} samples written in {time.perf_counter() - start:.1f} s")
+        cache = str(tmp / "jax-cache")
+        if args.serial:
+            base = serial(paths[:args.serial])
+            print(f"serial fit(): median {base['median']:.3f} s a material over {base['fits']} "
+                  f"({base['throughput']:.2f} materials/s)")
+        print("| workers | warm-up (compiles) | wall, all materials | materials/s | median time a material "
+              "(its share of its batch) | converged |")
+        print("|---|---|---|---|---|---|")
+        for workers in (int(w) for w in args.workers.split(",")):
+            r = run(paths, workers, args.batch, cache, tmp / f"results-{workers}.csv")
+            print(f"| {r['workers']} | {r['warm-up']:.1f} s | {r['wall']:.1f} s | {r['throughput']:.1f} | "
+                  f"{r['median time']:.3f} s | {r['converged']}/{r['rows']} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
