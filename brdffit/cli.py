@@ -404,9 +404,8 @@ def _cmd_models(args) -> int:
 
     for name in models.names():
         cls = models.lobe_class(name)
-        model = models.get(name, channels=1)
         print(models.describe(cls))
-        for spec in model.param_specs:
+        for spec in cls().param_specs():  # the declarations: no model is built, so JAX is not loaded
             fixed = ", fixed by default" if spec.fixed else ""
             print(f"    {spec.name:<10} {spec.kind:<6} default {spec.default:<8g} bounds [{spec.lower:g}, "
                   f"{spec.upper:g}] unit {spec.unit}{fixed}: {spec.doc}")
@@ -1039,7 +1038,9 @@ def main(argv=None) -> int:
         print(f"brdffit {args.command}: error: {message}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as exc:  # one line, no traceback; what was kept is said by the exception, if anything
-        print(f"brdffit {args.command}: interrupted{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
+        # `fit` writes its folder as a whole (staged_folder): an interrupted fit leaves the earlier folder as it was.
+        kept = "nothing was written; the output folder is as it was" if args.command == "fit" else str(exc)
+        print(f"brdffit {args.command}: interrupted{': ' + kept if kept else ''}", file=sys.stderr)
         return EXIT_INTERRUPTED
 
 

@@ -8,11 +8,14 @@ The likelihood uses the same residuals as the fit's loss.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import json
 import logging
 import math
+import signal
+import threading
 import time
 
 import emcee
@@ -28,12 +31,90 @@ from .params import ParamSpec
 from .fitting.problem import Problem, flatten_free, make_fit_data, physical_params, residual_fn
 from .progress import Progress
 
-__all__ = ["posterior", "load_posterior", "Posterior", "LIKELIHOODS", "PRIOR_FAMILIES"]
+__all__ = ["posterior", "load_posterior", "Posterior", "StepBackend", "LIKELIHOODS", "PRIOR_FAMILIES"]
 
 LIKELIHOODS = ("gaussian", "student-t")
 PRIOR_FAMILIES = ("uniform", "loguniform", "normal", "lognormal")
 QUANTILES = (2.5, 16.0, 50.0, 84.0, 97.5)
 _LOG_SIGMA_RANGE = (-30.0, 10.0)
+
+
+class StepBackend(emcee.backends.HDFBackend):
+    """emcee's HDF5 backend, with every step committed by its last write, so that a killed run resumes exactly.
+
+    emcee's ``save_step`` adds the step's acceptances to ``accepted`` and writes the new random state before it
+    counts the step in ``iteration``; a process killed (or interrupted) between those writes redoes the step when
+    it resumes and counts its acceptances twice (26 kills once gave an ``accepted`` 64 too high). Here the
+    acceptance counts and the random state after step ``k`` go into the group ``step_state_<k mod 2>``, and
+    ``iteration``, written last, says which of the two is current: an unfinished step leaves the current one
+    untouched and the redone step writes exactly what the first attempt would have. emcee's own ``accepted`` field
+    is set (not added to) each step, for readers without this class.
+    """
+
+    @staticmethod
+    def _slot(iteration: int) -> str:
+        return f"step_state_{int(iteration) % 2}"
+
+    def _current(self, g):
+        """The slot of the stored iteration, or the group itself before the first step (emcee's layout)."""
+        return g.get(self._slot(g.attrs["iteration"]), g)
+
+    @property
+    def accepted(self):
+        with self.open() as f:
+            return self._current(f[self.name])["accepted"][...]
+
+    @property
+    def random_state(self):
+        with self.open() as f:
+            attrs = self._current(f[self.name]).attrs
+            elements = [v for k, v in sorted(attrs.items()) if k.startswith("random_state_")]
+        return elements if len(elements) else None
+
+    def save_step(self, state, accepted):
+        """Store one step (emcee's ``Backend.save_step``); ``iteration`` is the last field written."""
+        self._check(state, accepted)
+        with self.open("a") as f:
+            g = f[self.name]
+            iteration = int(g.attrs["iteration"])
+            total = self._current(g)["accepted"][...] + accepted
+            g["chain"][iteration, :, :] = state.coords
+            g["log_prob"][iteration, :] = state.log_prob
+            if state.blobs is not None:
+                g["blobs"][iteration, :] = state.blobs
+            after = g.require_group(self._slot(iteration + 1))
+            if "accepted" not in after:
+                after.create_dataset("accepted", data=total)
+            after["accepted"][...] = total
+            for i, v in enumerate(state.random_state):
+                after.attrs[f"random_state_{i}"] = v
+            g["accepted"][...] = total
+            g.attrs["iteration"] = iteration + 1
+
+
+@contextlib.contextmanager
+def _interrupt_between_steps():
+    """Make Ctrl-C (SIGINT) stop the sampling after the step in progress, which is stored whole.
+
+    Yields a list that becomes non-empty when SIGINT arrives; a second SIGINT raises KeyboardInterrupt at once.
+    Outside the main thread, or where SIGINT is not Python's default handler, nothing changes.
+    """
+    asked: list[bool] = []
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or previous is not signal.default_int_handler:
+        yield asked
+        return
+
+    def handler(signum, frame):
+        if asked:
+            raise KeyboardInterrupt
+        asked.append(True)
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield asked
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _prior_term(spec: ParamSpec, user):
@@ -381,7 +462,7 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
     run_name = (name or model.spec).replace("/", "_")
     backend = None
     if store is not None:
-        backend = emcee.backends.HDFBackend(str(store), name=f"posteriors/{run_name}/chain")
+        backend = StepBackend(str(store), name=f"posteriors/{run_name}/chain")
         if backend.initialized and not resume:
             backend.reset(nwalkers, ndim)
         if backend.initialized and backend.iteration > 0 and backend.shape != (nwalkers, ndim):
@@ -408,8 +489,19 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
     bar = Progress("MCMC", remaining, enabled=progress and remaining > 0, unit="steps")
     t0 = time.perf_counter()
     if remaining:
-        for step, _ in enumerate(sampler.sample(start, iterations=remaining), start=1):
-            bar.update(step)
+        try:
+            with _interrupt_between_steps() as asked:
+                for step, _ in enumerate(sampler.sample(start, iterations=remaining), start=1):
+                    bar.update(step)
+                    if asked:
+                        break
+            if asked:
+                raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            if backend is None:
+                raise KeyboardInterrupt("the chain was not stored (pass store= to keep and resume one)") from None
+            raise KeyboardInterrupt(f"{backend.iteration} of {nsteps} steps are stored in {store}; run the same "
+                                    "command again to continue the chain") from None
     bar.close(f"({nwalkers} walkers)")
     wall = time.perf_counter() - t0
 
@@ -520,7 +612,7 @@ def load_posterior(fit_result: FitResult, measurements, store, *, name: str | No
         ValueError: the file holds no chain for that fit.
     """
     run_name = (name or fit_result.spec).replace("/", "_")
-    backend = emcee.backends.HDFBackend(str(store), name=f"posteriors/{run_name}/chain", read_only=True)
+    backend = StepBackend(str(store), name=f"posteriors/{run_name}/chain", read_only=True)
     try:
         steps = backend.iteration
         nwalkers = backend.shape[0]

@@ -155,3 +155,137 @@ def test_cli_fit_rerun_killed_or_completed_never_mixes_results(small_table, tmp_
     assert json.loads((out / "result.json").read_text())["model"] == "oren-nayar"
     assert FitResult.load(out / "result.h5").spec == "oren-nayar"
     assert not any(STAGE_MARK in p.name for p in tmp_path.iterdir())
+
+
+# ------------------------------------------------------------------------------------ posterior chains
+def gaussian_chain(path, nsteps, backend_class=None):
+    """An emcee chain of a 2-d Gaussian (8 walkers) stored in ``path``, resumed from what is stored there."""
+    import emcee
+
+    from brdffit.posterior import StepBackend
+
+    backend = (backend_class or StepBackend)(str(path), name="posteriors/g/chain")
+    already = backend.iteration if backend.initialized else 0
+    sampler = emcee.EnsembleSampler(8, 2, lambda x: -0.5 * np.sum(x ** 2, axis=1), vectorize=True,
+                                    backend=backend)
+    if already == 0:
+        sampler.random_state = np.random.RandomState(0).get_state()
+        start = np.random.RandomState(1).normal(size=(8, 2))
+    else:
+        start = backend.get_last_sample()
+    for _ in sampler.sample(start, iterations=nsteps - already):
+        pass
+    return backend
+
+
+def stored(backend) -> dict:
+    state = backend.random_state
+    return {"chain": backend.get_chain(), "log_prob": backend.get_log_prob(), "accepted": backend.accepted,
+            "iteration": backend.iteration, "random_state": (state[0], np.asarray(state[1]), *state[2:])}
+
+
+def assert_identical(a: dict, b: dict):
+    assert a["iteration"] == b["iteration"]
+    for key in ("chain", "log_prob", "accepted"):
+        assert np.array_equal(a[key], b[key]), key
+    assert a["random_state"][0] == b["random_state"][0] and np.array_equal(a["random_state"][1], b["random_state"][1])
+    assert a["random_state"][2:] == b["random_state"][2:]
+
+
+STEPS = 150
+
+
+@pytest.fixture(scope="module")
+def reference_chain(tmp_path_factory):
+    return stored(gaussian_chain(tmp_path_factory.mktemp("chain") / "ref.h5", STEPS))
+
+
+def test_a_chain_killed_many_times_resumes_identical_in_every_stored_field(tmp_path, reference_chain):
+    path = tmp_path / "killed.h5"
+    start = time.perf_counter()
+    gaussian_chain(tmp_path / "timing.h5", STEPS)
+    duration = time.perf_counter() - start
+    killed = 0
+    for k in range(20):
+        pid = os.fork()
+        if pid == 0:
+            try:
+                gaussian_chain(path, STEPS)
+            finally:
+                os._exit(0)
+        time.sleep(duration * (k % 4 + 1) / 150)  # a few steps into each resumed run
+        os.kill(pid, signal.SIGKILL)
+        _, status = os.waitpid(pid, 0)
+        killed += os.WIFSIGNALED(status)
+    assert killed >= 15
+    assert_identical(stored(gaussian_chain(path, STEPS)), reference_chain)
+
+
+@pytest.mark.parametrize("backend", ["emcee", "brdffit"])
+def test_a_step_cut_before_its_commit_is_redone_exactly(tmp_path, monkeypatch, reference_chain, backend):
+    """The write that counts step 50 (``iteration``) fails, as a kill or Ctrl-C there would: emcee's own backend
+    has already added the step's acceptances and counts them again when the step is redone; StepBackend does not."""
+    import emcee
+    import h5py
+
+    from brdffit.posterior import StepBackend
+
+    cls = emcee.backends.HDFBackend if backend == "emcee" else StepBackend
+    setitem = h5py.AttributeManager.__setitem__
+
+    def cut(self, key, value):
+        if key == "iteration" and value == 50:
+            monkeypatch.setattr(h5py.AttributeManager, "__setitem__", setitem)  # once
+            raise KeyboardInterrupt
+        setitem(self, key, value)
+
+    monkeypatch.setattr(h5py.AttributeManager, "__setitem__", cut)
+    path = tmp_path / "cut.h5"
+    with pytest.raises(KeyboardInterrupt):
+        gaussian_chain(path, STEPS, cls)
+    resumed = stored(gaussian_chain(path, STEPS, cls))
+    assert np.array_equal(resumed["log_prob"], reference_chain["log_prob"]) == (backend == "brdffit")
+    if backend == "emcee":  # the redone step drew other proposals (its random state was already advanced) ...
+        assert not np.array_equal(resumed["accepted"], reference_chain["accepted"])
+    else:
+        assert_identical(resumed, reference_chain)
+
+
+@pytest.mark.slow
+def test_cli_posterior_interrupted_says_one_line_and_resumes_identically(small_table, tmp_path):
+    import shutil
+
+    from brdffit import FitResult, fit
+    from brdffit.posterior import StepBackend, posterior
+
+    m = bio.load(small_table)
+    h5 = tmp_path / "result.h5"
+    bio.save(m, h5)
+    fit(m, "lambert").save(h5)
+    shutil.copy(h5, tmp_path / "reference.h5")
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "BRDFFIT_CACHE_DIR": str(tmp_path / "cache")}
+    run = brdffit(["posterior", h5, "--walkers", "4", "--steps", "100000"], tmp_path, env)
+    lines = []
+    while run.poll() is None:
+        lines.append(run.stderr.readline())
+        if lines[-1].startswith("MCMC 1/100000"):  # sampling has begun
+            time.sleep(0.5)
+            run.send_signal(signal.SIGINT)
+            break
+    assert run.wait(timeout=60) == 130
+    rest = run.stderr.read().splitlines()
+    assert "Traceback" not in "".join(lines + rest) and len(rest) == 1, rest
+    message = rest[0]
+    assert message.startswith("brdffit posterior: interrupted: ") and message.endswith(
+        f"of 100000 steps are stored in {h5}; run the same command again to continue the chain")
+    done = int(message.split(": ")[2].split(" of ")[0])
+    assert done > 0
+    # Resumed up to done + 10 steps: every stored field equals that of one uninterrupted run.
+    resumed = brdffit(["posterior", h5, "--walkers", "4", "--steps", str(done + 10), "--quiet"], tmp_path, env)
+    assert resumed.wait(timeout=300) == 0, resumed.stderr.read()
+    reference = tmp_path / "reference.h5"
+    posterior(FitResult.load(reference), bio.load(reference), nwalkers=4, nsteps=done + 10, store=reference,
+              progress=False, seed=0)
+    name = "posteriors/lambert/chain"
+    assert_identical(stored(StepBackend(str(h5), name=name, read_only=True)),
+                     stored(StepBackend(str(reference), name=name, read_only=True)))

@@ -16,9 +16,9 @@ Every write goes to a temporary file in the target's directory that is renamed i
 damages an existing file. Arrays are stored bit for bit, so a round trip is exact.
 
 Reading an untrusted file is bounded (`inspect_hdf5`): before the file is opened here, a forked child process opens
-it, reads every attribute and dataset and checks that each dataset's declared size is below `MAX_DATASET_BYTES`
-and backed by the bytes the file stores; external links, external raw storage and virtual datasets (data of other
-files) are refused. The child is killed after `INSPECT_TIMEOUT_S`: damaged metadata can make libhdf5 loop forever
+it, reads every attribute and dataset and checks that each dataset's declared size is below `MAX_DATASET_BYTES`;
+external links, external raw storage and virtual datasets (data of other files) are refused. Measurement datasets
+must also be backed by the bytes the file stores (not fill values). The child is killed after `INSPECT_TIMEOUT_S`: damaged metadata can make libhdf5 loop forever
 (zeroed global-heap objects hang ``H5Aread``), in C code that no Python signal interrupts. The signature may
 follow a user block (at byte 512, 1024, 2048, ... as HDF5 places it).
 """
@@ -121,8 +121,10 @@ def _check_attribute(path, obj, name: str, where: str) -> None:
     _attribute(path, obj, name, where)
 
 
-def _check_dataset(path, dataset, where: str) -> None:
-    """Refuse a dataset that reads another file's data or declares more than it (or `MAX_DATASET_BYTES`) holds."""
+def _check_dataset(path, dataset, where: str, stored_only: bool = True) -> None:
+    """Refuse a dataset that reads another file's data or declares more than `MAX_DATASET_BYTES`, and with
+    ``stored_only`` (measured data) one that declares more than the file stores of it. (A chain that emcee grew to
+    its planned length holds unwritten rows legitimately.)"""
     if dataset.is_virtual:
         raise FormatError(path, f"{where} is a virtual dataset (its data are in other files); brdffit reads data "
                                 "from this file only")
@@ -133,6 +135,8 @@ def _check_dataset(path, dataset, where: str) -> None:
     if declared > MAX_DATASET_BYTES:
         raise FormatError(path, f"{where} declares shape {dataset.shape} ({declared:,} bytes), more than the "
                                 f"{MAX_DATASET_BYTES:,} bytes brdffit reads from one dataset")
+    if not stored_only:
+        return
     stored = dataset.id.get_storage_size()
     filtered = dataset.id.get_create_plist().get_nfilters() > 0
     if declared > (MAX_FILTER_RATIO * stored if filtered else stored):
@@ -168,7 +172,7 @@ def _inspect(path) -> None:
                     raise FormatError(path, f"more than {MAX_OBJECTS:,} groups and datasets (a link cycle?)")
                 obj = group[name]
                 if isinstance(obj, h5py.Dataset):
-                    _check_dataset(path, obj, full)
+                    _check_dataset(path, obj, full, stored_only=False)
                     obj[()]
                 pending.append((full, obj))
 
@@ -177,8 +181,8 @@ def inspect_hdf5(path, timeout: float | None = None) -> None:
     """Check an HDF5 file in a forked child process that reads all of it, killed after ``timeout`` seconds.
 
     What the child refuses (`_inspect`): a file libhdf5 cannot open, an unreadable attribute (e.g. an unknown string
-    encoding), an attribute or dataset declaring more than `MAX_ATTRIBUTE_BYTES` / `MAX_DATASET_BYTES` or more than
-    the file stores, external links, external storage, virtual datasets. A child that does not finish in time, or
+    encoding), an attribute or dataset declaring more than `MAX_ATTRIBUTE_BYTES` / `MAX_DATASET_BYTES`, external
+    links, external storage, virtual datasets (`read_measurements_group` also refuses unstored measurement rows). A child that does not finish in time, or
     that libhdf5 crashes, makes the file refused too; the parent never runs libhdf5 on such a file.
 
     Arguments:
@@ -303,6 +307,7 @@ def read_measurements_group(group, path=None) -> Measurements:
         obj = group[name]
         if not isinstance(obj, h5py.Dataset) or obj.dtype.kind not in "fiu":
             raise FormatError(path, f"{where}/{name} is not a numeric dataset")
+        _check_dataset(path, obj, f"{where}/{name}")
         arrays[name] = np.asarray(obj[()], dtype=np.float64)
     try:
         channels = (parse_meta_json(path, _attr_text(_attribute(path, group, "channels", where)),
