@@ -754,7 +754,9 @@ def _cmd_render(args) -> int:
         key_theta, key_phi, key_intensity = lights[0]
         lights = render.area_light(key_theta, key_phi, key_intensity, args.area_light, samples=16) + lights[1:]
     if args.plane:
-        hdr = render.render_plane(source, lights, resolution=args.resolution, isotropic=not args.anisotropic)
+        hdr = render.render_plane(source, lights, resolution=args.resolution, isotropic=not args.anisotropic,
+                                  distance=render.PLANE_VIEW_DISTANCE)  # at infinity it would be one flat colour
+        what += f", a plane seen from distance {render.PLANE_VIEW_DISTANCE:g} (side 2)"
     else:
         hdr = render.render_sphere(source, lights, resolution=args.resolution, isotropic=not args.anisotropic)
     out = Path(args.out) if args.out else path.with_suffix(".png")
@@ -793,10 +795,6 @@ def _cmd_select(args) -> int:
 
 
 def _cmd_batch(args) -> int:
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers {args.workers}: give 1 or more worker processes")
-    if args.batch < 1:
-        raise UsageError(f"--batch {args.batch}: give 1 or more materials per task")
     if args.scheduler and args.workers is not None:
         raise UsageError("--workers sizes the local cluster; a --scheduler cluster has its own workers")
     from .distributed.table import table_format
@@ -811,6 +809,9 @@ def _cmd_batch(args) -> int:
 
     from . import fit_database
 
+    from .select import DEFAULT_CANDIDATES
+
+    _check_fixed(_parse_fixed(args.fixed), DEFAULT_CANDIDATES if args.model == "auto" else [args.model])
     enable_compilation_cache()
     client = None
     if args.scheduler:
@@ -965,7 +966,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file", help="a results file (renders its fit), measurements (.h5/.csv) or a MERL .binary")
     p.add_argument("--data", action="store_true", help="render the measurements even if the file holds a fit")
     p.add_argument("--name", help="which fit of a results file (default: the first)")
-    p.add_argument("--plane", action="store_true", help="a flat swatch instead of a sphere")
+    p.add_argument("--plane", action="store_true",
+                   help="a flat square swatch (side 2) seen from distance 3 instead of a sphere, so that the "
+                        "highlight moves across it (a viewer at infinity would see one flat colour)")
     p.add_argument("--resolution", type=bounded(int, 8, 4096), default=256, help="image size in pixels (default 256)")
     p.add_argument("--tonemap", default="reinhard", choices=["reinhard", "filmic", "clamp"],
                    help="tone curve before sRGB encoding (default reinhard)")
@@ -1003,9 +1006,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="a running Dask scheduler (tcp://HOST:8786, started with `dask scheduler` and `dask worker`); "
                         "default: a local cluster on this machine's cores")
-    p.add_argument("--workers", type=int, metavar="N", help="worker processes of the local cluster (default: one "
-                                                            "per core)")
-    p.add_argument("--batch", type=int, default=32, metavar="N",
+    p.add_argument("--workers", type=bounded(int, 1), metavar="N",
+                   help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--batch", type=bounded(int, 1), default=32, metavar="N",
                    help="the most equally shaped materials one task fits together (default 32)")
     p.add_argument("--no-resume", dest="resume", action="store_false",
                    help="start a new table (default: keep the rows of --out and fit only the rest and the errors)")

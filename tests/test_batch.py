@@ -221,8 +221,9 @@ def test_cli_batch_on_a_running_scheduler(database, client, cache, tmp_path, mon
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--out", "r.csv", "--workers", "0"], "--workers 0: give 1 or more"),
-    (["--out", "r.csv", "--batch", "0"], "--batch 0: give 1 or more"),
+    (["--out", "r.csv", "--workers", "0"], "--workers: 0 is outside the allowed range: an integer >= 1"),
+    (["--out", "r.csv", "--batch", "0"], "--batch: 0 is outside the allowed range: an integer >= 1"),
+    (["--out", "r.csv", "--fixed", "alpha=7"], "--fixed alpha=7: outside the allowed range of alpha"),
     (["--out", "r.csv", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers sizes the local cluster"),
     (["--out", "r.txt"], "--out: r.txt: a results table is .h5, .hdf5, .csv, .parquet, not '.txt'"),
     (["--out", "r.csv", "--model", "lambert+nonsense"], "nonsense"),
