@@ -28,6 +28,7 @@ __all__ = [
     "render",
     "render_sphere",
     "render_plane",
+    "PLANE_VIEW_DISTANCE",
     "DEFAULT_LIGHTS",
     "area_light",
     "tonemap",
@@ -132,6 +133,11 @@ def render_sphere(source, lights=None, view=(0.0, 0.0), resolution: int = 128, *
     """
     scene = Scene.sphere(DEFAULT_LIGHTS if lights is None else list(lights), view=view, resolution=resolution)
     return render(scene, source, k=k, isotropic=isotropic)
+
+
+# The viewer distance of `brdffit render --plane` (the swatch's side is 2): close enough that the directions, and so
+# the shading, change across the swatch; a viewer at infinity sees it as one flat colour under directional lights.
+PLANE_VIEW_DISTANCE = 3.0
 
 
 def render_plane(source, lights=None, view=(0.9, 0.0), resolution: int = 128, *, size: float = 2.0,

@@ -118,7 +118,7 @@ def _run_info(run_info) -> list[str]:
     return [f"{k}: {v}" for k, v in info.items()]
 
 
-def _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths):
+def _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths, report_warnings=()):
     b = [("h1", f"BRDF fit report: {fit_result.spec}")]
     b.append(("p", f"{measurements.n} samples × {measurements.n_channels} channels "
                    f"({', '.join(map(str, measurements.channels))}); loss {fit_result.loss}, solver "
@@ -151,7 +151,7 @@ def _blocks(measurements, fit_result, posterior, selection, run_info, figure_pat
         b.append(("p", f"criterion {selection.criterion}; best {selection.best}; chosen **{selection.chosen}**."))
         b.append(("table",) + _selection_table(selection))
     warnings = list(fit_result.warnings) + [f"posterior: {w}" for w in (posterior.warnings if posterior else [])] \
-        + [f"selection: {w}" for w in (selection.warnings if selection else [])]
+        + [f"selection: {w}" for w in (selection.warnings if selection else [])] + list(report_warnings)
     b.append(("h2", "Warnings"))
     b.append(("list", warnings) if warnings else ("p", "None."))
     b.append(("h2", "Figures"))
@@ -164,16 +164,36 @@ def _blocks(measurements, fit_result, posterior, selection, run_info, figure_pat
 
 _CAPTIONS = {
     "slices": "In-plane slices: measured samples near the plane of incidence (circles) and the fitted model "
-              "(lines) against the signed outgoing angle, log scale; shaded: posterior 68 % / 95 % bands.",
+              "(lines) against the signed outgoing angle, log scale.",
     "hemisphere": "The fitted model times cosθo over the outgoing hemisphere (orthographic projection).",
     "residuals": "Relative residual (model − data)/data averaged in bins of the half and difference angles.",
     "corner": "Corner plot of the posterior samples.",
     "traces": "Walker traces with the integrated autocorrelation time of each parameter.",
-    "albedo": "Directional albedo of the fitted model against the incidence angle; it must stay below 1.",
+    "albedo": "Directional albedo of the fitted model against the incidence angle; a passive surface stays at or "
+              "below 1 (dashed line).",
     "spheres": "Sphere previews: the measurement (interpolated), the fit and their relative difference. Rings and "
                "speckle in the difference come from interpolating scattered samples (k nearest neighbours), not "
                "necessarily from the fit.",
 }
+
+
+def _captions(posterior, albedo_max: float) -> dict:
+    """The figure captions, saying only what the figures show: posterior bands only when a posterior was run, the
+    albedo limit broken when the fit breaks it."""
+    captions = dict(_CAPTIONS)
+    if posterior is not None:
+        captions["slices"] += " Shaded: posterior 68 % / 95 % bands."
+    if albedo_max > 1.0:
+        captions["albedo"] += f" This fit exceeds it: max {albedo_max:.3f} (see Warnings)."
+    return captions
+
+
+def _albedo_warnings(albedo: np.ndarray, channels) -> list[str]:
+    """A warning per channel whose directional albedo exceeds 1 (the model reflects more than it receives)."""
+    peaks = np.nanmax(albedo, axis=0)
+    return [f"the fitted model's directional albedo in channel {name} reaches {peak:.3f} > 1: it reflects more "
+            "energy than it receives (not energy-conserving), e.g. a specular amplitude fitted too high"
+            for name, peak in zip(channels, peaks) if peak > 1.0]
 
 
 # ---------------------------------------------------------------------------------------------- writers
@@ -284,14 +304,17 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
     if posterior is not None:
         jobs += [("corner", lambda p: F.plot_corner(p, posterior, fit_result)),
                  ("traces", lambda p: F.plot_traces(p, posterior, fit_result))]
-    jobs += [("albedo", lambda p: F.plot_albedo(p, fit_result, channels=channels)),
+    albedo = F.albedo_curve(fit_result)
+    captions = _captions(posterior, float(np.nanmax(albedo)))
+    jobs += [("albedo", lambda p: F.plot_albedo(p, fit_result, channels=channels, albedo=albedo)),
              ("spheres", lambda p: F.plot_spheres(p, measurements, fit_result))]
     figure_paths = []
     for name, draw in jobs:
         path = out / f"{name}.png"
         draw(path)
-        figure_paths.append((str(path), _CAPTIONS[name]))
-    blocks = _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths)
+        figure_paths.append((str(path), captions[name]))
+    blocks = _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths,
+                     _albedo_warnings(albedo, channels))
     md_path, html_path = out / "report.md", out / "report.html"
     _write_text(md_path, _to_markdown(blocks, out))
     _write_text(html_path, _to_html(blocks))

@@ -437,17 +437,26 @@ def plot_traces(path, posterior, fit_result=None) -> str:
 
 
 # ------------------------------------------------------------------------------------------- 6. albedo
-def plot_albedo(path, fit_result, channels=None, n: int = 46) -> str:
+def albedo_curve(fit_result, n: int = 46) -> np.ndarray:
+    r"""Directional albedo a(θi) = ∫ f_r cosθo dωo of the fitted model(s), shape ``(n, C)``, at ``n`` angles θi
+    from 0° to 89° (`brdffit.properties.directional_albedo`)."""
+    return _fit_albedo(fit_result, np.radians(np.linspace(0.0, 89.0, n)))
+
+
+def plot_albedo(path, fit_result, channels=None, n: int = 46, albedo: np.ndarray | None = None) -> str:
     r"""Directional albedo a(θi) = ∫ f_r cosθo dωo of the fitted model against θi, per channel.
 
-    Computed with `brdffit.properties.directional_albedo` at ``n`` angles from 0° to 89°; the dashed line at 1 is
-    the energy-conservation limit (a passive surface stays below it).
+    Computed with `albedo_curve` at ``n`` angles from 0° to 89°; the dashed line at 1 is the energy-conservation
+    limit (a passive surface stays below it).
+
+    Arguments:
+        albedo: the curve `albedo_curve(fit_result)` when the caller has it already (its length sets ``n``).
 
     Returns:
         ``path`` as a string.
     """
-    theta = np.radians(np.linspace(0.0, 89.0, n))
-    albedo = _fit_albedo(fit_result, theta)
+    albedo = albedo_curve(fit_result, n) if albedo is None else np.asarray(albedo)
+    theta = np.radians(np.linspace(0.0, 89.0, len(albedo)))
     names = list(channels) if channels is not None else [f"c{i}" for i in range(albedo.shape[1])]
     colours = _channel_colours(names)
     fig = _new_figure("albedo")
