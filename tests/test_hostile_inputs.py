@@ -381,3 +381,14 @@ def test_csv_round_trip_moves_about_nine_percent_of_angles_by_one_ulp(tmp_path):
         a, b = getattr(m, name), getattr(back, name)
         assert 0.07 < np.mean(a != b) < 0.11  # docs/formats.md: about 9 % (8.6-9.1 % here)
         assert np.all(np.abs(a - b) <= np.spacing(a))  # within one ulp
+
+
+def test_a_killed_writer_s_temporary_file_is_removed_by_the_next_write(tmp_path):
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = int(gone.stdout)  # a process that has exited: its temporary files are abandoned
+    stale = tmp_path / f".m.csv.{dead}-abc123.tmp"
+    stale.write_bytes(b"x" * 1000)
+    live = tmp_path / f".m.csv.{os.getpid()}-def456.tmp"  # a live writer's file is left alone
+    live.write_bytes(b"y")
+    bio.save(small(), tmp_path / "m.csv")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["m.csv", live.name])

@@ -10,6 +10,7 @@ import os
 import re
 import stat
 import tempfile
+from glob import escape as glob_escape
 from pathlib import Path
 
 __all__ = ["FormatError", "atomic_path", "check_not_lfs_pointer", "LFS_PREFIX", "MAX_FILE_BYTES", "open_regular",
@@ -186,15 +187,34 @@ def _file_mode(path: Path) -> int:
         return 0o666 & ~umask  # what open() would have given a new file
 
 
+def _remove_abandoned(directory: Path, prefix: str) -> None:
+    """Delete temporary files ``<prefix><pid>-*`` whose writing process is gone (killed before it could clean up)."""
+    for entry in directory.glob(glob_escape(prefix) + "*"):
+        pid = entry.name[len(prefix):].split("-", 1)[0]
+        if not pid.isdigit():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            with contextlib.suppress(OSError):
+                entry.unlink()
+        except PermissionError:
+            pass  # another user's live process
+
+
 @contextlib.contextmanager
 def atomic_path(path, suffix: str | None = None):
     """Yield a temporary path beside ``path``; on success rename it onto ``path`` (os.replace), else delete it.
 
     An existing file at ``path`` is therefore never left half-written: it is either untouched or fully replaced.
+    The temporary name carries the writer's process id (``.<name>.<pid>-<random><suffix>``), so that the next write
+    of ``path`` deletes what a killed writer left behind.
     """
     path = Path(path)
     directory = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or ".tmp", dir=directory)
+    prefix = f".{path.name}."
+    _remove_abandoned(directory, prefix)
+    fd, tmp = tempfile.mkstemp(prefix=f"{prefix}{os.getpid()}-", suffix=suffix or ".tmp", dir=directory)
     os.close(fd)
     try:
         os.chmod(tmp, _file_mode(path))
