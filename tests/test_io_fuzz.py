@@ -147,3 +147,74 @@ def test_damaged_rgl_files(workdir, cut, header_flip, flip, byte, other):
     with pytest.raises(FormatError, match="truncated|outside the file") as err:
         bio.load(path)
     assert str(path) in str(err.value)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(rows=st.integers(0, 10**12), written=st.integers(0, 64), chunk=st.integers(1, 4096),
+       gzip=st.booleans())
+def test_hdf5_declared_sizes(workdir, rows, written, chunk, gzip):
+    """Datasets declaring any number of rows (fill values beyond the written ones): read or refused, in bounded
+    time, never allocated beyond what the file stores (issue 20)."""
+    import time
+
+    import h5py
+
+    from brdffit.io import hdf5
+
+    path = workdir / "declared.h5"
+    written = min(written, rows)
+    with h5py.File(path, "w") as f:
+        f.attrs["format_version"] = hdf5.FORMAT_VERSION
+        g = f.create_group("measurements")
+        for name, width in (("theta_i", None), ("phi_i", None), ("theta_o", None), ("phi_o", None), ("values", 1)):
+            shape = (rows,) if width is None else (rows, width)
+            d = g.create_dataset(name, shape=shape, dtype="f8", chunks=(chunk,) + shape[1:], maxshape=(None,) +
+                                 shape[1:], fillvalue=0.1, compression="gzip" if gzip else None)
+            if written:
+                d[:written] = 0.2
+    start = time.perf_counter()
+    m = load_or_fail_cleanly(path)
+    assert time.perf_counter() - start < 15
+    if m is not None:
+        assert m.n == rows and rows * 8 <= hdf5.MAX_DATASET_BYTES
+
+
+def test_cli_on_mutated_files_in_a_memory_limited_child(workdir):
+    """`brdffit info` on 40 mutated files of every format, in one child process limited to 4 GiB of address space:
+    each exits 0 or 2, with no traceback (issue 20)."""
+    import resource
+    import subprocess
+    import sys
+
+    rng = np.random.default_rng(20)
+    m = Measurements(np.radians([0, 30, 60]), 0.0, np.radians([10, 40, 70]), np.pi, [[0.1, 0.2], [0.3, 0.4],
+                                                                                      [0.5, 0.6]], sigma=0.01)
+    sources = []
+    for ext in (".csv", ".h5", ".alta"):
+        bio.save(m, workdir / f"source{ext}")
+        sources.append(workdir / f"source{ext}")
+    sources.append(workdir / "source.binary")
+    sources[-1].write_bytes(np.asarray([90, 90, 180], "<i4").tobytes() + rng.bytes(500))
+    files = []
+    for k in range(40):
+        source = sources[k % len(sources)]
+        data = bytearray(source.read_bytes())
+        for _ in range(int(rng.integers(1, 6))):
+            data[int(rng.integers(len(data)))] = int(rng.integers(256))
+        if k % 3 == 0:
+            data = data[: int(rng.integers(len(data) + 1))]
+        path = workdir / f"mutated{k}{source.suffix}"
+        path.write_bytes(bytes(data))
+        files.append(str(path))
+    script = ("import sys; from brdffit.cli import main; "
+              "print(' '.join(str(main(['info', f])) for f in sys.argv[1:]))")
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))
+
+    done = subprocess.run([sys.executable, "-c", script, *files], capture_output=True, text=True, timeout=300,
+                          preexec_fn=limit)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    codes = done.stdout.split()[-len(files):]
+    assert set(codes) <= {"0", "2"} and len(codes) == len(files) and "2" in codes
+    assert done.stderr.count("brdffit info: error: ") == codes.count("2")
