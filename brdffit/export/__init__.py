@@ -26,20 +26,24 @@ class Target:
     Attributes:
         name: the ``to=`` / ``--to`` name.
         description: one line for help texts.
-        write: for a renderer, ``write(model, name, header, source=None) -> (text, written, notes, deviation)``
-            (``source``: the original model under the fit option); None for
-            JSON, which `native.write` handles (it takes fits with one model per channel).
+        write: for a renderer, ``write(model, name, header, source=None) -> (text, written, notes, deviation)``;
+            under the fit option ``source`` is the original model, which the deviation is measured against;
+            None for JSON, which `native.write` handles (it takes fits with one model per channel).
+        refines: whether ``write`` with a ``source`` fits the renderer's own parameters to it (pbrt-v4); a target
+            that does not (Mitsuba 3, whose lambert + GGX plugins brdffit's models are exactly) gets a brdffit
+            fit of those lobes (`brdffit.export.refit`) unless its direct mapping is exact.
     """
 
     name: str
     description: str
     write: object = None
+    refines: bool = False
 
 
 TARGETS = {t.name: t for t in (
     Target("json", "brdffit's own description (model_from_dict reads it back)"),
     Target("mitsuba", "a Mitsuba 3 <bsdf version=\"3.0.0\"> document", mitsuba.write),
-    Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", pbrt.write),
+    Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", pbrt.write, refines=True),
 )}
 EXPORT_FORMATS = tuple(TARGETS)
 
@@ -105,25 +109,26 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
         raise ExportError(f"a fit in channel_mode='independent' has one model per channel ({result.spec}); "
                           f"{to} needs one material: refit with channel_mode='shared-shape' or export to json")
     header = [f"{_generator()} export of model {model.spec} to {to}"]
-    exported = model
-    if fit:
+    if not fit:
+        return _export(target, model, name, header, None)
+    candidates = []
+    try:
+        candidates.append(_export(target, model, name, header, model))
+    except ExportError:
+        pass
+    if not candidates or not (target.refines or candidates[0].deviation.exact()):
         from .refit import fit_exportable
 
-        exported, line = fit_exportable(model)
-        header.append(line)
-    text, written, notes, deviation = target.write(exported, name, header, source=model if fit else None)
-    if fit:
-        # The deviation a renderer writes is from the model it was given; the fit's source is the original.
-        from .terms import measure
+        fitted, line = fit_exportable(model)
+        candidates.append(_export(target, fitted, name, header + [line], model))
+    return min(candidates, key=lambda c: c.deviation.rms)
 
-        deviation = measure(model, written)
-        text = text.replace("from the source model", f"from the fitted model {exported.spec}", 1)
-        marker = "<!-- " if to == "mitsuba" else "# "
-        closing = " -->" if to == "mitsuba" else ""
-        first = text.index("\n") + 1
-        text = (text[:first] + f"{marker}achieved by the fit, from the source model {model.spec}: "
-                f"{deviation.describe()}{closing}\n" + text[first:])
-    return Export(text, written, model, notes, deviation)
+
+def _export(target: Target, model, name: str, header: list, source) -> Export:
+    """One renderer export of ``model``; with ``source`` (the fit option) measured against and, where the target
+    refines its own parameters, refined to it."""
+    text, written, notes, deviation = target.write(model, name, header, source=source)
+    return Export(text, written, source if source is not None else model, notes, deviation)
 
 
 def export(model_or_result, to: str = "json", *, name: str = "material", fit: bool = False) -> str:
@@ -136,9 +141,11 @@ def export(model_or_result, to: str = "json", *, name: str = "material", fit: bo
             ``<bsdf version="3.0.0">`` document for ``mitsuba.load_string``) or ``"pbrt"`` (pbrt-v4
             ``MakeNamedMaterial`` statements, the last one named ``name``).
         name: the material's id (Mitsuba) or name (pbrt).
-        fit: for a renderer, fit lambert + GGX lobes that it has exactly to the model over the hemisphere
-            (`brdffit.export.refit`) and write that, with the achieved error in the comments; this also exports
-            lobes with no equivalent (Oren-Nayar, Ward, Lafortune, ...). Ignored for JSON.
+        fit: for a renderer, fit the renderer's own model to the model over the hemisphere (cosine-weighted
+            least squares: for Mitsuba a brdffit fit of lambert + GGX lobes, `brdffit.export.refit`, unless the
+            direct mapping is exact; for pbrt-v4 its own parameters, refined) and write the candidate closest
+            to the model, with the achieved error in the comments; this also exports lobes with no equivalent
+            (Oren-Nayar, Ward, Lafortune, ...). Ignored for JSON.
 
     Returns:
         The text. Renderer outputs open with comments naming the source spec, the brdffit version, each

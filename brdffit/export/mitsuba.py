@@ -265,8 +265,9 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
         model: the brdffit model (1 or 3 channels).
         name: the ``id`` of the root ``<bsdf>``.
         header: comment lines that open the document (source, version, fit notes).
-        source: unused: for the fit option, ``model`` is already brdffit's fit of Mitsuba's own plugins
-            (lambert + GGX lobes, written exactly) to the source (`brdffit.export.refit`).
+        source: the model the deviation is measured against (the original under the fit option, where
+            ``model`` may be brdffit's fit of Mitsuba's own plugins to it, `brdffit.export.refit`); default
+            ``model``.
 
     Returns:
         (text, a function (wi, wo) -> f_r of the written material as Mitsuba evaluates it, notes, `Deviation` from
@@ -279,7 +280,7 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     notes: list[str] = []
     leaves = _weigh(_leaves(model, notes))
     written = _evaluator([part for leaf in leaves for part in leaf.parts], model.channels)
-    deviation = tm.measure(model, written)
+    deviation = tm.measure(model if source is None else source, written)
     lines = [_comment(line) for line in header]
     lines += [_comment(f"approximation: {note}") for note in notes]
     lines.append(_comment(("exact: " if deviation.exact() else "measured deviation from the source model: ")

@@ -209,7 +209,7 @@ def write(model, name: str, header: list[str], source=None):
         name: the material name (the last statement; parts are named ``name:kind-j``).
         header: comment lines that open the text.
         source: for the fit option, the model that pbrt-v4's parameters of the mapping of ``model`` are then
-            refined against (`_refine`); None writes the mapping.
+            refined against (`_refine`) and the deviation measured against; None writes the mapping.
 
     Returns:
         (text, a function (wi, wo) -> f_r of the written material by pbrt-v4's formulas, notes, `Deviation` from
@@ -234,7 +234,7 @@ def write(model, name: str, header: list[str], source=None):
         notes.append("fit: pbrt-v4's own parameters (mix weights, reflectance, roughness, eta, k) were then refined "
                      "by least squares on the cosine-weighted error against the source model")
     body, written = _evaluator(parts, name)
-    deviation = tm.measure(model, written)
+    deviation = tm.measure(model if source is None else source, written)
     lines = [f"# {line}" for line in header] + [f"# approximation: {note}" for note in notes]
     lines.append(("# exact: " if deviation.exact() else "# measured deviation from the source model (pbrt-v4's "
                   "formulas, brdffit.export.pbrt_reference): ") + deviation.describe())

@@ -1,10 +1,10 @@
-"""The ``fit`` option of an export: fit a model the renderer has exactly to the source model over the hemisphere.
+"""The fit option's brdffit fit: ``lambert + ggx`` lobes, which Mitsuba 3 has exactly, fitted to a source model.
 
 For a model whose lobes have no exact plugin (Oren-Nayar, Ward, Lafortune, V-cavity shadowing, a Schlick term
-too bright for Mitsuba's principled, ...), the export can instead fit ``lambert + ggx`` lobes (separable Smith,
-which Mitsuba 3 has exactly; conductor Fresnel where the source lobe is a conductor, dielectric otherwise) to
-the source's values at noise-free uniform direction pairs with brdffit's own fit and its default cosine-weighted
-loss (Ngan et al. 2005), and export that. The achieved error goes into the export's comments.
+too bright for Mitsuba's principled, ...), the export can instead fit ``lambert + ggx`` lobes (separable Smith;
+conductor Fresnel where the source lobe is a conductor, dielectric otherwise) to the source's values at
+noise-free uniform direction pairs with brdffit's own fit and its default cosine-weighted loss (Ngan et al.
+2005). `brdffit.export.export_details` compares the candidates and writes the closest (docs/export.md).
 """
 
 from __future__ import annotations
