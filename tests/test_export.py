@@ -58,8 +58,6 @@ EXACT = {
     "two lambert, one channel": get("lambert+lambert", channels=1, rho_d=0.2, rho_d_2=0.3),
     "ggx conductor, ks > 1": get("ggx(fresnel=conductor)", alpha=0.12, ks=[1.3, 1.1, 0.9], eta=[0.2, 0.4, 1.1],
                                  k=[3.9, 2.4, 2.2]),
-    "ggx dielectric alone": get("ggx(fresnel=dielectric)", alpha=0.3, ks=1.0, eta=1.5),
-    "ggx schlick": get("ggx", alpha=0.09, ks=1.0, f0=0.04),
     "ggx schlick f0 = 0": get("ggx", alpha=0.2, ks=0.7, f0=0.0),
     "lambert + ggx schlick": get("lambert+ggx", rho_d=[0.6, 0.3, 0.1], ks=0.8, alpha=0.25, f0=0.04),
     "lambert + ggx dielectric, ks 2": get("lambert+ggx(fresnel=dielectric)", rho_d=0.3, ks=2.0, alpha=0.1, eta=1.6),

@@ -2,13 +2,17 @@
 
 Plugins written (Mitsuba 3 ``src/bsdfs/``; parameters as its plugin tables document them):
 
-| plugin | as a brdffit term | used for |
-|---|---|---|
-| ``diffuse`` (``reflectance``) | ρ/π | every ``lambert`` lobe (summed) |
-| ``roughconductor`` (``distribution``, ``alpha``, ``eta``, ``k``, ``specular_reflectance``) | ks F_conductor D G1 G1 / (4 cosθi cosθo) | ``fresnel=conductor``; with ``material`` none (η = 0, k = 1, F = 1) the constant part of a Schlick term |
-| ``roughplastic`` (``diffuse_reflectance`` 0, ``int_ior``, ``ext_ior`` 1, ``specular_reflectance``) | ks F_dielectric D G1 G1 / (4 cosθi cosθo) | ``fresnel=dielectric`` |
-| ``principled`` (``metallic`` 1, ``base_color`` = f0', ``roughness`` = √α) | Schlick(f0') D_GGX G1 G1 / (4 cosθi cosθo) | ``fresnel=schlick`` with GGX: the only Schlick Fresnel in Mitsuba |
-| ``blendbsdf`` (``weight`` t) | (1 − t) first + t second | sums: each part scaled by 1/its weight |
+- ``diffuse`` (``reflectance``): ρ/π, for every ``lambert`` lobe (summed).
+- ``roughconductor`` (``distribution``, ``alpha``, ``eta``, ``k``, ``specular_reflectance``):
+  ks F_conductor D G1 G1 / (4 cosθi cosθo), for ``fresnel=conductor``; with ``material`` none (η = 0, k = 1,
+  F = 1) the constant part of a Schlick term.
+- ``roughplastic`` (``diffuse_reflectance`` 0, ``int_ior``, ``ext_ior`` 1, ``specular_reflectance``):
+  ks F_dielectric D G1 G1 / (4 cosθi cosθo), for ``fresnel=dielectric``.
+- ``principled`` (``metallic`` 1, ``base_color`` = f0', ``roughness`` = √α): Schlick(f0') D_GGX G1 G1 /
+  (4 cosθi cosθo), for ``fresnel=schlick`` with GGX: the only Schlick Fresnel in Mitsuba (its metallic term,
+  ``calc_schlick(base_color, cos, eta)`` in ``src/bsdfs/principledhelpers.h``, is f0 + (1 − f0)(1 − cos)⁵ for
+  eta > 1; the default ``specular`` 0.5 gives eta = 1.5; the diffuse, sheen and clearcoat terms vanish).
+- ``blendbsdf`` (``weight`` t): (1 − t) first + t second, for sums: each part scaled by 1/its weight.
 
 A sum A + B is written exactly as a blend of 2A and 2B: ``blendbsdf`` takes convex combinations, and each part's
 amplitude (``reflectance``, ``specular_reflectance``) is scaled by the inverse of its weight. Values above 1 go
@@ -39,8 +43,6 @@ EXPORTABLE = ("lambert (any number, summed) and cook-torrance or ggx lobes with 
               "summed")
 # Where a principled part shares a blend with other parts, their weight is at least this much.
 _MIN_OTHER_WEIGHT = 1e-3
-# A dielectric lobe with eta at or below this reflects nothing (F = 0 for eta = 1).
-_DIELECTRIC_NOTHING = 1.0 + 1e-12
 
 
 @dataclasses.dataclass
@@ -66,6 +68,12 @@ class _Leaf:
 
 def _microfacet_params(distribution, alpha):
     return [("string", "distribution", distribution), ("float", "alpha", alpha)]
+
+
+def _conductor_leaf(distribution, alpha, ks, eta, k) -> _Leaf:
+    return _Leaf("roughconductor", _microfacet_params(distribution, alpha) + [("rgb", "eta", eta), ("rgb", "k", k)],
+                 "specular_reflectance", ks, parts=[(tm.microfacet_lobe(distribution, "conductor"),
+                                                     {"ks": ks, "m": alpha, "eta": eta, "k": k})])
 
 
 def _schlick_split(term, channels):
@@ -95,14 +103,10 @@ def _leaves(model: tm.Model, notes: list) -> list[_Leaf]:
         if lobe.shadowing != "smith":
             notes.append(f"{lobe.name} shadowing={lobe.shadowing} became Mitsuba's separable Smith G1(wi) G1(wo)")
         if lobe.fresnel == "conductor":
-            eta, k = term.params["eta"], term.params["k"]
-            leaves.append(_Leaf("roughconductor", _microfacet_params(distribution, alpha)
-                                + [("rgb", "eta", eta), ("rgb", "k", k)], "specular_reflectance", ks, parts=[
-                                    (tm.microfacet_lobe(distribution, "conductor"),
-                                     {"ks": ks, "m": alpha, "eta": eta, "k": k})]))
+            leaves.append(_conductor_leaf(distribution, alpha, ks, term.params["eta"], term.params["k"]))
         elif lobe.fresnel == "dielectric":
             eta = float(term.params["eta"])
-            if eta <= _DIELECTRIC_NOTHING:
+            if tm.reflects_nothing(eta):
                 notes.append(f"the {lobe.name} lobe has eta = 1: its Fresnel term is 0, it reflects nothing and "
                              "was left out (exact)")
                 continue
@@ -121,11 +125,7 @@ def _leaves(model: tm.Model, notes: list) -> list[_Leaf]:
                          f"Fresnel is principled's (GGX), so the conductor Fresnel of the closest index eta = "
                          f"{tm.number(eta)}, k = {tm.number(k)} was written (the curves differ by up to "
                          f"{curve:.3g} absolute)")
-            leaves.append(_Leaf("roughconductor", _microfacet_params(distribution, alpha)
-                                + [("rgb", "eta", np.full(3, eta)), ("rgb", "k", np.full(3, k))],
-                                "specular_reflectance", ks, parts=[
-                                    (tm.microfacet_lobe(distribution, "conductor"),
-                                     {"ks": ks, "m": alpha, "eta": eta, "k": k})]))
+            leaves.append(_conductor_leaf(distribution, alpha, ks, eta, k))
     if rho is not None:
         leaves.insert(0, _Leaf("diffuse", [], "reflectance", rho, parts=[(tm.lambert_lobe(), {"rho_d": rho})]))
     leaves.extend(_schlick_leaves(schlick, channels, bool(leaves), notes))

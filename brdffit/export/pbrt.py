@@ -3,11 +3,12 @@
 Materials written (pbrt-v4 ``src/pbrt/materials.{h,cpp}``, ``bxdfs.h``; checked against the transcribed
 formulas of `brdffit.export.pbrt_reference`):
 
-| material | f_r | used for |
-|---|---|---|
-| ``diffuse`` (``rgb reflectance``, clamped by pbrt to [0, 1]) | R/π | every ``lambert`` lobe (summed): exact |
-| ``conductor`` (``rgb eta``, ``rgb k``, ``float roughness`` = α, ``bool remaproughness`` false) | F_complex D_TR G / (4 cosθi cosθo), G = 1/(1 + Λ(ωo) + Λ(ωi)) | microfacet lobes; ``fresnel=dielectric`` as k = 0 (the same Fresnel term) |
-| ``mix`` (``string materials`` [a b], ``float amount`` t) | expected value (1 − t) f_a + t f_b | sums and the amplitude ks |
+- ``diffuse`` (``rgb reflectance``, clamped by pbrt to [0, 1]): R/π, for every ``lambert`` lobe (summed): exact.
+- ``conductor`` (``rgb eta``, ``rgb k``, ``float roughness`` = α, ``bool remaproughness`` false):
+  F_complex D_TR G / (4 cosθi cosθo) with G = 1/(1 + Λ(ωo) + Λ(ωi)), for the microfacet lobes;
+  ``fresnel=dielectric`` as k = 0 (the same Fresnel term).
+- ``mix`` (``string materials`` [a b], ``float amount`` t): the expected value (1 − t) f_a + t f_b, for sums and
+  the amplitude ks.
 
 pbrt-v4 has no amplitude on its conductor: a microfacet lobe enters the mix with weight ks (one value, so a
 per-channel ks is averaged), the diffuse part takes the rest with its reflectance divided by its weight. Every
@@ -53,7 +54,7 @@ def _candidates(model, notes: list) -> list[tuple[list[_Part], list]]:
             eta, k = term.params["eta"], term.params["k"]
         elif lobe.fresnel == "dielectric":
             eta, k = term.params["eta"], np.zeros(1)
-            if float(eta) <= 1.0 + 1e-12:
+            if tm.reflects_nothing(eta):
                 notes.append(f"the {lobe.name} lobe has eta = 1: it reflects nothing and was left out (exact)")
                 continue
         else:

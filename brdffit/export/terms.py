@@ -21,8 +21,8 @@ from ..models.diffuse import Lambert
 from ..models.layout import layout
 from ..models.model import evaluate_dirs
 
-__all__ = ["ExportError", "Term", "terms", "assemble", "evaluate_dirs", "f0_to_eta", "schlick_to_conductor", "Deviation",
-           "measure", "random_pairs", "number", "rgb"]
+__all__ = ["ExportError", "Term", "terms", "assemble", "evaluate_dirs", "reflects_nothing", "f0_to_eta",
+           "schlick_to_conductor", "Deviation", "measure", "random_pairs", "number", "rgb"]
 
 MICROFACET_LOBES = ("cook-torrance", "ggx")
 # Direction pairs of the measured deviation (uniform in solid angle on each hemisphere).
@@ -110,6 +110,11 @@ def lambert_lobe() -> Lambert:
 def microfacet_lobe(distribution: str, fresnel: str) -> CookTorrance:
     """The brdffit lobe of a renderer's microfacet plugin: separable Smith, the given D and Fresnel mode."""
     return CookTorrance(distribution=distribution, shadowing="smith", fresnel=fresnel)
+
+
+def reflects_nothing(eta) -> bool:
+    """True for a dielectric index of 1 (to rounding): its Fresnel term is 0 at every angle, the lobe is 0."""
+    return float(eta) <= 1.0 + 1e-12
 
 
 def f0_to_eta(f0: float) -> float:
