@@ -37,8 +37,11 @@ def test_reaches_the_optimum_optimistix_reaches(misspecified, spec):
     theirs = fit(misspecified, spec, solver="optx-lm", max_steps=1000)
     assert ours.converged and theirs.converged, (ours.summary(), theirs.summary())
     assert ours.cost == pytest.approx(theirs.cost, rel=1e-8)
+    # The default solver stops at Bates & Watts' relative offset of 1e-3: the remaining Gauss-Newton step is
+    # about 1e-3 √p standard errors long, so the parameters agree to a hundredth of their standard errors.
     for name in ours.params:
-        np.testing.assert_allclose(ours.params[name], theirs.params[name], rtol=1e-4, atol=1e-7)
+        np.testing.assert_array_less(np.abs(np.asarray(ours.params[name]) - np.asarray(theirs.params[name])),
+                                     0.01 * np.asarray(ours.stderr[name]) + 1e-12)
 
 
 def _problem_and_data(data, spec):
@@ -54,7 +57,9 @@ def test_points_of_a_batch_are_solved_independently(misspecified):
     # plateau where ks is 0, which the first start crosses, depends on it.)
     problem, base, data = _problem_and_data(misspecified, "lambert+cook-torrance")
     starts = [dict(base, m=np.asarray(0.05)), dict(base, m=np.asarray(0.6))]
-    kwargs = dict(rtol=1e-10, atol=1e-14, max_steps=200)
+    # The step tests alone (offset=0): the relative offset test stops each point anywhere within 1e-3 of a standard
+    # error, where the two roundings may part by more than the 1e-12 this compares.
+    kwargs = dict(rtol=1e-10, atol=1e-14, max_steps=200, offset=0.0)
     together = marquardt.solve(problem, [starts], [data], **kwargs)[0]
     for start, joint in zip(starts, together):
         alone = marquardt.solve(problem, [[start]], [data], **kwargs)[0][0]

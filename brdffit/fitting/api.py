@@ -224,7 +224,7 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
         padded = [material + [material[-1]] * (width - count) for material in starts]
         out, compile_time, run_time = _timed(lambda: marquardt.solve(
             problem, padded, [solve_data], rtol=problem.solver.rtol, atol=problem.solver.atol,
-            max_steps=problem.max_steps, damping=problem.solver.damping, held=held))
+            max_steps=problem.max_steps, damping=problem.solver.damping, offset=problem.solver.offset, held=held))
         return [material[:count] for material in out], compile_time, run_time
     y0 = {name: jnp.asarray(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
                                                 for s in material]) for material in starts]))
