@@ -24,6 +24,7 @@ from .fitting.losses import loss_epsilon
 from .models.model import evaluate_dirs
 from .fitting.progressive import new_lobe_candidates
 from .fitting.problem import Problem, make_fit_data, residuals_at
+from .fitting.status import information_criteria
 from .progress import Progress
 
 __all__ = ["select", "Selection", "DEFAULT_CANDIDATES", "CRITERIA", "DEFAULT_MARGIN"]
@@ -45,6 +46,13 @@ CRITERIA = ("aic", "bic", "cv")
 # more than a bare mention").
 DEFAULT_MARGIN = 2.0
 _COST_SAMPLES = 65_536
+# Screening (AIC/BIC with many samples): every candidate is fitted to SCREEN_SAMPLES training rows, and only those
+# that can still be chosen are refitted to all the data. A subsample optimum costs the full data about
+# k (n/n_s − 1) more in the criterion's units for a well-specified model (the excess χ² of an estimate with n/n_s
+# times the full-data covariance); SCREEN_SLACK times k n/n_s bounds it for misspecified ones too
+# (docs/model-selection.md, and the measurement there).
+SCREEN_SAMPLES = 4096
+SCREEN_SLACK = 10.0
 _LAFORTUNE = re.compile(r"^(?P<base>.*?)\+?lafortune(?:\((?P<options>[^)]*)\))?$")
 
 
@@ -55,13 +63,15 @@ class Selection:
     Attributes:
         table: one dict per candidate: ``spec``, ``n_params``, ``train_error``, ``heldout_error``,
             ``heldout_se``, ``aic``, ``bic``, ``score``, ``cost_ns`` (measured evaluation cost per sample,
-            nanoseconds), ``status``, and with a scene ``scene_error``.
+            nanoseconds), ``status``, ``samples`` (the valid values the reported fit was fitted to: fewer than
+            the data's for a candidate that screening ruled out), and with a scene ``scene_error``.
         chosen: the chosen spec (the scene's choice when a scene was given, else the criterion's).
         criterion: ``"aic"``, ``"bic"`` or ``"cv"``; margin: the margin used.
         best: the candidate with the best score.
         chosen_by_criterion: the criterion's choice (equals ``chosen`` without a scene).
         chosen_by_scene: the scene's choice, or None.
-        results: spec -> the full-data `FitResult`.
+        results: spec -> the reported `FitResult`: the full-data fit, or for a candidate that screening ruled
+            out its fit to the screening subsample.
         scene_results: spec -> the `FitResult` fitted to what the scene sees (empty without a scene).
         warnings: human-readable warnings.
     """
@@ -87,12 +97,12 @@ class Selection:
     def summary(self) -> str:
         """The table as text, with the choice and the rule that made it."""
         has_scene = any("scene_error" in row for row in self.table)
-        head = (f"{'candidate':<32}{'params':>7}{'train':>11}{'held-out':>11}{'AIC':>13}{'BIC':>13}"
+        head = (f"{'candidate':<32}{'params':>7}{'fit on':>8}{'train':>11}{'held-out':>11}{'AIC':>13}{'BIC':>13}"
                 f"{'ns/sample':>10}" + (f"{'scene err':>11}" if has_scene else "") + "  status")
         lines = [head]
         for row in self.table:
             mark = "*" if row["spec"] == self.chosen else " "
-            line = (f"{mark}{row['spec']:<31}{row['n_params']:>7}{row['train_error']:>11.4g}"
+            line = (f"{mark}{row['spec']:<31}{row['n_params']:>7}{row['samples']:>8}{row['train_error']:>11.4g}"
                     f"{row['heldout_error']:>11.4g}{row['aic']:>13.6g}{row['bic']:>13.6g}{row['cost_ns']:>10.1f}")
             if has_scene:
                 line += f"{row['scene_error']:>11.4g}"
@@ -116,16 +126,22 @@ class Selection:
                 "warnings": list(self.warnings)}
 
 
-def _loss_rmse(result: FitResult, measurements, rows: np.ndarray) -> float:
-    """RMS of the fit's loss residuals on the given rows (held-out samples), over channels."""
+def _loss_cost(result: FitResult, measurements, rows: np.ndarray | None = None) -> tuple[float, int]:
+    """Σ r² of the fit's loss residuals on the given rows (all rows when None), and the number of valid values."""
     model = result.model
-    held = measurements.take(rows)
+    data_rows = measurements if rows is None else measurements.take(rows)
     problem = Problem(lobes=model.lobes, channels=model.channels, free=(), loss=result.loss, robust=None,
                       solver=None, max_steps=0)
-    data = make_fit_data(held, {}, loss_epsilon(result.loss, measurements.values), pad=True)
+    data = make_fit_data(data_rows, {}, loss_epsilon(result.loss, measurements.values), pad=True)
     r = np.asarray(residuals_at(problem, dict(model.params), data))
     mask = np.asarray(data.mask)
-    return float(np.sqrt(np.sum(r[mask] ** 2) / max(mask.sum(), 1)))
+    return float(np.sum(r[mask] ** 2)), int(mask.sum())
+
+
+def _loss_rmse(result: FitResult, measurements, rows: np.ndarray) -> float:
+    """RMS of the fit's loss residuals on the given rows (held-out samples), over channels."""
+    cost, count = _loss_cost(result, measurements, rows)
+    return float(np.sqrt(cost / max(count, 1)))
 
 
 def _masked(measurements, rows: np.ndarray):
@@ -228,31 +244,17 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
     order = rng.permutation(valid_rows)
     fold_rows = np.array_split(order, folds) if criterion == "cv" else [order[: int(round(holdout * len(order)))]]
     options = dict(loss=loss, seed=seed, **fit_options)
+    train_rows = np.setdiff1d(valid_rows, fold_rows[0])
+    screen = criterion != "cv" and len(train_rows) >= 2 * SCREEN_SAMPLES
     done: dict[str, FitResult] = {}
-    rows, warnings = [], []
+    warnings = []
     bar = Progress("select", len(candidates) * (2 if scene is not None else 1), enabled=progress, unit="fits")
-    for i, spec in enumerate(candidates):
-        bar.update(i, f"fitting {spec}")
-        result, init = _fit_candidate(spec, measurements, done, options)
-        done[spec] = result
-        errors = []
-        # The held-out fits start from the full-data optimum (same shapes, so the same compiled programs): the
-        # training optimum lies within the held-out rows' influence of it, and the global search has been done.
-        start = result.model if result.model is not None else init
-        for held in fold_rows:
-            train = fit(_masked(measurements, held), spec, init=start, **options)
-            errors.append(_loss_rmse(train, measurements, held))
-        rows.append({
-            "spec": spec,
-            "n_params": result.n_params,
-            "train_error": float(np.sqrt(result.cost / max(result.n_samples, 1))),
-            "heldout_error": float(np.mean(errors)),
-            "heldout_se": float(np.std(errors, ddof=1) / np.sqrt(len(errors))) if len(errors) > 1 else math.nan,
-            "aic": result.aic,
-            "bic": result.bic,
-            "cost_ns": _eval_cost_ns(result, seed),
-            "status": result.status,
-        })
+    if screen:
+        subset = np.sort(rng.choice(train_rows, SCREEN_SAMPLES, replace=False))
+        rows = _screened_rows(candidates, measurements, measurements.take(subset), fold_rows[0], criterion, margin,
+                              seed, options, done, bar)
+    else:
+        rows = _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar)
     for row in rows:
         row["score"] = row["heldout_error"] if criterion == "cv" else row[criterion]
     usable = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r["score"])]
@@ -296,6 +298,72 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
     return Selection(table=rows, chosen=by_scene or chosen["spec"], criterion=criterion, margin=margin,
                      best=best["spec"], chosen_by_criterion=chosen["spec"], chosen_by_scene=by_scene,
                      results=done, warnings=warnings, scene_results=scene_results)
+
+
+def _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar):
+    """The table of an unscreened selection: every candidate fitted to all the data, and refitted with each fold
+    of ``fold_rows`` held out for its held-out error."""
+    rows = []
+    for i, spec in enumerate(candidates):
+        bar.update(i, f"fitting {spec}")
+        result, init = _fit_candidate(spec, measurements, done, options)
+        done[spec] = result
+        errors = []
+        # The held-out fits start from the full-data optimum (same shapes, so the same compiled programs): the
+        # training optimum lies within the held-out rows' influence of it, and the global search has been done.
+        start = result.model if result.model is not None else init
+        for held in fold_rows:
+            train = fit(_masked(measurements, held), spec, init=start, **options)
+            errors.append(_loss_rmse(train, measurements, held))
+        rows.append({
+            "spec": spec,
+            "n_params": result.n_params,
+            "train_error": float(np.sqrt(result.cost / max(result.n_samples, 1))),
+            "heldout_error": float(np.mean(errors)),
+            "heldout_se": float(np.std(errors, ddof=1) / np.sqrt(len(errors))) if len(errors) > 1 else math.nan,
+            "aic": result.aic,
+            "bic": result.bic,
+            "cost_ns": _eval_cost_ns(result, seed),
+            "status": result.status,
+            "samples": result.n_samples,
+        })
+    return rows
+
+
+def _screened_rows(candidates, measurements, screen_data, held, criterion, margin, seed, options, done, bar):
+    """The table of a screened selection: every candidate fitted to ``screen_data`` (training rows only) and
+    scored on all the data at that fit; those that can still be chosen refitted to all the data from there.
+
+    A row's ``heldout_error`` is its screening fit's error on the held-out rows ``held``, which that fit never
+    saw; ``aic``/``bic``/``train_error``/``status``/``samples`` are those of the reported fit (``done[spec]``): the
+    full-data fit where one was made, else the screening fit scored on all the data."""
+    screened: dict[str, FitResult] = {}
+    rows = []
+    n_values = int(np.isfinite(measurements.values).sum())
+    for i, spec in enumerate(candidates):
+        bar.update(i, f"screening {spec} on {screen_data.n} samples")
+        result, _ = _fit_candidate(spec, screen_data, screened, options)
+        screened[spec] = done[spec] = result
+        cost, count = _loss_cost(result, measurements)
+        aic, bic = information_criteria(result.loss, cost, count, result.n_params)
+        rows.append({"spec": spec, "n_params": result.n_params, "train_error": float(np.sqrt(cost / max(count, 1))),
+                     "heldout_error": _loss_rmse(result, measurements, held), "heldout_se": math.nan, "aic": aic,
+                     "bic": bic, "cost_ns": _eval_cost_ns(result, seed), "status": result.status,
+                     "samples": result.n_samples})
+    finite = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r[criterion])]
+    if not finite:
+        return rows
+    best = min(r[criterion] for r in finite)
+    for row in finite:
+        ratio = n_values / max(screened[row["spec"]].n_samples, 1)
+        if row[criterion] - SCREEN_SLACK * row["n_params"] * ratio > best + margin:
+            continue  # cannot come within the margin of the best, even fitted to all the data
+        bar.update(len(rows) - 1, f"fitting {row['spec']} to all {measurements.n} samples")
+        result = fit(measurements, row["spec"], init=screened[row["spec"]].model, **options)
+        done[row["spec"]] = result
+        row.update(train_error=float(np.sqrt(result.cost / max(result.n_samples, 1))), aic=result.aic,
+                   bic=result.bic, status=result.status, samples=result.n_samples)
+    return rows
 
 
 def _scene_measurements(scene, values, channels):

@@ -117,3 +117,35 @@ def test_unneeded_lobe_goes_to_zero_and_the_status_says_so():
     kept = "ks_2" if spare == ["ks_1"] else "ks_1"
     np.testing.assert_allclose(two.params[kept], [0.5, 0.4, 0.3], rtol=0.01)
     assert two.bic >= one.bic - 1e-6 * abs(one.bic)
+
+
+def test_screening_chooses_as_fitting_every_candidate_to_all_the_data(monkeypatch):
+    # 12,000 samples: screened (4,096 training samples per candidate, refits where they can still be chosen). The
+    # same selection with screening off fits every candidate to all the data: the same choice, and the refitted
+    # candidates the same criterion values; the ruled-out ones report their subsample fits' upper bounds.
+    import sys
+
+    selection_module = sys.modules["brdffit.select"]  # the module (`brdffit.select` is the function)
+
+    truth = models.get("lambert+ggx", rho_d=[0.3, 0.2, 0.1], ks=[0.6, 0.5, 0.4], alpha=0.2, f0=0.04)
+    data = synth.generate(truth, pattern="uniform", n=12_000, noise="relative:0.01", seed=3)
+    candidates = ["lambert", "lambert+ward", "lambert+ggx", "lambert+cook-torrance"]
+    screened = select(data, candidates, criterion="bic")
+    screen_values = 3 * selection_module.SCREEN_SAMPLES
+    monkeypatch.setattr(selection_module, "SCREEN_SAMPLES", 10 ** 9)
+    full = select(data, candidates, criterion="bic")
+    assert screened.chosen == full.chosen == "lambert+ggx", (screened.summary(), full.summary())
+    values = 3 * data.n
+    rows = {r["spec"]: r for r in screened.table}
+    for reference in full.table:
+        row = rows[reference["spec"]]
+        assert reference["samples"] == values
+        if row["samples"] == values:  # refitted to all the data: the full fit's optimum
+            assert row["bic"] == pytest.approx(reference["bic"], abs=0.5)
+        else:  # ruled out: an upper bound, far above the best
+            assert row["samples"] == screen_values
+            assert row["bic"] >= reference["bic"] - 0.5
+            assert row["bic"] > rows[screened.chosen]["bic"] + 100
+    assert rows["lambert+ggx"]["samples"] == values
+    assert rows["lambert"]["samples"] < values  # Lambert alone cannot explain a GGX peak: screened out
+    assert screened.results["lambert"].n_samples == screen_values

@@ -90,7 +90,8 @@ def _metrics_table(fit_result, channels):
 
 
 def _selection_table(selection):
-    keys = ["spec", "n_params", "train_error", "heldout_error", "heldout_se", "aic", "bic", "cost_ns", "status"]
+    keys = ["spec", "n_params", "samples", "train_error", "heldout_error", "heldout_se", "aic", "bic", "cost_ns",
+            "status"]
     if any("scene_error" in row for row in selection.table):
         keys.insert(-1, "scene_error")
     rows = []
@@ -98,7 +99,7 @@ def _selection_table(selection):
         cells = []
         for k in keys:
             v = row.get(k)
-            cells.append(format_value(v, 5) if isinstance(v, (float, np.floating)) else str(v))
+            cells.append("–" if v is None else format_value(v, 5) if isinstance(v, (float, np.floating)) else str(v))
         cells[0] = ("**" if row["spec"] == selection.chosen else "") + cells[0] + \
             (" (chosen)" if row["spec"] == selection.chosen else "")
         rows.append(cells)
