@@ -12,8 +12,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import jax
-import jax.numpy as jnp
+from ._lazy import module
+
+jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
+jax = module("jax")
+
 
 __all__ = [
     "LocalPair",

@@ -2,11 +2,16 @@
 
 `names()` lists the lobes; `get(spec, channels=3, **options_and_params)` builds a model from a spec string such as
 ``"lambert+cook-torrance"``.
+
+The names load on first use (`brdffit._lazy`): the registry and the lobes' declarations without JAX, `Model`
+and the evaluations with it.
 """
 
-from .lobe import Lobe
-from .model import Model, evaluate, evaluate_dirs
-from .registry import describe, get, lobe_class, model_from_dict, model_to_dict, names, parse_spec
+from .._lazy import exports as _exports
 
-__all__ = ["Lobe", "Model", "names", "get", "lobe_class", "parse_spec", "describe", "evaluate", "evaluate_dirs",
-           "model_to_dict", "model_from_dict"]
+_PUBLIC = {"Lobe": "lobe:Lobe", "Model": "model:Model", "evaluate": "model:evaluate",
+           "evaluate_dirs": "model:evaluate_dirs", **{name: f"registry:{name}" for name in (
+               "names", "get", "lobe_class", "parse_spec", "describe", "model_to_dict", "model_from_dict")}}
+_exports(__name__, _PUBLIC)
+
+__all__ = sorted(_PUBLIC)

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax.numpy as jnp
-
+from .._lazy import module
 from ..geometry import LocalPair, safe_div
 from ..params import ParamSpec
 from .fresnel import schlick
 from .lobe import Lobe
 from .specs import exponent
+
+jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
 __all__ = ["AshikhminShirley", "AshikhminShirleyAniso"]
 

@@ -5,12 +5,13 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import jax.numpy as jnp
-
+from .._lazy import module
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from .lobe import Lobe
 from .specs import RHO_D
+
+jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
 __all__ = ["Lambert", "OrenNayar"]
 

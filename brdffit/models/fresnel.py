@@ -6,9 +6,10 @@ return the unpolarised reflectance, the mean of the s- and p-polarised reflectan
 
 from __future__ import annotations
 
-import jax.numpy as jnp
-
+from .._lazy import module
 from ..geometry import TINY, safe_sqrt
+
+jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
 __all__ = ["schlick", "dielectric", "conductor", "CONDUCTORS", "DIELECTRICS"]
 

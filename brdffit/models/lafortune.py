@@ -5,12 +5,13 @@ from __future__ import annotations
 import dataclasses
 import itertools
 
-import jax.numpy as jnp
-
+from .._lazy import module
 from ..geometry import LocalPair, safe_pow
 from ..params import ParamSpec
 from .lobe import Lobe
 from .specs import KS, exponent
+
+jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
 __all__ = ["Lafortune"]
 

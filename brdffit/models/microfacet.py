@@ -10,10 +10,11 @@ from __future__ import annotations
 import abc
 import dataclasses
 
-import jax.numpy as jnp
-from jax.scipy.special import erfc
-
+from .._lazy import module
 from ..geometry import TINY, LocalPair, safe_div, safe_sqrt
+
+jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
+jax_special = module("jax.scipy.special")
 
 __all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "DISTRIBUTIONS", "v_cavity", "smith", "SHADOWING"]
 
@@ -32,7 +33,7 @@ def _beckmann_lambda(cos_v, m):
     # written with erfc so that both terms vanish smoothly for large a.
     sin_v = safe_sqrt(1.0 - cos_v * cos_v)
     a = jnp.minimum(safe_div(cos_v, m * sin_v, fallback=_BECKMANN_A_MAX), _BECKMANN_A_MAX)
-    return 0.5 * (jnp.exp(-a * a) / (a * jnp.sqrt(jnp.pi)) - erfc(a))
+    return 0.5 * (jnp.exp(-a * a) / (a * jnp.sqrt(jnp.pi)) - jax_special.erfc(a))
 
 
 @dataclasses.dataclass(frozen=True)

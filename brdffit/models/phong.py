@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax.numpy as jnp
-
+from .._lazy import module
 from ..geometry import LocalPair, mirror, safe_pow
 from .lobe import Lobe
 from .specs import KS, exponent
+
+jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
 __all__ = ["Phong", "BlinnPhong"]
 

@@ -9,16 +9,19 @@ from __future__ import annotations
 import dataclasses
 import re
 
+from .._lazy import module
 from .ashikhmin_shirley import AshikhminShirley, AshikhminShirleyAniso
 from .cook_torrance import GGX, CookTorrance
 from .diffuse import Lambert, OrenNayar
 from .lafortune import Lafortune
 from .lobe import Lobe
 from .layout import layout
-from .model import Model, coerce_value
 from .phong import BlinnPhong, Phong
 from .toon import ToonDiffuse, ToonSpecular
 from .ward import Ward, WardAniso, WardDuer
+
+# The composed Model (equinox, JAX) is loaded when a model is built, not when the registry is read.
+_model = module("brdffit.models.model")
 
 __all__ = ["names", "get", "lobe_class", "parse_spec", "describe", "model_to_dict", "model_from_dict"]
 
@@ -108,7 +111,7 @@ def parse_spec(spec: str) -> list[tuple[str, dict]]:
     return parsed
 
 
-def get(spec, channels: int = 3, **options_and_params) -> Model:
+def get(spec, channels: int = 3, **options_and_params) -> "Model":
     """Build a model from a spec string.
 
     Arguments:
@@ -126,7 +129,7 @@ def get(spec, channels: int = 3, **options_and_params) -> Model:
         KeyError: unknown lobe name. ValueError: malformed spec, unknown keyword, wrong value shape, or an
         invalid option value.
     """
-    if isinstance(spec, Model):
+    if isinstance(spec, _model.Model):
         return spec.replace(**options_and_params)
     if not isinstance(channels, int) or channels < 1:
         raise ValueError(f"channels must be a positive integer, got {channels!r}")
@@ -151,9 +154,9 @@ def get(spec, channels: int = 3, **options_and_params) -> Model:
     if unknown:
         raise ValueError(f"model {spec!r} has no parameter or option {sorted(unknown)[0]!r}; parameters: "
                          f"{', '.join(s.name for s in specs)}")
-    params = {s.name: coerce_value(s, values[s.name], channels) if s.name in values else s.initial(channels)
+    params = {s.name: _model.coerce_value(s, values[s.name], channels) if s.name in values else s.initial(channels)
               for s in specs}
-    return Model(params=params, lobes=lobes, channels=channels)
+    return _model.Model(params=params, lobes=lobes, channels=channels)
 
 
 def describe(spec_class: type[Lobe]) -> str:
@@ -162,7 +165,7 @@ def describe(spec_class: type[Lobe]) -> str:
     return f"{spec_class.name}: {spec_class.reference} (options: {opts})"
 
 
-def model_to_dict(model: Model) -> dict:
+def model_to_dict(model: "Model") -> dict:
     """A JSON-ready description of a model: its spec (with lobe options), channel count and parameter values.
 
     Arguments:
@@ -177,7 +180,7 @@ def model_to_dict(model: Model) -> dict:
     return {"spec": model.spec, "channels": model.channels, "params": params}
 
 
-def model_from_dict(description: dict) -> Model:
+def model_from_dict(description: dict) -> "Model":
     """Rebuild a model from `model_to_dict`'s output.
 
     Arguments:

@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax.numpy as jnp
-
+from .._lazy import module
 from ..geometry import LocalPair, logistic, mirror
 from ..params import ParamSpec
 from .lobe import Lobe
 from .specs import KS, RHO_D
+
+jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
 __all__ = ["ToonDiffuse", "ToonSpecular"]
 
