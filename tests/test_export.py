@@ -240,6 +240,18 @@ def test_registry_and_cli_choices():
     assert list(to.choices) == list(TARGETS)
 
 
+def test_registry_loads_no_jax():
+    # The CLI builds its --to choices from the registry; light commands (info, convert) must not load JAX.
+    import subprocess
+    import sys
+
+    script = ("import sys; from brdffit.export import TARGETS, ExportError; from brdffit.cli import build_parser; "
+              "build_parser(); print(sorted(TARGETS), 'jax' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "['json', 'mitsuba', 'pbrt'] False"
+
+
 def test_json_round_trips():
     model = get("lambert+cook-torrance(distribution=ggx, fresnel=conductor, material=copper)", rho_d=[0.1, 0.2, 0.3])
     d = json.loads(export(model, "json"))

@@ -13,39 +13,18 @@ from __future__ import annotations
 
 import dataclasses
 
-from . import mitsuba, native, pbrt
-from .terms import ExportError, f0_to_eta
+from .registry import EXPORT_FORMATS, TARGETS, ExportError, Target
 
-__all__ = ["EXPORT_FORMATS", "TARGETS", "Target", "ExportError", "export", "export_details", "f0_to_eta"]
-
-
-@dataclasses.dataclass(frozen=True)
-class Target:
-    """An export format.
-
-    Attributes:
-        name: the ``to=`` / ``--to`` name.
-        description: one line for help texts.
-        write: for a renderer, ``write(model, name, header, source=None) -> (text, written, notes, deviation)``;
-            under the fit option ``source`` is the original model, which the deviation is measured against;
-            None for JSON, which `native.write` handles (it takes fits with one model per channel).
-        refines: whether ``write`` with a ``source`` fits the renderer's own parameters to it (pbrt-v4); a target
-            that does not (Mitsuba 3, whose lambert + GGX plugins brdffit's models are exactly) gets a brdffit
-            fit of those lobes (`brdffit.export.refit`) unless its direct mapping is exact.
-    """
-
-    name: str
-    description: str
-    write: object = None
-    refines: bool = False
+__all__ = ["EXPORT_FORMATS", "TARGETS", "Target", "Export", "ExportError", "export", "export_details", "f0_to_eta"]
 
 
-TARGETS = {t.name: t for t in (
-    Target("json", "brdffit's own description (model_from_dict reads it back)"),
-    Target("mitsuba", "a Mitsuba 3 <bsdf version=\"3.0.0\"> document", mitsuba.write),
-    Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", pbrt.write, refines=True),
-)}
-EXPORT_FORMATS = tuple(TARGETS)
+def __getattr__(name):
+    # f0_to_eta lives with the maths (brdffit.export.terms, which loads JAX); the registry above stays light.
+    if name == "f0_to_eta":
+        from .terms import f0_to_eta
+
+        return f0_to_eta
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,9 +80,9 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
         ExportError, ValueError: as `export`.
     """
     target = TARGETS.get(to)
-    if target is None or target.write is None:
+    if target is None or not target.renderer:
         raise ValueError(f"unknown renderer {to!r}; choose one of "
-                         f"{', '.join(t.name for t in TARGETS.values() if t.write is not None)}")
+                         f"{', '.join(t.name for t in TARGETS.values() if t.renderer)}")
     model, result = _unwrap(model_or_result)
     if model is None:
         raise ExportError(f"a fit in channel_mode='independent' has one model per channel ({result.spec}); "
@@ -127,7 +106,7 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
 def _export(target: Target, model, name: str, header: list, source) -> Export:
     """One renderer export of ``model``; with ``source`` (the fit option) measured against and, where the target
     refines its own parameters, refined to it."""
-    text, written, notes, deviation = target.write(model, name, header, source=source)
+    text, written, notes, deviation = target.load().write(model, name, header, source=source)
     return Export(text, written, source if source is not None else model, notes, deviation)
 
 
@@ -157,7 +136,7 @@ def export(model_or_result, to: str = "json", *, name: str = "material", fit: bo
     """
     if to not in TARGETS:
         raise ValueError(f"unknown export format {to!r}; choose one of {', '.join(EXPORT_FORMATS)}")
-    if TARGETS[to].write is None:
+    if not TARGETS[to].renderer:
         model, result = _unwrap(model_or_result)
-        return native.write(model, result, _generator())
+        return TARGETS[to].load().write(model, result, _generator())
     return export_details(model_or_result, to, name=name, fit=fit).text

@@ -20,6 +20,7 @@ from ..models.cook_torrance import CookTorrance
 from ..models.diffuse import Lambert
 from ..models.layout import layout
 from ..models.model import evaluate_dirs
+from .registry import ExportError
 
 __all__ = ["ExportError", "Term", "terms", "assemble", "evaluate_dirs", "reflects_nothing", "f0_to_eta",
            "schlick_to_conductor", "Deviation", "measure", "random_pairs", "number", "rgb"]
@@ -31,10 +32,6 @@ DEVIATION_SEED = 20260
 # The deviation reports the largest relative error over the values above this fraction of the peak, where a
 # relative error means something; the cosine-weighted RMS covers all.
 RELATIVE_FLOOR = 1e-3
-
-
-class ExportError(ValueError):
-    """The model has no equivalent in the requested format (the message names the lobe)."""
 
 
 @dataclasses.dataclass(frozen=True)

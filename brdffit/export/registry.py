@@ -1,0 +1,48 @@
+"""The export targets as values (light: the CLI builds its ``--to`` choices from it without loading JAX)."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+
+__all__ = ["ExportError", "Target", "TARGETS", "EXPORT_FORMATS"]
+
+
+class ExportError(ValueError):
+    """The model has no equivalent in the requested format (the message names the lobe)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Target:
+    """An export format.
+
+    Attributes:
+        name: the ``to=`` / ``--to`` name.
+        description: one line for help texts.
+        module: the module of `brdffit.export` that writes it; a renderer's module has
+            ``write(model, name, header, source=None) -> (text, written, notes, deviation)``, where under the fit
+            option ``source`` is the original model that the deviation is measured against.
+        renderer: False for brdffit's own JSON (`brdffit.export.native`, which also takes fits with one model
+            per channel).
+        refines: whether ``write`` with a ``source`` fits the renderer's own parameters to it (pbrt-v4); a target
+            that does not (Mitsuba 3, whose plugins brdffit's lambert + GGX lobes are exactly) gets a brdffit fit
+            of those lobes (`brdffit.export.refit`) unless its direct mapping is exact.
+    """
+
+    name: str
+    description: str
+    module: str
+    renderer: bool = True
+    refines: bool = False
+
+    def load(self):
+        """The target's module (imported on first use)."""
+        return importlib.import_module(f"{__package__}.{self.module}")
+
+
+TARGETS = {t.name: t for t in (
+    Target("json", "brdffit's own description (model_from_dict reads it back)", "native", renderer=False),
+    Target("mitsuba", "a Mitsuba 3 <bsdf version=\"3.0.0\"> document", "mitsuba"),
+    Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", "pbrt", refines=True),
+)}
+EXPORT_FORMATS = tuple(TARGETS)
