@@ -166,15 +166,28 @@ def _schlick_leaves(schlick: list, channels: int, others: bool, notes: list) -> 
 
 
 def _weigh(leaves: list[_Leaf]) -> list[_Leaf]:
-    """Blend weights summing to 1: principled parts keep theirs, the others share the rest equally."""
+    """Blend weights summing to 1, heaviest part first.
+
+    Principled parts keep theirs; the others share the rest in proportion to their mean amplitude, so that
+    Mitsuba's blend, which samples a part with the probability of its weight, samples each about as often as it
+    reflects (parts with amplitude 0 are left out). Heaviest first: a blend computes 1 − t in float32, which is
+    exact to rounding when the rest's share t is the smaller one.
+    """
     fixed = sum(leaf.weight for leaf in leaves if leaf.amplitude is None)
     scalable = [leaf for leaf in leaves if leaf.amplitude is not None]
-    if not scalable and fixed < 1.0:
-        black = _Leaf("diffuse", [], "reflectance", np.zeros(3))
-        leaves, scalable = leaves + [black], [black]
-    for leaf in scalable:
-        leaf.weight = (1.0 - fixed) / len(scalable)
-    return leaves
+    amplitudes = [float(np.mean(leaf.coefficient)) for leaf in scalable]
+    if sum(amplitudes) > 0.0:
+        scalable = [leaf for leaf, a in zip(scalable, amplitudes) if a > 0.0]
+        amplitudes = [a for a in amplitudes if a > 0.0]
+    elif fixed < 1.0:
+        # Nothing to scale (a principled part alone, or a black material): one black diffuse takes the rest.
+        scalable, amplitudes = [_Leaf("diffuse", [], "reflectance", np.zeros(3))], [1.0]
+    else:
+        scalable, amplitudes = [], []
+    for leaf, a in zip(scalable, amplitudes):
+        leaf.weight = (1.0 - fixed) * a / sum(amplitudes)
+    kept = [leaf for leaf in leaves if leaf.amplitude is None] + scalable
+    return sorted(kept, key=lambda leaf: -leaf.weight)
 
 
 def _beckmann_g1(cos_v, alpha):
