@@ -279,12 +279,32 @@ def test_channel_count_and_names_are_checked():
         export(get("lambert"), "pbrt", name='a"b')
 
 
-def test_fit_result_exports(mi):
+@pytest.fixture(scope="module")
+def lambert_fit():
     truth = get("lambert", rho_d=[0.4, 0.3, 0.2])
-    result = brdffit.fit(synth.generate(truth, "uniform", n=100, seed=1), "lambert")
+    return brdffit.fit(synth.generate(truth, "uniform", n=100, seed=1), "lambert")
+
+
+def test_fit_result_exports(mi, lambert_fit):
+    result = lambert_fit
     d = json.loads(export(result, "json"))
     assert set(d["stderr"]) == set(d["params"]) and d["status"] == result.status
     details = export_details(result, "mitsuba")
     assert details.deviation.exact() and details.source is result.model
     np.testing.assert_allclose(evaluate_in_mitsuba(details.text, *random_pairs(5)),
                                np.broadcast_to(np.asarray(result.model.params["rho_d"]) / np.pi, (5, 3)), rtol=1e-6)
+
+
+def test_cli_export_writes_what_mitsuba_loads(mi, lambert_fit, tmp_path, capsys):
+    from brdffit.cli import main
+
+    path = tmp_path / "result.h5"
+    lambert_fit.save(path)
+    out = tmp_path / "m.xml"
+    assert main(["export", str(path), "--to", "mitsuba", "--fit", "--out", str(out), "--quiet"]) == 0
+    assert "<!-- exact:" in out.read_text()
+    mi.load_string(out.read_text())
+    assert main(["export", str(path), "--to", "pbrt"]) == 0
+    assert pr.parse(capsys.readouterr().out)["material"]["type"] == "diffuse"
+    assert main(["export", str(path), "--to", "blender"]) == 2
+    assert "invalid choice: 'blender'" in capsys.readouterr().err
