@@ -953,8 +953,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p.add_argument("--to", required=True, choices=list(TARGETS), help="target format: " + "; ".join(
         f"{t.name}: {t.description}" for t in TARGETS.values()))
-    p.add_argument("--fit", action="store_true", help="renderers: fit lambert + GGX lobes the renderer has "
-                   "exactly to the fitted model and write that, with the achieved error (docs/export.md)")
+    p.add_argument("--fit", action="store_true", help="renderers: fit the renderer's own model to the fitted one "
+                   "(cosine-weighted least squares) and write the closest, with the achieved error; also exports "
+                   "lobes with no equivalent (docs/export.md)")
     p.add_argument("--name", help="which fit in the file (default: the first)")
     p.add_argument("--material", default="material", help="material name in the output (default 'material')")
     p.add_argument("--out", help="output file (default: print to stdout)")
