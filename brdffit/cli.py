@@ -1011,8 +1011,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="worker processes of the local cluster (default: one per core)")
     p.add_argument("--batch", type=bounded(int, 1), default=32, metavar="N",
                    help="the most equally shaped materials one task fits together (default 32)")
-    p.add_argument("--no-resume", dest="resume", action="store_false",
-                   help="start a new table (default: keep the rows of --out and fit only the rest and the errors)")
+    p.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
+                   help="keep the rows of --out and fit only the other materials and the failed ones (the default); "
+                        "--no-resume starts a new table")
     _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print one JSON object: out, materials, statuses")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")

@@ -8,8 +8,9 @@ its solves stop, within their tolerance, elsewhere on the flat bottom of the cos
 (300 samples): cost 2.8e-10 relative, parameters 3.4e-4 standard errors apart, standard errors 1.6e-5 and metrics
 9.4e-6 relative, step counts different (10 against 5). So a row is equal to the serial fit when its cost agrees to
 `COST_RTOL`, each parameter to `PARAM_SIGMAS` of its standard error and every other number but time and steps to
-`SERIAL_RTOL`; and a run whose worker was killed is compared with the undisturbed run of the same batches exactly. The workers run JAX
-on the CPU with one persistent compilation cache (a temporary folder) shared by every worker of this file.
+`SERIAL_RTOL`; and a run whose worker was killed is compared with the undisturbed run of the same batches exactly.
+The workers run JAX on the CPU with one persistent compilation cache (a temporary folder) shared by every worker
+of this file.
 """
 
 import json
@@ -166,7 +167,8 @@ def test_resume_keeps_done_rows_and_fits_the_rest(local_run, database, serial, c
     assert "6 fitted (1 failed), 3 already done" in err and "ETA" in err  # the broken file fails again
     by_source = {row["source"]: row for row in resumed}
     for before in done:
-        assert _same([by_source[before["source"]]]) == _same([before]), "a done row is kept (its time too: not refitted)"
+        # Kept as it was, its time too: it was not fitted again.
+        assert _same([by_source[before["source"]]]) == _same([before])
     assert by_source[retried["source"]]["status"] == "converged"
     _assert_rows_equal_serial(resumed, database, serial)
     header = out.read_text().splitlines()[0].split(",")
@@ -199,6 +201,18 @@ def test_failing_fit_gets_its_row_and_spares_the_batch(database, serial, monkeyp
                        "error": "FloatingPointError: the solve blew up"}
     for row in (rows[0], rows[2]):  # each fitted alone: the serial fit, bit for bit
         assert row == {**serial[row["source"]], "time": row["time"]}
+
+
+def test_selection_per_material_is_select(database):
+    """A model given as candidates (``"auto"`` gives the standard ones) runs `brdffit.select` on each material."""
+    from brdffit import select
+
+    key = next(k for k in database["materials"] if k.endswith("m0.h5"))
+    candidates = ("lambert", SPEC)
+    (row,), _ = fit_batch(expand_sources(key), candidates, None, {}, None)
+    chosen = select(database["materials"][key], candidates)
+    assert chosen.chosen == SPEC == row["model"] and row["status"] == chosen.result.status
+    assert row["alpha"] == float(chosen.result.params["alpha"]) and row["bic"] == chosen.result.bic
 
 
 def test_cli_batch_on_a_running_scheduler(database, client, cache, tmp_path, monkeypatch, capsys):

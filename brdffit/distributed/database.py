@@ -14,8 +14,8 @@ The client plans and records; the workers read and fit (`brdffit.distributed.tas
    opening of a brdffit HDF5 file inspects all of it in a child process, ~0.1 s);
 3. a multi-material HDF5 file given as a whole is found to be one when its task reads it: the task returns its
    member groups, which the client cuts into batches of their own (a table row per member);
-4. the rows are written as each task's result arrives (the whole table, atomically), and a progress line counts
-   them with an estimate of the time left.
+4. the rows are written as the tasks' results arrive (the whole table, atomically, at most once a second and at
+   the end, also of an interrupted run), and a progress line counts them with an estimate of the time left.
 
 Faults: the scheduler reruns the tasks of a worker that dies on the other workers (Dask's
 ``distributed.scheduler.allowed-failures``, 3 by default); a batch that still fails gets error rows naming the
@@ -28,18 +28,22 @@ from __future__ import annotations
 
 import contextlib
 import inspect
+import math
 import os
 import time
 from pathlib import Path
 
 from ..progress import Progress
-from .sources import expand_sources
+from .sources import error_text, expand_sources
 from .table import complete, read_results, table_format, write_results
 from .tasks import error_row, fit_batch
 
 __all__ = ["fit_database", "DEFAULT_BATCH"]
 
 DEFAULT_BATCH = 32
+# The table is rewritten whole; at most this often (and at the end), so that a large database does not spend its
+# time rewriting a growing table after every batch.
+WRITE_INTERVAL_S = 1.0
 
 
 def _model_argument(model):
@@ -73,7 +77,8 @@ def _check_fit_options(fit_options: dict, selecting: bool) -> None:
     accepted -= {"measurements", "measurements_list", "model", "candidates", "progress"}
     unknown = sorted(set(fit_options) - accepted)
     if unknown:
-        raise TypeError(f"fit_database: unknown fit option(s) {', '.join(unknown)}; it takes {', '.join(sorted(accepted))}")
+        raise TypeError(f"fit_database: unknown fit option(s) {', '.join(unknown)}; it takes "
+                        f"{', '.join(sorted(accepted))}")
 
 
 @contextlib.contextmanager
@@ -97,14 +102,6 @@ def _connected(client, workers: int | None):
             yield connected
 
 
-def _batches(sources: list, shapes: list, size: int) -> list[list]:
-    """Sources of one shape together, in the order given, cut into batches of at most ``size``."""
-    groups: dict[tuple, list] = {}
-    for source, shape in zip(sources, shapes):
-        groups.setdefault(shape, []).append(source)
-    return [group[i:i + size] for group in groups.values() for i in range(0, len(group), size)]
-
-
 class _Record:
     """The rows so far, written to the results table (when there is one) each time new rows arrive, and the
     progress line."""
@@ -116,10 +113,12 @@ class _Record:
         self.given = list(given)  # the sources' keys in order, multi-material files replaced by their members
         self.done = self.failed = 0
         self.start = time.perf_counter()
+        self.written, self.unwritten = -math.inf, False
 
     def expand(self, key: str, members: list[str], fresh: int) -> None:
         """A multi-material file turned out to stand for ``members``, ``fresh`` of which are still to fit."""
-        rest = [k for k in self.given if k not in members]
+        named = set(members)
+        rest = [k for k in self.given if k not in named]
         at = rest.index(key)
         self.given = rest[:at] + members + rest[at + 1:]
         self.todo += fresh - 1
@@ -130,11 +129,18 @@ class _Record:
             self.rows[row["source"]] = row
         self.done += len(rows)
         self.failed += sum(row["status"] == "error" for row in rows)
-        if self.out is not None and rows:
-            write_results(self.table(), self.out)
+        self.unwritten = self.unwritten or bool(rows)
+        if time.perf_counter() - self.written >= WRITE_INTERVAL_S:
+            self.flush()
         if self.done:
             left = (time.perf_counter() - self.start) / self.done * (self.todo - self.done)
             self.bar.update(self.done, f"{self.failed} failed, ETA {left:.0f} s" if self.done < self.todo else "")
+
+    def flush(self) -> None:
+        """Write the table if rows arrived since the last write."""
+        if self.out is not None and self.unwritten:
+            write_results(self.table(), self.out)
+            self.written, self.unwritten = time.perf_counter(), False
 
     def table(self) -> list[dict]:
         """Rows of sources not in this run first (they stay in the table), then the sources in order."""
@@ -163,7 +169,8 @@ def fit_database(sources, model, *, client=None, batch: int = DEFAULT_BATCH, out
             the end.
         batch: the most materials one task fits together (>= 1).
         out: the results table, ``.h5`` / ``.hdf5`` / ``.csv`` / ``.parquet`` (`brdffit.distributed.table`),
-            rewritten atomically as rows arrive; None keeps the rows in memory only.
+            rewritten atomically as rows arrive (at most once a second, and at the end); None keeps the rows in
+            memory only.
         resume: keep the rows already in ``out`` and skip their materials (rows with status ``"error"`` are
             tried again); False starts a new table.
         workers: processes of the LocalCluster started when ``client`` is None (default: one per core).
@@ -201,8 +208,11 @@ def fit_database(sources, model, *, client=None, batch: int = DEFAULT_BATCH, out
     record = _Record(out, [source.key for source in items], kept, bar, len(todo))
     cache = None if cache_dir is None else str(Path(cache_dir).resolve())
     if todo:
-        with _connected(client, workers) as connected:
-            _run(connected, todo, model, batch, read_options, fit_options, cache, record)
+        try:
+            with _connected(client, workers) as connected:
+                _run(connected, todo, model, batch, read_options, fit_options, cache, record)
+        finally:  # an interrupted run keeps every row it received
+            record.flush()
     rows = record.result()
     bar.close(f"{record.done} fitted ({record.failed} failed), {sum(r['source'] in record.kept for r in rows)} "
               "already done")
@@ -227,7 +237,7 @@ def _run(client, todo: list, model, batch: int, read_options, fit_options: dict,
         try:
             rows, members = future.result()
         except Exception as err:  # the batch's workers kept dying (KilledWorker), or the task could not run
-            rows, members = [error_row(source.key, f"{type(err).__name__}: {err}", label) for source in group], []
+            rows, members = [error_row(source.key, error_text(err), label) for source in group], []
         future.release()
         fresh = []
         for path in dict.fromkeys(member.path for member in members):

@@ -20,7 +20,7 @@ from ..io import FORMATS, FormatError, detect_format, load
 from ..io.hdf5 import MEASUREMENTS_GROUP, open_hdf5, read_measurements_group
 from ..measurements import Measurements
 
-__all__ = ["Source", "Read", "GROUP_SEPARATOR", "expand_sources", "read_sources", "material_groups"]
+__all__ = ["Source", "Read", "GROUP_SEPARATOR", "expand_sources", "read_sources", "material_groups", "error_text"]
 
 GROUP_SEPARATOR = "::"
 
@@ -71,7 +71,8 @@ def material_groups(f) -> list[str]:
     return sorted(found, key=lambda name: name != MEASUREMENTS_GROUP)
 
 
-def _message(err: BaseException) -> str:
+def error_text(err: BaseException) -> str:
+    """The error column's text of an exception: ``"FormatError: <path>: line 3: ..."``."""
     return f"{type(err).__name__}: {err}"
 
 
@@ -81,7 +82,7 @@ def _read_hdf5(path: str, sources: list[Source]) -> list[Read]:
     try:
         f = open_hdf5(path)
     except Exception as err:  # noqa: BLE001 - every source of the file gets the reason
-        return [Read(source, error=_message(err)) for source in sources]
+        return [Read(source, error=error_text(err)) for source in sources]
     reads = []
     with f:
         for source in sources:
@@ -99,7 +100,7 @@ def _read_hdf5(path: str, sources: list[Source]) -> list[Read]:
                 else:
                     reads.append(Read(source, members=tuple(Source(path, group) for group in groups)))
             except Exception as err:  # noqa: BLE001 - a damaged group is that material's error
-                reads.append(Read(source, error=_message(err)))
+                reads.append(Read(source, error=error_text(err)))
     return reads
 
 
@@ -121,7 +122,7 @@ def read_sources(sources, read_options: dict | None = None) -> list[Read]:
         try:
             hdf5 = source.group is not None or detect_format(source.path) == "hdf5"
         except Exception as err:  # noqa: BLE001
-            reads[source] = Read(source, error=_message(err))
+            reads[source] = Read(source, error=error_text(err))
             continue
         if hdf5:
             by_file.setdefault(source.path, []).append(source)
@@ -129,7 +130,7 @@ def read_sources(sources, read_options: dict | None = None) -> list[Read]:
         try:
             reads[source] = Read(source, load(source.path, **(read_options or {})))
         except Exception as err:  # noqa: BLE001 - an unreadable material is its row's error
-            reads[source] = Read(source, error=_message(err))
+            reads[source] = Read(source, error=error_text(err))
     for path, members in by_file.items():
         reads.update((read.source, read) for read in _read_hdf5(path, members))
     return [reads[source] for source in sources]

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from .sources import Source, _message, read_sources
+from .sources import Source, error_text, read_sources
 
 __all__ = ["configure", "fit_batch", "result_row", "error_row"]
 
@@ -76,7 +76,7 @@ def _fit_together(loaded: list, spec: str, fit_options: dict) -> list[dict]:
         results = fit_many([m for _, m in loaded], spec, **fit_options)
     except Exception as err:
         if len(loaded) == 1:
-            return [error_row(loaded[0][0].key, _message(err), spec)]
+            return [error_row(loaded[0][0].key, error_text(err), spec)]
         return [row for item in loaded for row in _fit_together([item], spec, fit_options)]
     share = (time.perf_counter() - start) / len(loaded)
     return [result_row(source.key, result, share) for (source, _), result in zip(loaded, results)]
@@ -91,7 +91,7 @@ def _select_one(item, candidates: tuple, fit_options: dict) -> dict:
     try:
         selection = select(m, candidates, **fit_options)
     except Exception as err:
-        return error_row(source.key, _message(err), "auto")
+        return error_row(source.key, error_text(err), "auto")
     return result_row(source.key, selection.result, time.perf_counter() - start)
 
 
