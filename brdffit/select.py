@@ -46,8 +46,9 @@ CRITERIA = ("aic", "bic", "cv")
 # more than a bare mention").
 DEFAULT_MARGIN = 2.0
 _COST_SAMPLES = 65_536
-# Screening (AIC/BIC with many samples): every candidate is fitted to SCREEN_SAMPLES training rows, and only those
-# that can still be chosen are refitted to all the data. A subsample optimum costs the full data about
+_CONVERGED = ("converged", "converged-at-bound")
+# Screening (AIC/BIC): every candidate is fitted to the training rows (a subsample of SCREEN_SAMPLES of them when
+# there are twice as many), and only those that can still be chosen are refitted to all the data. A subsample optimum costs the full data about
 # k (n/n_s − 1) more in the criterion's units for a well-specified model (the excess χ² of an estimate with n/n_s
 # times the full-data covariance); SCREEN_SLACK times k n/n_s bounds it for misspecified ones too
 # (docs/model-selection.md, and the measurement there).
@@ -64,14 +65,15 @@ class Selection:
         table: one dict per candidate: ``spec``, ``n_params``, ``train_error``, ``heldout_error``,
             ``heldout_se``, ``aic``, ``bic``, ``score``, ``cost_ns`` (measured evaluation cost per sample,
             nanoseconds), ``status``, ``samples`` (the valid values the reported fit was fitted to: fewer than
-            the data's for a candidate that screening ruled out), and with a scene ``scene_error``.
+            the data's for a candidate that screening ruled out), ``verdict`` (why it was or was not chosen by
+            the criterion), and with a scene ``scene_error``.
         chosen: the chosen spec (the scene's choice when a scene was given, else the criterion's).
         criterion: ``"aic"``, ``"bic"`` or ``"cv"``; margin: the margin used.
         best: the candidate with the best score.
         chosen_by_criterion: the criterion's choice (equals ``chosen`` without a scene).
         chosen_by_scene: the scene's choice, or None.
         results: spec -> the reported `FitResult`: the full-data fit, or for a candidate that screening ruled
-            out its fit to the screening subsample.
+            out its fit to the training rows (or their subsample).
         scene_results: spec -> the `FitResult` fitted to what the scene sees (empty without a scene).
         warnings: human-readable warnings.
     """
@@ -112,6 +114,8 @@ class Selection:
         lines.append(f"best by {self.criterion}: {self.best}; simplest with {rule}: {self.chosen_by_criterion}")
         if self.chosen_by_scene is not None:
             lines.append(f"cheapest within the scene tolerance: {self.chosen_by_scene}")
+        lines.extend(f"  {row['spec']}: {row['verdict']}" for row in self.table
+                     if row["spec"] != self.chosen_by_criterion and "verdict" in row)
         lines.extend(f"warning: {w}" for w in self.warnings)
         return "\n".join(lines)
 
@@ -126,22 +130,21 @@ class Selection:
                 "warnings": list(self.warnings)}
 
 
-def _loss_cost(result: FitResult, measurements, rows: np.ndarray | None = None) -> tuple[float, int]:
-    """Σ r² of the fit's loss residuals on the given rows (all rows when None), and the number of valid values."""
+def _loss_residuals(result: FitResult, measurements) -> np.ndarray:
+    """The fit's loss residuals on every sample ``(N, C)``, NaN where the data are missing (one compiled program
+    per model and data size serves the full-data cost and any rows' held-out error)."""
     model = result.model
-    data_rows = measurements if rows is None else measurements.take(rows)
     problem = Problem(lobes=model.lobes, channels=model.channels, free=(), loss=result.loss, robust=None,
                       solver=None, max_steps=0)
-    data = make_fit_data(data_rows, {}, loss_epsilon(result.loss, measurements.values), pad=True)
-    r = np.asarray(residuals_at(problem, dict(model.params), data))
-    mask = np.asarray(data.mask)
-    return float(np.sum(r[mask] ** 2)), int(mask.sum())
+    data = make_fit_data(measurements, {}, loss_epsilon(result.loss, measurements.values), pad=True)
+    r = np.asarray(residuals_at(problem, dict(model.params), data))[:measurements.n]
+    return np.where(np.asarray(data.mask)[:measurements.n], r, np.nan)
 
 
-def _loss_rmse(result: FitResult, measurements, rows: np.ndarray) -> float:
-    """RMS of the fit's loss residuals on the given rows (held-out samples), over channels."""
-    cost, count = _loss_cost(result, measurements, rows)
-    return float(np.sqrt(cost / max(count, 1)))
+def _rms(r: np.ndarray) -> float:
+    """RMS over the finite entries."""
+    finite = r[np.isfinite(r)]
+    return float(np.sqrt(np.sum(finite ** 2) / max(finite.size, 1)))
 
 
 def _masked(measurements, rows: np.ndarray):
@@ -193,6 +196,23 @@ def _fit_candidate(spec, measurements, done, fit_options):
     return fit(measurements, spec, init=init, **fit_options), init
 
 
+def _verdict(row: dict, chosen: dict, best: dict, threshold: float, criterion: str, usable: list) -> str:
+    """Why a candidate was or was not chosen, in words."""
+    name = {"aic": "ΔAIC", "bic": "ΔBIC", "cv": "CV error"}[criterion]
+    if row is chosen:
+        return "chosen: the simplest candidate within " + ("one standard error of the best CV error"
+                                                            if criterion == "cv" else "the margin of the best")
+    if row not in usable:
+        return f"not eligible: its fit ended {row['status']}"
+    if row["score"] > threshold:
+        gap = (f"{name} {row['score'] - best['score']:+.4g}" if criterion != "cv"
+               else f"{name} {row['score']:.4g} against {best['score']:.4g}")
+        return f"worse than {best['spec']}: {gap}, beyond the " + ("standard error" if criterion == "cv" else "margin")
+    if row["n_params"] > chosen["n_params"]:
+        return f"as good, but {row['n_params']} parameters against {chosen['n_params']}"
+    return f"as good and as small, but slower to evaluate ({row['cost_ns']:.3g} against {chosen['cost_ns']:.3g} ns)"
+
+
 def _simplest(rows: list[dict], eligible) -> dict:
     return min((r for r in rows if eligible(r)), key=lambda r: (r["n_params"], r["cost_ns"]))
 
@@ -200,7 +220,7 @@ def _simplest(rows: list[dict], eligible) -> dict:
 def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", *, loss: str = "cosine",
            margin: float | None = None, folds: int = 5, holdout: float = 0.2, scene=None,
            tolerance: float | None = None, scene_metric: str = "relative", reference: str = "data", seed: int = 0,
-           progress: bool = False, **fit_options) -> Selection:
+           screen: bool = True, progress: bool = False, **fit_options) -> Selection:
     """Fit candidate models and choose the smallest one that is good enough.
 
     Arguments:
@@ -223,6 +243,9 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
         reference: what a candidate's scene radiance is compared with: ``"data"`` (the measurements interpolated
             at the scene's directions, `brdffit.scene.interpolate`) or ``"best"`` (the best-scoring candidate).
         seed: seed of the held-out split, folds and cost measurement.
+        screen: with ``aic``/``bic``, fit every candidate to the training rows first (at most `SCREEN_SAMPLES` of
+            them) and refit to all the data only the candidates that can still be chosen (docs/model-selection.md);
+            False fits every candidate to all the data and again with the held-out rows masked.
         progress: show a progress line on stderr, one update per candidate (and per scene refit).
         **fit_options: passed to every `brdffit.fit` (solver, fixed, max_steps, ...).
 
@@ -245,27 +268,39 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
     fold_rows = np.array_split(order, folds) if criterion == "cv" else [order[: int(round(holdout * len(order)))]]
     options = dict(loss=loss, seed=seed, **fit_options)
     train_rows = np.setdiff1d(valid_rows, fold_rows[0])
-    screen = criterion != "cv" and len(train_rows) >= 2 * SCREEN_SAMPLES
+    screen = screen and criterion != "cv"
     done: dict[str, FitResult] = {}
     warnings = []
     bar = Progress("select", len(candidates) * (2 if scene is not None else 1), enabled=progress, unit="fits")
     if screen:
-        subset = np.sort(rng.choice(train_rows, SCREEN_SAMPLES, replace=False))
-        rows = _screened_rows(candidates, measurements, measurements.take(subset), fold_rows[0], criterion, margin,
-                              seed, options, done, bar)
+        if len(train_rows) >= 2 * SCREEN_SAMPLES:  # a subsample of the training rows, in a smaller compiled shape
+            screen_data = measurements.take(np.sort(rng.choice(train_rows, SCREEN_SAMPLES, replace=False)))
+        else:  # all the training rows, the held-out ones masked: the refits reuse the screening's programs
+            screen_data = _masked(measurements, fold_rows[0])
+        rows = _screened_rows(candidates, measurements, screen_data, fold_rows[0], criterion, margin, seed, options,
+                              done, bar)
     else:
         rows = _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar)
     for row in rows:
         row["score"] = row["heldout_error"] if criterion == "cv" else row[criterion]
-    usable = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r["score"])]
-    if not usable:
+    finite = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r["score"])]
+    if not finite:
         raise ValueError("no candidate produced a finite score; check the data and candidates")
+    # Only a converged fit is a candidate's answer: an unconverged one's score says little about the model.
+    usable = [r for r in finite if r["status"] in _CONVERGED]
+    if not usable:
+        usable = finite
+        warnings.append("no candidate's fit converged: the choice is among unconverged fits (raise max_steps, "
+                        "or check the data)")
     best = min(usable, key=lambda r: r["score"])
     if criterion == "cv":
         se = best["heldout_se"] if math.isfinite(best["heldout_se"]) else 0.0
-        chosen = _simplest(usable, lambda r: r["score"] <= best["score"] + se)
+        threshold = best["score"] + se
     else:
-        chosen = _simplest(usable, lambda r: r["score"] <= best["score"] + margin)
+        threshold = best["score"] + margin
+    chosen = _simplest(usable, lambda r: r["score"] <= threshold)
+    for row in rows:
+        row["verdict"] = _verdict(row, chosen, best, threshold, criterion, usable)
     by_scene = None
     scene_results = {}
     if scene is not None:
@@ -314,7 +349,7 @@ def _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar):
         start = result.model if result.model is not None else init
         for held in fold_rows:
             train = fit(_masked(measurements, held), spec, init=start, **options)
-            errors.append(_loss_rmse(train, measurements, held))
+            errors.append(_rms(_loss_residuals(train, measurements)[held]))
         rows.append({
             "spec": spec,
             "n_params": result.n_params,
@@ -331,8 +366,9 @@ def _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar):
 
 
 def _screened_rows(candidates, measurements, screen_data, held, criterion, margin, seed, options, done, bar):
-    """The table of a screened selection: every candidate fitted to ``screen_data`` (training rows only) and
-    scored on all the data at that fit; those that can still be chosen refitted to all the data from there.
+    """The table of a screened selection: every candidate fitted to ``screen_data`` (training rows only: a
+    subsample, or all the data with the held-out rows masked) and scored on all the data at that fit; those that
+    can still be chosen refitted to all the data from there.
 
     A row's ``heldout_error`` is its screening fit's error on the held-out rows ``held``, which that fit never
     saw; ``aic``/``bic``/``train_error``/``status``/``samples`` are those of the reported fit (``done[spec]``): the
@@ -340,14 +376,16 @@ def _screened_rows(candidates, measurements, screen_data, held, criterion, margi
     screened: dict[str, FitResult] = {}
     rows = []
     n_values = int(np.isfinite(measurements.values).sum())
+    training = int(np.any(np.isfinite(screen_data.values), axis=1).sum())
     for i, spec in enumerate(candidates):
-        bar.update(i, f"screening {spec} on {screen_data.n} samples")
+        bar.update(i, f"screening {spec} on {training} samples")
         result, _ = _fit_candidate(spec, screen_data, screened, options)
         screened[spec] = done[spec] = result
-        cost, count = _loss_cost(result, measurements)
-        aic, bic = information_criteria(result.loss, cost, count, result.n_params)
-        rows.append({"spec": spec, "n_params": result.n_params, "train_error": float(np.sqrt(cost / max(count, 1))),
-                     "heldout_error": _loss_rmse(result, measurements, held), "heldout_se": math.nan, "aic": aic,
+        r = _loss_residuals(result, measurements)
+        cost = float(np.nansum(r ** 2))
+        aic, bic = information_criteria(result.loss, cost, n_values, result.n_params)
+        rows.append({"spec": spec, "n_params": result.n_params, "train_error": float(np.sqrt(cost / max(n_values, 1))),
+                     "heldout_error": _rms(r[held]), "heldout_se": math.nan, "aic": aic,
                      "bic": bic, "cost_ns": _eval_cost_ns(result, seed), "status": result.status,
                      "samples": result.n_samples})
     finite = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r[criterion])]

@@ -119,23 +119,21 @@ def test_unneeded_lobe_goes_to_zero_and_the_status_says_so():
     assert two.bic >= one.bic - 1e-6 * abs(one.bic)
 
 
-def test_screening_chooses_as_fitting_every_candidate_to_all_the_data(monkeypatch):
-    # 12,000 samples: screened (4,096 training samples per candidate, refits where they can still be chosen). The
-    # same selection with screening off fits every candidate to all the data: the same choice, and the refitted
-    # candidates the same criterion values; the ruled-out ones report their subsample fits' upper bounds.
+def test_screening_chooses_as_fitting_every_candidate_to_all_the_data():
+    # 12,000 samples: screened on a subsample of 4,096 training samples per candidate, refitted where they can
+    # still be chosen. The same selection with screen=False fits every candidate to all the data: the same choice,
+    # and the refitted candidates the same criterion values; the ruled-out ones report their subsample fits' upper
+    # bounds.
     import sys
 
     selection_module = sys.modules["brdffit.select"]  # the module (`brdffit.select` is the function)
-
     truth = models.get("lambert+ggx", rho_d=[0.3, 0.2, 0.1], ks=[0.6, 0.5, 0.4], alpha=0.2, f0=0.04)
     data = synth.generate(truth, pattern="uniform", n=12_000, noise="relative:0.01", seed=3)
     candidates = ["lambert", "lambert+ward", "lambert+ggx", "lambert+cook-torrance"]
     screened = select(data, candidates, criterion="bic")
-    screen_values = 3 * selection_module.SCREEN_SAMPLES
-    monkeypatch.setattr(selection_module, "SCREEN_SAMPLES", 10 ** 9)
-    full = select(data, candidates, criterion="bic")
+    full = select(data, candidates, criterion="bic", screen=False)
     assert screened.chosen == full.chosen == "lambert+ggx", (screened.summary(), full.summary())
-    values = 3 * data.n
+    values, screen_values = 3 * data.n, 3 * selection_module.SCREEN_SAMPLES
     rows = {r["spec"]: r for r in screened.table}
     for reference in full.table:
         row = rows[reference["spec"]]
@@ -146,6 +144,22 @@ def test_screening_chooses_as_fitting_every_candidate_to_all_the_data(monkeypatc
             assert row["samples"] == screen_values
             assert row["bic"] >= reference["bic"] - 0.5
             assert row["bic"] > rows[screened.chosen]["bic"] + 100
-    assert rows["lambert+ggx"]["samples"] == values
+            assert row["verdict"].startswith("worse than lambert+ggx")
+    assert rows["lambert+ggx"]["samples"] == values and rows["lambert+ggx"]["verdict"].startswith("chosen")
     assert rows["lambert"]["samples"] < values  # Lambert alone cannot explain a GGX peak: screened out
     assert screened.results["lambert"].n_samples == screen_values
+
+
+def test_an_unconverged_candidate_is_not_chosen_and_the_verdict_says_why():
+    truth = models.get("lambert+blinn-phong", rho_d=[0.3, 0.2, 0.1], ks=[0.6, 0.5, 0.4], n=60.0)
+    data = synth.generate(truth, pattern="half-diff", n=800, noise="relative:0.01", seed=0)
+    # One solver step cannot converge the true model's polish; Lambert is a linear solve (0 steps). The true model
+    # has by far the better BIC, and is still not chosen: its unconverged score says little.
+    selection = select(data, ["lambert", "lambert+blinn-phong"], criterion="bic", max_steps=1)
+    rows = {r["spec"]: r for r in selection.table}
+    assert rows["lambert"]["status"].startswith("converged")
+    assert rows["lambert+blinn-phong"]["status"] == "max-steps", selection.summary()
+    assert rows["lambert+blinn-phong"]["bic"] < rows["lambert"]["bic"]
+    assert selection.chosen == "lambert"
+    assert rows["lambert+blinn-phong"]["verdict"] == "not eligible: its fit ended max-steps"
+    assert "lambert+blinn-phong: not eligible: its fit ended max-steps" in selection.summary()
