@@ -203,6 +203,22 @@ def test_failing_fit_gets_its_row_and_spares_the_batch(database, serial, monkeyp
         assert row == {**serial[row["source"]], "time": row["time"]}
 
 
+def test_an_interrupted_run_keeps_every_row_it_received(database, tmp_path, monkeypatch):
+    """Ctrl-C in the client: the rows that arrived are in the table (the last within the write interval too)."""
+    from brdffit.distributed import database as client_side
+
+    def interrupted(client, todo, model, batch, read_options, fit_options, cache, record):
+        for i, source in enumerate(todo[:2]):
+            record.add([{"source": source.key, "status": "converged", "model": SPEC, "error": "", "alpha": 0.1 * i}])
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(client_side, "_run", interrupted)
+    out = tmp_path / "results.csv"
+    with pytest.raises(KeyboardInterrupt):
+        fit_database(str(database["folder"]), SPEC, client=object(), out=out)
+    assert [(row["status"], row["alpha"]) for row in read_results(out)] == [("converged", 0.0), ("converged", 0.1)]
+
+
 def test_selection_per_material_is_select(database):
     """A model given as candidates (``"auto"`` gives the standard ones) runs `brdffit.select` on each material."""
     from brdffit import select
