@@ -25,11 +25,11 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import numpy as np
-
 from ._lazy import module
 
-jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
+# Loaded on first use: the registry (`brdffit models`) needs neither.
+np = module("numpy")
+jnp = module("jax.numpy")
 
 __all__ = ["ParamSpec", "ParamTable", "to_unconstrained", "from_unconstrained", "transform_slope", "at_bound",
            "bound_margin"]

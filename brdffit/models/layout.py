@@ -16,9 +16,10 @@ import dataclasses
 import functools
 from collections import Counter
 
-import numpy as np
-
+from .._lazy import module
 from ..params import ParamSpec, ParamTable
+
+np = module("numpy")  # loaded on first use: the registry (`brdffit models`) does not need it
 
 __all__ = ["Slot", "Layout", "layout"]
 
