@@ -18,9 +18,9 @@ damages an existing file. Arrays are stored bit for bit, so a round trip is exac
 Reading an untrusted file is bounded (`inspect_hdf5`): before the file is opened here, a forked child process opens
 it, reads every attribute and dataset and checks that each dataset's declared size is below `MAX_DATASET_BYTES`;
 external links, external raw storage and virtual datasets (data of other files) are refused. Measurement datasets
-must also be backed by the bytes the file stores (not fill values). The child is killed after `INSPECT_TIMEOUT_S`: damaged metadata can make libhdf5 loop forever
-(zeroed global-heap objects hang ``H5Aread``), in C code that no Python signal interrupts. The signature may
-follow a user block (at byte 512, 1024, 2048, ... as HDF5 places it).
+must also be backed by the bytes the file stores (not fill values). The child is killed after `INSPECT_TIMEOUT_S`:
+damaged metadata can make libhdf5 loop forever (zeroed global-heap objects hang ``H5Aread``), in C code that no
+Python signal interrupts. The signature may follow a user block (at byte 512, 1024, 2048, ... as HDF5 places it).
 """
 
 from __future__ import annotations
