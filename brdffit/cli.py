@@ -847,7 +847,8 @@ def _add_fit_options(p):
     p.add_argument("--fixed", action="append", metavar="NAME=VALUE",
                    help="hold a parameter at a value (repeatable; a colour takes R,G,B)")
     p.add_argument("--seed", type=bounded(int, 0), default=0, help="seed of subsamples and starts (default 0)")
-    p.add_argument("--max-steps", type=bounded(int, 1), default=256, metavar="N", help="solver step limit (default 256)")
+    p.add_argument("--max-steps", type=bounded(int, 1), default=256, metavar="N",
+                   help="solver step limit (default 256)")
 
 
 def _add(sub, name, help_text, examples, run):
