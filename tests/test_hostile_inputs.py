@@ -392,3 +392,23 @@ def test_a_killed_writer_s_temporary_file_is_removed_by_the_next_write(tmp_path)
     live.write_bytes(b"y")
     bio.save(small(), tmp_path / "m.csv")
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["m.csv", live.name])
+
+
+def test_selection_table_formats_every_number_alike_and_drops_empty_columns():
+    from types import SimpleNamespace
+
+    import jax.numpy as jnp
+
+    from brdffit.report.assemble import _selection_table
+
+    table = [{"spec": "lambert", "n_params": 3, "samples": 500, "train_error": 0.0123456789, "heldout_error": 0.02,
+              "heldout_se": float("nan"), "aic": -1234.56789, "bic": -1200.123456, "cost_ns": 812.0,
+              "status": "converged"},
+             {"spec": "lambert+ggx", "n_params": 5, "samples": 500, "train_error": np.float64(0.0101010101),
+              "heldout_error": 0.019, "heldout_se": float("nan"), "aic": jnp.asarray(-1300.98765),
+              "bic": np.float32(-1250.5), "cost_ns": 1500.0, "status": "converged"}]
+    headers, rows = _selection_table(SimpleNamespace(table=table, chosen="lambert+ggx"))
+    assert "heldout_se" not in headers and headers[:3] == ["candidate", "n_params", "samples"]
+    aic, bic = headers.index("aic"), headers.index("bic")
+    assert [r[aic] for r in rows] == ["-1234.6", "-1301"] and [r[bic] for r in rows] == ["-1200.1", "-1250.5"]
+    assert rows[0][0] == "lambert" and rows[1][0] == "**lambert+ggx (chosen)**" and rows[1][1] == "5"

@@ -89,19 +89,29 @@ def _metrics_table(fit_result, channels):
     return headers, rows
 
 
+def _cell(v) -> str:
+    """A selection-table cell: counts and text as they are, every other number (a Python, NumPy or JAX scalar, so
+    that the chosen fit's own AIC reads like the others') with 5 significant digits, "–" when missing."""
+    if v is None or isinstance(v, (str, bool, int, np.integer)):
+        return "–" if v is None else str(v)
+    try:
+        return format_value(float(v), 5)
+    except (TypeError, ValueError):
+        return str(v)
+
+
 def _selection_table(selection):
     keys = ["spec", "n_params", "samples", "train_error", "heldout_error", "heldout_se", "aic", "bic", "cost_ns",
             "status"]
     if any("scene_error" in row for row in selection.table):
         keys.insert(-1, "scene_error")
+    # A column no candidate has a value in (heldout_se of an AIC/BIC selection, which holds out no folds) is left out.
+    keys = [k for k in keys if k == "spec" or any(_cell(row.get(k)) != "–" for row in selection.table)]
     rows = []
     for row in selection.table:
-        cells = []
-        for k in keys:
-            v = row.get(k)
-            cells.append("–" if v is None else format_value(v, 5) if isinstance(v, (float, np.floating)) else str(v))
-        cells[0] = ("**" if row["spec"] == selection.chosen else "") + cells[0] + \
-            (" (chosen)" if row["spec"] == selection.chosen else "")
+        cells = [_cell(row.get(k)) for k in keys]
+        if row["spec"] == selection.chosen:
+            cells[0] = f"**{cells[0]} (chosen)**"  # closed, so that Markdown viewers bold it too
         rows.append(cells)
     return ["candidate"] + keys[1:], rows
 
