@@ -252,6 +252,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
     Returns:
         A `Selection`; ``.chosen`` is the chosen spec, ``.table`` the per-candidate rows.
     """
+    measurements.check_informative()  # no information, no selection (named in the error)
     if criterion not in CRITERIA:
         raise ValueError(f"criterion must be one of {', '.join(CRITERIA)}, got {criterion!r}")
     candidates = list(candidates)

@@ -412,3 +412,35 @@ def test_selection_table_formats_every_number_alike_and_drops_empty_columns():
     aic, bic = headers.index("aic"), headers.index("bic")
     assert [r[aic] for r in rows] == ["-1234.6", "-1301"] and [r[bic] for r in rows] == ["-1200.1", "-1250.5"]
     assert rows[0][0] == "lambert" and rows[1][0] == "**lambert+ggx (chosen)**" and rows[1][1] == "5"
+
+
+def test_all_zero_values_fit_lambert_exactly_at_its_bound(tmp_path, capsys):
+    # ρd = 0 reproduces every value exactly: a converged fit on its bound (exit 0), not max-steps.
+    from brdffit import synth
+
+    data = synth.generate("lambert", n=600, seed=1)
+    path = tmp_path / "zeros.csv"
+    bio.save(data.replace(values=np.zeros_like(data.values)), path)
+    assert main(["fit", str(path), "--model", "lambert", "--no-report", "--json", "--out", str(tmp_path / "o")]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "converged-at-bound" and out["params"]["rho_d"] == [0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("case", ["all NaN", "all weights 0", "one channel NaN"])
+def test_measurements_built_in_code_without_information_are_refused_by_fit_and_select(case):
+    import brdffit
+    from brdffit import synth
+
+    data = synth.generate("lambert", n=200, seed=2)
+    values, weights = np.array(data.values), None
+    if case == "all NaN":
+        values[:] = np.nan
+    elif case == "all weights 0":
+        weights = np.zeros(data.n)
+    else:
+        values[:, 1] = np.nan
+    empty = data.replace(values=values, weights=weights)
+    for call in (lambda: brdffit.fit(empty, "lambert"), lambda: brdffit.fit_many([empty], "lambert"),
+                 lambda: brdffit.select(empty, ["lambert"])):
+        with pytest.raises(MeasurementError, match="no valid samples|channel 'G' has none"):
+            call()

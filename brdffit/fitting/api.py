@@ -435,6 +435,8 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
 def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart, robust, max_steps, rtol, atol,
               seed, coarse, bar: Progress) -> list[FitResult]:
     """The fitting pipeline of the module doc over equally shaped materials ``items``."""
+    for measurements in items:  # no information, no fit: it would end "converged" at its start
+        measurements.check_informative()
     rtol, atol = working_tolerances(rtol, atol)
     problem, base_model, fixed_values, robust_scale = _prepare(
         items[0], model, loss=loss, solver=solver, fixed=fixed, free=free, robust=robust, max_steps=max_steps,

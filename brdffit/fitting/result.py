@@ -230,11 +230,10 @@ class FitResult:
         Raises:
             brdffit.io.FormatError: the file has no such fit.
         """
-        import h5py
-
         from ..io import FormatError
+        from ..io.hdf5 import open_hdf5
 
-        with h5py.File(path, "r") as f:
+        with open_hdf5(path) as f:  # regular files only, the metadata inspected in bounded time (docs/formats.md)
             fits = f.get("fits")
             if fits is None or len(fits) == 0:
                 raise FormatError(path, "no /fits group; write one with FitResult.save or `brdffit fit`")

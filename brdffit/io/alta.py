@@ -441,7 +441,10 @@ def read_alta(path, *, channels: Sequence[str] | None = None) -> Measurements:
         raise err.with_file(path, np.asarray(lines) if err.row is not None else None) from None
     incidences = np.unique(np.round(np.stack([m.theta_i, m.phi_i], axis=1), 9), axis=0)
     read["incidences"] = int(len(incidences))
-    return m.replace(meta={**m.meta, "read": read})
+    try:
+        return m.replace(meta={**m.meta, "read": read}).check_informative()
+    except MeasurementError as err:
+        raise err.with_file(path) from None
 
 
 # ----------------------------------------------------------------------------------------------------- writing

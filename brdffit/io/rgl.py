@@ -70,7 +70,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..measurements import Measurements
+from ..measurements import MeasurementError, Measurements
 from ._common import FormatError, read_file_bytes
 
 __all__ = ["RglTable", "read_rgl", "read_tensor_file", "looks_like_rgl", "direction_to_unit", "MAGIC", "DTYPES"]
@@ -465,7 +465,11 @@ class RglTable:
                 "weights total": float(weights.sum()),
             },
         }
-        return Measurements(theta_i, phi_i, theta_o, phi_o, values, weights=weights, channels=CHANNELS, meta=meta)
+        try:
+            return Measurements(theta_i, phi_i, theta_o, phi_o, values, weights=weights, channels=CHANNELS,
+                                meta=meta).check_informative()
+        except MeasurementError as err:
+            raise err.with_file(self.path) from None
 
     def _nodes(self, slice_index: int, theta: float, phi: float, s1, s2, cell) -> dict[str, np.ndarray]:
         """Outgoing directions ωo (N, 3) (some may lie below the horizon), values f_r (N, 3), unclipped, and
