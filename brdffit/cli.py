@@ -351,19 +351,12 @@ def _exchange(a: Path, b: Path) -> bool:
 
 def _remove_abandoned(out: Path) -> None:
     """Delete the staging folders beside ``out`` of earlier runs that were killed (their process is gone)."""
+    import functools
     import shutil
 
-    prefix = f".{out.name}{STAGE_MARK}"
-    for entry in out.parent.glob(prefix + "*") if out.parent.is_dir() else ():
-        pid = entry.name[len(prefix):].split("-", 1)[0]
-        if not pid.isdigit():
-            continue
-        try:
-            os.kill(int(pid), 0)
-        except ProcessLookupError:
-            shutil.rmtree(entry, ignore_errors=True)
-        except PermissionError:
-            pass  # another user's live process
+    from .io._common import remove_abandoned
+
+    remove_abandoned(out.parent, f".{out.name}{STAGE_MARK}", functools.partial(shutil.rmtree, ignore_errors=True))
 
 
 @contextlib.contextmanager

@@ -13,7 +13,7 @@ import tempfile
 from glob import escape as glob_escape
 from pathlib import Path
 
-__all__ = ["FormatError", "atomic_path", "check_not_lfs_pointer", "LFS_PREFIX", "MAX_FILE_BYTES", "open_regular",
+__all__ = ["FormatError", "atomic_path", "decode_text", "remove_abandoned", "check_not_lfs_pointer", "LFS_PREFIX", "MAX_FILE_BYTES", "open_regular",
            "read_file_bytes", "read_head", "parse_meta_json", "MAX_META_CHARS", "MAX_META_DEPTH"]
 
 LFS_PREFIX = b"version https://git-lfs"
@@ -178,6 +178,28 @@ def parse_meta_json(path, text: str, what: str):
         raise FormatError(path, f"{what} is not valid JSON: {err}") from None
 
 
+def decode_text(path, data: bytes, kind: str) -> str:
+    """The text of a text format's file, or a `FormatError`: empty, binary (a NUL byte), not UTF-8.
+
+    Arguments:
+        path: the file (for the message).
+        data: its bytes.
+        kind: what the file should be, for the message (``"a text table"``, ``"ALTA text data"``).
+
+    Returns:
+        The decoded text (a UTF-8 byte-order mark dropped).
+    """
+    if not data.strip():
+        raise FormatError(path, "the file is empty")
+    nul = data.find(b"\0")
+    if nul >= 0:
+        raise FormatError(path, f"binary data (a NUL byte at offset {nul}), not {kind}")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise FormatError(path, f"not UTF-8 text (byte {err.object[err.start]:#04x} at offset {err.start})") from None
+
+
 def _file_mode(path: Path) -> int:
     try:
         return path.stat().st_mode & 0o777  # keep an existing file's permissions
@@ -187,8 +209,16 @@ def _file_mode(path: Path) -> int:
         return 0o666 & ~umask  # what open() would have given a new file
 
 
-def _remove_abandoned(directory: Path, prefix: str) -> None:
-    """Delete temporary files ``<prefix><pid>-*`` whose writing process is gone (killed before it could clean up)."""
+def remove_abandoned(directory: Path, prefix: str, remove=None) -> None:
+    """Delete what a killed writer left: the entries ``<prefix><pid>-*`` of ``directory`` whose process is gone.
+
+    Arguments:
+        directory: where the temporary entries lie.
+        prefix: their names' start, before the writer's process id.
+        remove: how to delete one (default: unlink a file; `shutil.rmtree` for a staging folder).
+    """
+    if not directory.is_dir():
+        return
     for entry in directory.glob(glob_escape(prefix) + "*"):
         pid = entry.name[len(prefix):].split("-", 1)[0]
         if not pid.isdigit():
@@ -197,7 +227,7 @@ def _remove_abandoned(directory: Path, prefix: str) -> None:
             os.kill(int(pid), 0)
         except ProcessLookupError:
             with contextlib.suppress(OSError):
-                entry.unlink()
+                (remove or os.unlink)(entry)
         except PermissionError:
             pass  # another user's live process
 
@@ -213,7 +243,7 @@ def atomic_path(path, suffix: str | None = None):
     path = Path(path)
     directory = path.parent if str(path.parent) else Path(".")
     prefix = f".{path.name}."
-    _remove_abandoned(directory, prefix)
+    remove_abandoned(directory, prefix)
     fd, tmp = tempfile.mkstemp(prefix=f"{prefix}{os.getpid()}-", suffix=suffix or ".tmp", dir=directory)
     os.close(fd)
     try:

@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from ..measurements import THETA_TOLERANCE, MeasurementError, Measurements, _default_channels
-from ._common import FormatError, atomic_path, read_file_bytes
+from ._common import FormatError, atomic_path, decode_text, read_file_bytes
 from .merl import _jit
 
 __all__ = ["read_alta", "write_alta", "looks_like_alta", "PARAM_IN", "PARAM_OUT"]
@@ -216,18 +216,10 @@ class _Header:
 
 
 def _decode(path: Path, data: bytes) -> str:
-    if not data.strip():
-        raise FormatError(path, "the file is empty")
     if re.search(rb"^[ \t]*#FORMAT[ \t]+binary", data[:_HEADER_BYTES], re.MULTILINE):
         raise FormatError(path, "ALTA binary data (#FORMAT binary) is not read by brdffit; convert it to ALTA text "
                                 "data (e.g. with ALTA's data2data) first")
-    nul = data.find(b"\0")
-    if nul >= 0:
-        raise FormatError(path, f"binary data (a NUL byte at offset {nul}), not ALTA text data")
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as err:
-        raise FormatError(path, f"not UTF-8 text (byte {err.object[err.start]:#04x} at offset {err.start})") from None
+    return decode_text(path, data, "ALTA text data")
 
 
 def _split(path: Path, text: str) -> tuple[_Header, list[str], list[int]]:

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..measurements import MeasurementError, Measurements
-from ._common import FormatError, atomic_path, parse_meta_json, read_file_bytes
+from ._common import FormatError, atomic_path, decode_text, parse_meta_json, read_file_bytes
 
 __all__ = ["read_table", "write_table", "ANGLE_COLUMNS", "META_PREFIX"]
 
@@ -184,16 +184,7 @@ def _split_lines(path, text: str, delimiter: str | None) -> _Table:
 
 def _read_text(path) -> str:
     path = Path(path)
-    data = read_file_bytes(path)
-    if not data.strip():
-        raise FormatError(path, "the file is empty")
-    nul = data.find(b"\0")
-    if nul >= 0:
-        raise FormatError(path, f"binary data (a NUL byte at offset {nul}), not a text table")
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as err:
-        raise FormatError(path, f"not UTF-8 text (byte {err.object[err.start]:#04x} at offset {err.start})") from None
+    return decode_text(path, read_file_bytes(path), "a text table")
 
 
 def _as_list(x) -> list:
