@@ -13,8 +13,9 @@ import tempfile
 from glob import escape as glob_escape
 from pathlib import Path
 
-__all__ = ["FormatError", "atomic_path", "decode_text", "remove_abandoned", "check_not_lfs_pointer", "LFS_PREFIX", "MAX_FILE_BYTES", "open_regular",
-           "read_file_bytes", "read_head", "parse_meta_json", "MAX_META_CHARS", "MAX_META_DEPTH"]
+__all__ = ["FormatError", "atomic_path", "decode_text", "remove_abandoned", "check_not_lfs_pointer", "LFS_PREFIX",
+           "MAX_FILE_BYTES", "open_regular", "read_file_bytes", "read_head", "parse_meta_json", "MAX_META_CHARS",
+           "MAX_META_DEPTH"]
 
 LFS_PREFIX = b"version https://git-lfs"
 
