@@ -19,8 +19,8 @@ _CHUNK = 65_536
 
 def metric_sums(f_model, values, valid, cos_i, weights, xp=jnp):
     """Numerators and denominators of the metrics over some samples: ``(8, C)`` (`metrics_from_sums` finishes
-    them). The fits take the same sums on the host from the model values of their last pass
-    (`brdffit.fitting.normal_equations.accumulate`): inside the pass they doubled its compilation time.
+    them). The fits take the same sums from the model values of their last pass, in one program per data shape
+    that every model shares (`brdffit.fitting.normal_equations.accumulate`).
 
     Arguments:
         f_model: model values ``(N, C)``.
