@@ -308,3 +308,12 @@ def test_cli_export_writes_what_mitsuba_loads(mi, lambert_fit, tmp_path, capsys)
     assert pr.parse(capsys.readouterr().out)["material"]["type"] == "diffuse"
     assert main(["export", str(path), "--to", "blender"]) == 2
     assert "invalid choice: 'blender'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("f0", [0.5, 0.68, 0.9])
+def test_schlick_to_conductor_for_a_large_f0(f0):
+    # The dielectric start of f0 >= 0.67 lies beyond the search's η bound of 10 (a real fit, RGL's gloss film,
+    # has f0 = 0.677): the start is clipped into the box, and the curve still matches at normal incidence.
+    eta, k, curve = schlick_to_conductor(f0)
+    assert 1e-3 <= eta <= 10.0 and 0.0 <= k <= 20.0
+    assert abs(pr.fr_complex(1.0, eta, k) - f0) < 0.02 and curve < 0.1

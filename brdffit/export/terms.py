@@ -169,9 +169,11 @@ def schlick_to_conductor(f0: float) -> tuple[float, float, float]:
         return (_conductor_fresnel(c, x[0], x[1]) - target) / (target + 0.05)
 
     best = None
-    # Starts: the dielectric of the same f0, a weak and a strong conductor.
+    lower, upper = [1e-3, 0.0], [10.0, 20.0]
+    # Starts: the dielectric of the same f0 (inside the bounds: f0 = 0.68 is η = 10.3), a weak and a strong
+    # conductor.
     for start in ((f0_to_eta(min(f0, 0.99)), 0.0), (1.0, 0.3), (0.5, 2.0)):
-        sol = least_squares(residual, start, bounds=([1e-3, 0.0], [10.0, 20.0]))
+        sol = least_squares(residual, np.clip(start, lower, upper), bounds=(lower, upper))
         if best is None or sol.cost < best.cost:
             best = sol
     eta, k = (float(v) for v in best.x)
