@@ -237,6 +237,7 @@ def write(model, name: str, header: list[str], source=None):
     body, written = _evaluator(parts, name)
     deviation = tm.measure(model if source is None else source, written)
     lines = [f"# {line}" for line in header] + [f"# approximation: {note}" for note in notes]
-    lines.append(("# exact: " if deviation.exact() else "# measured deviation from the source model (pbrt-v4's "
+    exact = deviation.exact() and not notes  # "exact" only where nothing was approximated (see mitsuba.write)
+    lines.append(("# exact: " if exact else "# measured deviation from the source model (pbrt-v4's "
                   "formulas, brdffit.export.pbrt_reference): ") + deviation.describe())
     return "\n".join(lines) + "\n" + body, written, notes, deviation
