@@ -105,19 +105,25 @@ APPROXIMATE = {
 }
 
 
-@pytest.mark.parametrize("case", list(APPROXIMATE))
-def test_approximate_mappings_load_and_state_their_measured_error(mi, case):
-    model = APPROXIMATE[case]
-    result = export_details(model, "mitsuba")
+def _renders_what_it_states(result):
+    """Mitsuba renders what an approximate export says it wrote (with Mitsuba's rational Beckmann G1), the export
+    is not called exact, and its stated deviation is the measured one. Returns the pairs and Mitsuba's values."""
     wi, wo = random_pairs()     # the export's own pairs: the stated error is recomputed from Mitsuba's values
     g = evaluate_in_mitsuba(result.text, wi, wo)
     written = np.broadcast_to(result.written(wi, wo), g.shape)
-    # What Mitsuba renders is what the export says it wrote (with Mitsuba's rational Beckmann G1).
     np.testing.assert_allclose(g, written, rtol=1e-4, atol=1e-7 * written.max())
     stated = re.search(r"measured deviation from the source model: cosine-weighted relative RMS error ([0-9.e+-]+)",
                        result.text)
     assert "approximation:" in result.text and "exact:" not in result.text
     assert stated and float(stated.group(1)) == pytest.approx(result.deviation.rms, rel=1e-2)
+    return wi, wo, g
+
+
+@pytest.mark.parametrize("case", list(APPROXIMATE))
+def test_approximate_mappings_load_and_state_their_measured_error(mi, case):
+    model = APPROXIMATE[case]
+    result = export_details(model, "mitsuba")
+    wi, wo, g = _renders_what_it_states(result)
     # The stated error is the error of what Mitsuba renders.
     f = np.broadcast_to(np.asarray(evaluate_dirs(model, wi, wo)), g.shape)
     mitsuba_rms = np.sqrt(np.sum(((g - f) * wi[:, 2:3]) ** 2) / np.sum((f * wi[:, 2:3]) ** 2))
@@ -330,12 +336,4 @@ def test_a_real_materials_fit_exports_and_mitsuba_renders_what_it_states(mi):
         pytest.skip("../shared/data is absent (a user's clone): the RGL-EPFL measurements are not here")
     fitted = brdffit.fit(brdffit.io.load(path), "lambert+cook-torrance")
     assert fitted.converged and float(fitted.params["f0"]) > 0.6
-    result = export_details(fitted, "mitsuba")
-    wi, wo = random_pairs()
-    g = evaluate_in_mitsuba(result.text, wi, wo)
-    written = np.broadcast_to(result.written(wi, wo), g.shape)
-    np.testing.assert_allclose(g, written, rtol=1e-4, atol=1e-7 * written.max())
-    stated = re.search(r"measured deviation from the source model: cosine-weighted relative RMS error ([0-9.e+-]+)",
-                       result.text)
-    assert "approximation:" in result.text and "exact:" not in result.text
-    assert stated and float(stated.group(1)) == pytest.approx(result.deviation.rms, rel=1e-2)
+    _renders_what_it_states(export_details(fitted, "mitsuba"))
