@@ -29,7 +29,7 @@ import numpy as np
 
 from ..params import bound_margin
 from .losses import get_loss
-from .problem import FitData, Problem, evaluate_pair, residuals_of
+from .problem import FitData, Problem, residual_fn
 from .separable import amplitude_sums, solve_box
 
 __all__ = ["search", "interior", "canonical", "search_range", "SEARCH_SAMPLES", "MAX_CANDIDATES", "POLISH_STARTS"]
@@ -169,7 +169,7 @@ def _cost_fn(problem: Problem):
     """Jitted ``(candidates, data) -> costs (M, B)``: the loss at complete parameters (amplitudes given), for the
     losses whose cost is not the quadratic of the projection (nonlinear, robust)."""
     def one(params, data: FitData):
-        r = residuals_of(problem, evaluate_pair(problem.model(params), data.pair), data)
+        r = residual_fn(problem, params, data)
         return jnp.sum(r * r)
 
     return jax.jit(jax.vmap(jax.vmap(one, in_axes=(0, None)), in_axes=(None, 0)))
