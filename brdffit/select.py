@@ -336,6 +336,12 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
                      results=done, warnings=warnings, scene_results=scene_results)
 
 
+def _full_fit_fields(result: FitResult) -> dict:
+    """A row's entries that a fit to all the data determines."""
+    return {"train_error": float(np.sqrt(result.cost / max(result.n_samples, 1))), "aic": result.aic,
+            "bic": result.bic, "status": result.status, "samples": result.n_samples}
+
+
 def _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar):
     """The table of an unscreened selection: every candidate fitted to all the data, and refitted with each fold
     of ``fold_rows`` held out for its held-out error."""
@@ -354,14 +360,10 @@ def _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar):
         rows.append({
             "spec": spec,
             "n_params": result.n_params,
-            "train_error": float(np.sqrt(result.cost / max(result.n_samples, 1))),
             "heldout_error": float(np.mean(errors)),
             "heldout_se": float(np.std(errors, ddof=1) / np.sqrt(len(errors))) if len(errors) > 1 else math.nan,
-            "aic": result.aic,
-            "bic": result.bic,
             "cost_ns": _eval_cost_ns(result, seed),
-            "status": result.status,
-            "samples": result.n_samples,
+            **_full_fit_fields(result),
         })
     return rows
 
@@ -400,8 +402,7 @@ def _screened_rows(candidates, measurements, screen_data, held, criterion, margi
         bar.update(len(rows) - 1, f"fitting {row['spec']} to all {measurements.n} samples")
         result = fit(measurements, row["spec"], init=screened[row["spec"]].model, **options)
         done[row["spec"]] = result
-        row.update(train_error=float(np.sqrt(result.cost / max(result.n_samples, 1))), aic=result.aic,
-                   bic=result.bic, status=result.status, samples=result.n_samples)
+        row.update(_full_fit_fields(result))
     return rows
 
 
