@@ -144,7 +144,7 @@ def _lobe_section(name: str) -> list[str]:
     out = [f"## `{name}`", "", f"Reference: {cls.reference}.", "", "```", EQUATIONS[name], "```", ""]
     if name in NOTES:
         out += [NOTES[name], ""]
-    fields = dataclasses.fields(cls)
+    fields = [f for f in dataclasses.fields(cls) if f.name != "share"]  # every lobe's option, described once
     if fields:
         out += ["Options:", "", "| option | default | values |", "|---|---|---|"]
         out += [f"| `{f.name}` | `{f.default!r}` | {OPTION_VALUES.get(f.name, '')} |" for f in fields]
@@ -179,6 +179,11 @@ def render() -> str:
         "`\"lambert+ward+ward\"` has `rho_d, ks, alpha, ks_2, alpha_2`. A suffixed name that another lobe declares "
         "itself is skipped: in `\"phong+phong+lafortune(lobes=2)\"` the second Phong has `ks_3, n_3`, since `ks_2` "
         "and `n_2` are the Lafortune lobe 2's.",
+        "- Every lobe takes the option `share=NAMES` (parameter names separated by spaces): the lobe has no "
+        "parameter of its own under those names and reads the one of the nearest earlier lobe that declares it. "
+        "`\"lambert+ggx+ggx(share=f0)\"` is two GGX lobes with one Fresnel term: `rho_d, ks, alpha, f0, ks_2, "
+        "alpha_2`. The declarations must match (a dielectric's η is not a conductor's), and amplitudes cannot be "
+        "shared; fits treat a shared parameter as acting through every lobe that reads it.",
         "- A *colour* parameter has one value per channel (shape `(channels,)`); a *shape* parameter is one scalar "
         "shared by all channels. Fits keep every parameter strictly inside its bounds through smooth transforms "
         "(see `brdffit.params`).",

@@ -327,6 +327,64 @@ def test_shared_options_apply_to_every_lobe_that_accepts_them():
     assert [lobe.distribution for lobe in own.lobes] == ["blinn", "ggx"]
 
 
+# Two GGX lobes with one Fresnel term (the `share` option every lobe has): the second lobe reads the first's f0.
+SHARED = "lambert+ggx+ggx(share=f0)"
+SHARED_PARAMS = dict(rho_d=RHO, ks=KS, alpha=0.08, ks_2=[0.2, 0.1, 0.05], alpha_2=0.4, f0=0.3)
+
+
+def test_a_shared_parameter_is_one_slot_that_both_lobes_read():
+    model = models.get(SHARED, channels=CHANNELS, **SHARED_PARAMS)
+    assert list(model.params) == ["rho_d", "ks", "alpha", "f0", "ks_2", "alpha_2"]
+    assert model.names_by_lobe == (("rho_d",), ("ks", "alpha", "f0"), ("ks_2", "alpha_2", "f0"))
+    assert model.spec == SHARED and model.reciprocal
+    angles = _radians(ALL_POINTS)
+    want = (ref.lambert(*angles, np.array(RHO))
+            + ref.cook_torrance(*angles, np.array(KS), 0.08, distribution="ggx", shadowing="smith", f0=0.3)
+            + ref.cook_torrance(*angles, np.array([0.2, 0.1, 0.05]), 0.4, distribution="ggx", shadowing="smith",
+                                f0=0.3))
+    np.testing.assert_allclose(brdffit.evaluate(model, *angles), want, rtol=RTOL, atol=ATOL)
+    # f0 acts through both amplitudes, so neither lobe's amplitude at 0 leaves it undetermined.
+    assert model.layout.partners(1, "ks") == ("alpha",) and model.layout.partners(2, "ks") == ("alpha_2",)
+    # One declaration shared by any lobes declaring the name alike: three Ward lobes with one width.
+    assert models.get("ward+ward(share=alpha)+ward(share=alpha)").param_specs.names == ("ks", "alpha", "ks_2",
+                                                                                         "ks_3")
+
+
+def test_shared_lobes_are_reciprocal_with_finite_gradients_and_conserve_energy():
+    from brdffit import properties
+
+    model = models.get(SHARED, channels=CHANNELS, **SHARED_PARAMS)
+    points = np.array(ALL_POINTS, dtype=float)
+    np.testing.assert_allclose(_evaluate(model, ALL_POINTS), _evaluate(model, points[:, [2, 3, 0, 1]]),
+                               rtol=1e-11, atol=ATOL)
+    for points in (GRAD_POINTS, RETRO_POINTS):
+        assert not _non_finite(_grad(model, points))
+    # The shared f0's gradient is the sum of what each lobe's own f0 would get.
+    apart = models.get("lambert+ggx+ggx", channels=CHANNELS, **SHARED_PARAMS, f0_2=0.3)
+    together, separate = _grad(model, CONFIGS["off-specular"]), _grad(apart, CONFIGS["off-specular"])
+    np.testing.assert_allclose(together.params["f0"], separate.params["f0"] + separate.params["f0_2"], rtol=1e-12)
+    # Amplitudes summing to 1 with f0 = 1 (the largest Fresnel term): the directional albedo stays at or below 1.
+    bright = models.get("ggx+ggx(share=f0)", channels=1, ks=0.6, alpha=0.05, ks_2=0.4, alpha_2=0.5, f0=1.0)
+    albedo = np.asarray(properties.directional_albedo(bright, np.radians([0.0, 30.0, 60.0, 85.0])))
+    assert np.all(albedo <= 1.0 + 1e-3) and np.all(albedo > 0.5), albedo
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("ggx(share=f0)", ["lobe 1", "f0", "no lobe before it"]),
+    ("lambert+ggx+ggx(share=ks)", ["lobe 3", "amplitude cannot be shared"]),
+    ("lambert+ggx+ggx(share=beta)", ["beta", "does not declare", "ks, alpha, f0"]),
+    ("ggx(fresnel=conductor)+ggx(fresnel=conductor, share=eta)", []),  # alike: fine
+    ("ggx(fresnel=dielectric)+cook-torrance(fresnel=conductor, share=eta)", ["eta", "declares it differently"]),
+])
+def test_sharing_errors_name_the_lobe_and_the_parameter(spec, words):
+    if not words:
+        assert models.get(spec).param_specs.names == ("ks", "alpha", "eta", "k", "ks_2", "alpha_2", "k_2")
+        return
+    with pytest.raises(ValueError) as info:
+        models.get(spec)
+    assert all(word in str(info.value) for word in words), str(info.value)
+
+
 def test_params_and_param_specs_have_the_declared_shapes():
     model = models.get("lambert+cook-torrance(fresnel=conductor)", channels=5)
     for spec in model.param_specs:
@@ -408,6 +466,7 @@ SERIALISED_SPECS = [
     "oren-nayar+cook-torrance(shadowing=smith, fresnel=dielectric)",
     "lafortune(lobes=2, anisotropic=true)",
     "ggx(fresnel=conductor)+toon-specular",
+    SHARED,
 ]
 
 

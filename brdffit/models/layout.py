@@ -8,6 +8,10 @@ Model-level names: the k-th lobe declaring a name gets ``name_k``, unless anothe
 (Lafortune's ``ks_2``) or it is already taken; then the count goes on to the next free suffix. So
 ``"lambert+ward+ward"`` has ``rho_d, ks, alpha, ks_2, alpha_2`` and ``"phong+phong+lafortune(lobes=2)"`` gives
 the second Phong ``ks_3`` and ``n_3``, since ``ks_2`` and ``n_2`` belong to Lafortune's second lobe.
+
+Shared parameters: a lobe whose ``share`` option names a parameter (`Lobe.shared`) has no slot of its own for it;
+it reads the slot of the nearest earlier lobe declaring that name. ``"lambert+ggx+ggx(share=f0)"`` has
+``rho_d, ks, alpha, f0, ks_2, alpha_2``, and both GGX lobes read ``f0``.
 """
 
 from __future__ import annotations
@@ -67,8 +71,16 @@ class Layout:
         seen: Counter[str] = Counter()
         taken: set[str] = set()
         slots = []
+        latest: dict[str, Slot] = {}  # local name -> the slot the last lobe declaring it reads
+        per_lobe = []
         for j, lobe in enumerate(self.lobes):
-            for spec in lobe.param_specs():
+            own = []  # the slots this lobe reads, in its declaration order
+            specs = lobe.param_specs()
+            _check_shared(j, lobe, specs, latest)
+            for spec in specs:
+                if spec.name in lobe.shared:
+                    own.append(latest[spec.name])
+                    continue
                 seen[spec.name] += 1
                 name = spec.name
                 if seen[spec.name] > 1:
@@ -78,8 +90,13 @@ class Layout:
                     seen[spec.name] = count
                     name = f"{spec.name}_{count}"
                 taken.add(name)
-                slots.append(Slot(name, spec.name, j, spec.renamed(name), (self.channels,) if spec.colour else ()))
+                slot = Slot(name, spec.name, j, spec.renamed(name), (self.channels,) if spec.colour else ())
+                slots.append(slot)
+                own.append(slot)
+            latest.update({slot.local: slot for slot in own})
+            per_lobe.append(tuple(own))
         self.slots: tuple[Slot, ...] = tuple(slots)
+        self._per_lobe: tuple[tuple[Slot, ...], ...] = tuple(per_lobe)
         self.specs = ParamTable(slot.spec for slot in slots)
         self.names: tuple[str, ...] = self.specs.names
         self._by_name = {slot.name: slot for slot in slots}
@@ -91,8 +108,9 @@ class Layout:
             raise KeyError(f"no parameter {name!r}; parameters are {', '.join(self.names)}") from None
 
     def lobe_slots(self, j: int) -> tuple[Slot, ...]:
-        """The slots of lobe ``j``, in its declaration order."""
-        return tuple(slot for slot in self.slots if slot.lobe == j)
+        """The slots lobe ``j`` reads, one per parameter it declares, in its declaration order (a shared
+        parameter's slot belongs to the earlier lobe that owns it: ``slot.lobe != j``)."""
+        return self._per_lobe[j]
 
     def local_params(self, params: dict, j: int) -> dict:
         """Lobe ``j``'s parameters under its own names, from model-level ``params``."""
@@ -107,7 +125,9 @@ class Layout:
         """Model-level names of the parameters of lobe ``j`` that act only through its amplitude ``local``
         (`Lobe.amplitude_partners`)."""
         mapping = {slot.local: slot.name for slot in self.lobe_slots(j)}
-        return tuple(mapping[p] for p in self.lobes[j].amplitude_partners(local))
+        # A parameter another lobe reads too (shared) does not act only through this amplitude.
+        elsewhere = {slot.name for k in range(len(self.lobes)) if k != j for slot in self.lobe_slots(k)}
+        return tuple(mapping[p] for p in self.lobes[j].amplitude_partners(local) if mapping[p] not in elsewhere)
 
     def linear(self, names) -> tuple[str, ...]:
         """The names among ``names`` declared linear (amplitudes), in model order."""
@@ -152,6 +172,26 @@ class Layout:
                 index.append(q)
                 incidence.append(np.ones(self.channels))
         return np.asarray(index, dtype=int), np.asarray(incidence).reshape(-1, self.channels)
+
+
+def _check_shared(j: int, lobe, specs, latest: dict) -> None:
+    """Raise a ValueError naming the lobe if its ``share`` option cannot be resolved: an unknown name, no earlier
+    lobe declaring it, an amplitude, or an earlier declaration that differs (bounds, colour)."""
+    if not isinstance(lobe.share, str):
+        raise ValueError(f"lobe {j + 1} ({lobe.name}): share must be parameter names separated by spaces, got "
+                         f"{lobe.share!r}")
+    own = {spec.name: spec for spec in specs}
+    for name in lobe.shared:
+        where = f"lobe {j + 1} ({lobe.token()}) shares {name!r}"
+        if name not in own:
+            raise ValueError(f"{where}, which it does not declare; its parameters: {', '.join(own)}")
+        if name not in latest:
+            raise ValueError(f"{where}, but no lobe before it declares {name!r}")
+        if own[name].linear:
+            raise ValueError(f"{where}: an amplitude cannot be shared (each lobe's amplitude is its own)")
+        if latest[name].spec.renamed(name) != own[name]:
+            raise ValueError(f"{where}, but the earlier lobe declares it differently ({latest[name].spec} against "
+                             f"{own[name]})")
 
 
 @functools.lru_cache(maxsize=256)

@@ -28,11 +28,23 @@ class Lobe(abc.ABC):
     - ``reciprocal``: whether f(ωi, ωo) = f(ωo, ωi) holds for every parameter value;
     - ``param_specs()``: the parameter declarations, in order;
     - ``__call__(params, pair)``: the BRDF value in 1/sr, without the cosine factor.
+
+    Every lobe has one option of its own, declared here once: ``share``, the names of parameters that this lobe
+    takes from the nearest earlier lobe of the sum declaring them, instead of having its own (space-separated:
+    ``"lambert+ggx+ggx(share=f0)"`` is two GGX lobes with one Fresnel term). The model's `Layout` resolves it;
+    amplitudes cannot be shared.
     """
 
     name: ClassVar[str]
     reference: ClassVar[str]
     reciprocal: ClassVar[bool] = True
+
+    share: str = ""
+
+    @property
+    def shared(self) -> tuple[str, ...]:
+        """The local names this lobe takes from an earlier lobe (the ``share`` option, split)."""
+        return tuple(str(self.share).split())
 
     @classmethod
     def option_names(cls) -> tuple[str, ...]:
