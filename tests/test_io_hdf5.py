@@ -1,7 +1,10 @@
 """brdffit's HDF5 schema: exact round trips, reproducible bytes, group updates that never damage a file."""
 
+import faulthandler
 import json
 import os
+import signal
+import time
 
 import h5py
 import numpy as np
@@ -9,6 +12,7 @@ import pytest
 
 import brdffit.io as bio
 from brdffit.io import FormatError, read_hdf5, update_hdf5, write_hdf5
+from brdffit.io import hdf5
 from brdffit.io.hdf5 import read_hdf5_group
 from brdffit.measurements import MeasurementError, Measurements
 
@@ -171,3 +175,78 @@ def test_truncated_file(tmp_path):
         path.write_bytes(data[:cut])
         with pytest.raises(FormatError):
             read_hdf5(path)
+
+
+# ------------------------------------------------------------------------------- a batch inspected in one child
+def zeroed_heap(path):
+    """A brdffit file whose global heap objects are zeroed: libhdf5's H5Aread then loops forever (issue 20)."""
+    write_hdf5(sample(), path)
+    data = bytearray(path.read_bytes())
+    heap = data.find(b"GCOL")
+    assert heap > 0
+    data[heap + 32:heap + 32 + 512] = bytes(512)
+    path.write_bytes(bytes(data))
+    return path
+
+
+def test_a_batch_is_inspected_in_one_child_and_a_bad_file_spares_the_others(tmp_path, monkeypatch):
+    m = sample()
+    good = []
+    for i in range(4):
+        good.append(tmp_path / f"good{i}.h5")
+        write_hdf5(m, good[-1])
+    truncated = tmp_path / "truncated.h5"
+    truncated.write_bytes(good[0].read_bytes()[:1024])
+    text = tmp_path / "text.h5"
+    text.write_bytes(b"theta_i,phi_i\n")
+    paths = [good[0], good[1], zeroed_heap(tmp_path / "zeroed.h5"), good[2], truncated, text, good[3],
+             tmp_path / "missing.h5"]
+    forks = []
+    real_fork = os.fork
+
+    def counting_fork():
+        forks.append(1)
+        return real_fork()
+
+    monkeypatch.setattr(os, "fork", counting_fork)
+    monkeypatch.setattr(hdf5, "INSPECT_TIMEOUT_S", 2.0)
+    start = time.perf_counter()
+    opened = list(hdf5.open_hdf5_many(paths))
+    assert time.perf_counter() - start < 6.0  # the one 2 s timeout, and milliseconds for the others
+    # good0, good1 and the looping file in one child (killed at the timeout), good2 and the truncated file in a
+    # second one, good3 in a third; the text file and the missing one never reach a child.
+    assert len(forks) == 3
+    assert [path for path, _ in opened] == paths
+    results = dict(opened)
+    for path in good:
+        with results[path] as f:
+            assert_same(hdf5.read_measurements_group(f["measurements"], path), m)
+    problems = {path.name: str(results[path]) for path in paths if path not in good}
+    assert problems["zeroed.h5"].endswith("zeroed.h5: reading its HDF5 metadata did not finish within 2 s (damaged "
+                                          "metadata makes libhdf5 loop); the file is refused")
+    assert "truncated.h5: cannot be opened as HDF5 (truncated or damaged?)" in problems["truncated.h5"]
+    assert "text.h5: not an HDF5 file" in problems["text.h5"]
+    assert isinstance(results[tmp_path / "missing.h5"], FileNotFoundError)
+    assert all(isinstance(results[path], FormatError) for path in (paths[2], truncated, text))
+
+
+def test_a_child_that_crashes_refuses_only_the_file_it_crashed_on(tmp_path, monkeypatch):
+    paths = []
+    for i in range(3):
+        paths.append(tmp_path / f"m{i}.h5")
+        write_hdf5(sample(), paths[-1])
+    inspect = hdf5._inspect
+
+    def crashing(path):  # runs in the child: libhdf5 dying of a signal on the second file
+        if str(path).endswith("m1.h5"):
+            faulthandler.disable()  # pytest's traceback dump on SIGSEGV would only be noise here
+            os.kill(os.getpid(), signal.SIGSEGV)
+        inspect(path)
+
+    monkeypatch.setattr(hdf5, "_inspect", crashing)
+    problems = hdf5.inspect_hdf5_many(paths)
+    assert problems[0] is None and problems[2] is None
+    assert str(problems[1]) == (f"{paths[1]}: libhdf5 crashed (signal {int(signal.SIGSEGV)}) reading it: a damaged "
+                                "HDF5 file")
+    with pytest.raises(FormatError, match="libhdf5 crashed"):
+        hdf5.inspect_hdf5(paths[1])

@@ -5,8 +5,8 @@ A multi-material HDF5 file holds several groups in the layout of ``/measurements
 ``/materials/red`` and ``/materials/blue``, written with `brdffit.io.update_hdf5` and
 `brdffit.io.hdf5.write_measurements_group`. A source names one of them as ``FILE::GROUP``; the file alone stands
 for all of them (or for its ``/measurements`` group where it has one). Every opening of a brdffit HDF5 file
-inspects all of it in a child process (`brdffit.io.hdf5.inspect_hdf5`), so the groups of one file that a task
-reads are read through one opening.
+inspects all of it in a child process (`brdffit.io.hdf5.inspect_hdf5`): the files a task reads are inspected in
+one child (`brdffit.io.hdf5.open_hdf5_many`), and the groups of one file are read through one opening.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from ..io import FORMATS, FormatError, detect_format, load
-from ..io.hdf5 import MEASUREMENTS_GROUP, open_hdf5, read_measurements_group
+from ..io.hdf5 import MEASUREMENTS_GROUP, open_hdf5_many, read_measurements_group
 from ..measurements import Measurements
 
 __all__ = ["Source", "Read", "GROUP_SEPARATOR", "expand_sources", "read_sources", "material_groups", "error_text"]
@@ -59,16 +59,15 @@ class Read(NamedTuple):
 def material_groups(f) -> list[str]:
     """The groups of an open brdffit HDF5 file (`brdffit.io.hdf5.open_hdf5`) that hold a material, in file order
     (``/measurements`` first)."""
+    found = []
+    f.visititems(lambda name, obj: found.append(name) if _holds_material(obj) else None)
+    return sorted(found, key=lambda name: name != MEASUREMENTS_GROUP)
+
+
+def _holds_material(obj) -> bool:
     import h5py
 
-    found = []
-
-    def visit(name, obj):
-        if isinstance(obj, h5py.Group) and all(isinstance(obj.get(d), h5py.Dataset) for d in _MATERIAL_DATASETS):
-            found.append(name)
-
-    f.visititems(visit)
-    return sorted(found, key=lambda name: name != MEASUREMENTS_GROUP)
+    return isinstance(obj, h5py.Group) and all(isinstance(obj.get(d), h5py.Dataset) for d in _MATERIAL_DATASETS)
 
 
 def error_text(err: BaseException) -> str:
@@ -76,31 +75,27 @@ def error_text(err: BaseException) -> str:
     return f"{type(err).__name__}: {err}"
 
 
-def _read_hdf5(path: str, sources: list[Source]) -> list[Read]:
-    """Read sources of one brdffit HDF5 file with one opening (each opening inspects the whole file, brdffit.io.hdf5):
-    the named groups, and for the file itself its ``/measurements`` or the list of its material groups."""
-    try:
-        f = open_hdf5(path)
-    except Exception as err:  # noqa: BLE001 - every source of the file gets the reason
-        return [Read(source, error=error_text(err)) for source in sources]
+def _read_hdf5(f, path: str, sources: list[Source]) -> list[Read]:
+    """Read sources of one open brdffit HDF5 file: the named groups, and for the file itself its ``/measurements``
+    or the list of its material groups."""
     reads = []
-    with f:
-        for source in sources:
-            try:
-                if source.group is not None:
-                    if source.group not in f:
-                        raise FormatError(path, f"no group /{source.group}")
-                    reads.append(Read(source, read_measurements_group(f[source.group], path)))
-                    continue
-                groups = material_groups(f)
-                if not groups:
-                    raise FormatError(path, f"no group holds a material (datasets {', '.join(_MATERIAL_DATASETS)})")
-                if MEASUREMENTS_GROUP in groups:
-                    reads.append(Read(source, read_measurements_group(f[MEASUREMENTS_GROUP], path)))
-                else:
-                    reads.append(Read(source, members=tuple(Source(path, group) for group in groups)))
-            except Exception as err:  # noqa: BLE001 - a damaged group is that material's error
-                reads.append(Read(source, error=error_text(err)))
+    for source in sources:
+        try:
+            if source.group is not None:
+                if source.group not in f:
+                    raise FormatError(path, f"no group /{source.group}")
+                reads.append(Read(source, read_measurements_group(f[source.group], path)))
+                continue
+            # /measurements, where the file has it, is the file's material: no need to visit the others
+            groups = [MEASUREMENTS_GROUP] if _holds_material(f.get(MEASUREMENTS_GROUP)) else material_groups(f)
+            if not groups:
+                raise FormatError(path, f"no group holds a material (datasets {', '.join(_MATERIAL_DATASETS)})")
+            if groups[0] == MEASUREMENTS_GROUP:
+                reads.append(Read(source, read_measurements_group(f[MEASUREMENTS_GROUP], path)))
+            else:
+                reads.append(Read(source, members=tuple(Source(path, group) for group in groups)))
+        except Exception as err:  # noqa: BLE001 - a damaged group is that material's error
+            reads.append(Read(source, error=error_text(err)))
     return reads
 
 
@@ -131,8 +126,14 @@ def read_sources(sources, read_options: dict | None = None) -> list[Read]:
             reads[source] = Read(source, load(source.path, **(read_options or {})))
         except Exception as err:  # noqa: BLE001 - an unreadable material is its row's error
             reads[source] = Read(source, error=error_text(err))
-    for path, members in by_file.items():
-        reads.update((read.source, read) for read in _read_hdf5(path, members))
+    # One opening a file, and the inspections of all the batch's files in one child (brdffit.io.hdf5).
+    for path, opened in open_hdf5_many(by_file):
+        path = str(path)
+        if isinstance(opened, Exception):  # every source of the file gets the reason
+            reads.update((source, Read(source, error=error_text(opened))) for source in by_file[path])
+            continue
+        with opened:
+            reads.update((read.source, read) for read in _read_hdf5(opened, path, by_file[path]))
     return [reads[source] for source in sources]
 
 
