@@ -5,8 +5,9 @@ One file per target, each with a ``write`` function; `TARGETS` is the registry t
 and `EXPORT_FORMATS` come from. Shared pieces (the lobes as renderer terms, the measured deviation, the Schlick
 -> index fit) are in `brdffit.export.terms`; the ``fit`` option is `brdffit.export.refit`. Every renderer output
 opens with comments naming the source spec and the brdffit version, one ``approximation:`` line per
-approximation made, and the deviation of the written material from the source measured at 2,000 random direction
-pairs (docs/export.md).
+approximation made, and the deviation of the written material from the source measured at 2,000 uniform random
+direction pairs and pairs near each lobe's peak, combined by the balance heuristic (`brdffit.export.terms.measure`,
+docs/export.md).
 """
 
 from __future__ import annotations
@@ -45,6 +46,12 @@ class Export:
     source: object
     notes: list
     deviation: object
+
+    @property
+    def pairs(self):
+        """The direction pairs the deviation was measured at (`brdffit.export.terms.Pairs`: uniform and near the
+        peaks, with their weights): evaluate the written text there (in Mitsuba, say) to check the stated error."""
+        return self.deviation.sample
 
 
 def _unwrap(model_or_result):

@@ -158,16 +158,26 @@ _BOUNDS = {"weight": (1e-6, 1.0), "reflectance": (0.0, 1.0), "eta": (1e-3, 10.0)
            "roughness": (1e-3, 1.0)}
 
 
-def _refine(parts: list[_Part], source, name: str) -> list[_Part]:
+def _peaks(parts: list[_Part]) -> list:
+    """The peaks of the written conductors (Trowbridge-Reitz of width α = roughness, remaproughness false)."""
+    return [tm.Peak("half", float(np.clip(dict((key, value) for _, key, value in part.params)["roughness"], 1e-4,
+                                          1.0)), lobe="pbrt conductor")
+            for part in parts if part.kind == "conductor"]
+
+
+def _refine(parts: list[_Part], source, model, name: str) -> list[_Part]:
     """The fit option: pbrt-v4's own parameters (mix weights, reflectance, roughness, η, k) of ``parts`` refined
-    by least squares on the cosine-weighted residual (f_pbrt − f) cosθi against ``source`` at the pairs of the
-    stated deviation (so the comment states the achieved error); pbrt's formulas are evaluated on the written
-    text itself."""
+    by least squares on the cosine-weighted residual √w (f_pbrt − f) cosθi against ``source``, at pairs drawn
+    like those of the stated deviation (uniform and near the peaks of ``source``, ``model`` and ``parts``, with
+    their balance-heuristic weights w, `brdffit.export.terms.Pairs`) but with another seed, so that the stated
+    error is measured at pairs the refinement did not see; pbrt's formulas are evaluated on the written text
+    itself."""
     from scipy.optimize import least_squares
 
-    wi, wo = tm.random_pairs()
+    pairs = tm.deviation_pairs(tm.peaks(source, model, extra=_peaks(parts)), seed=tm.DEVIATION_SEED + 1)
+    wi, wo = pairs.wi, pairs.wo
     f = np.broadcast_to(np.asarray(tm.evaluate_dirs(source, wi, wo), dtype=float), (len(wi), 3))
-    cos = wi[:, 2:3]
+    cos = wi[:, 2:3] * np.sqrt(pairs.weight / pairs.weight.mean())[:, None]
     slots, x0 = [], []                                  # (part, parameter index or None for the weight, size)
     for j, part in enumerate(parts):
         entries = [(None, "weight", [part.weight])]
@@ -224,18 +234,23 @@ def write(model, name: str, header: list[str], source=None):
         raise tm.ExportError(f"a pbrt material name cannot hold quotes or newlines: {name!r}")
     notes: list[str] = []
     best = None
-    for parts, own in _candidates(model, notes):
-        deviation = tm.measure(model, _evaluator(parts, name)[1])
+    candidates = _candidates(model, notes)
+    # The candidates are compared at the same pairs: uniform and near the peaks of the model and of each mix.
+    pairs = tm.deviation_pairs(tm.peaks(model, extra=[p for parts, _ in candidates for p in _peaks(parts)]))
+    for parts, own in candidates:
+        deviation = tm.measure(model, _evaluator(parts, name)[1], pairs=pairs)
         if best is None or deviation.rms < best[1].rms:
             best = (parts, deviation, own)
     parts, deviation, own = best
     notes = notes + own
+    reference = model if source is None else source
     if source is not None:
-        parts = _refine(parts, source, name)
+        parts = _refine(parts, source, model, name)
         notes.append("fit: pbrt-v4's own parameters (mix weights, reflectance, roughness, eta, k) were then refined "
                      "by least squares on the cosine-weighted error against the source model")
+        pairs = tm.deviation_pairs(tm.peaks(reference, model, extra=_peaks(parts)))
     body, written = _evaluator(parts, name)
-    deviation = tm.measure(model if source is None else source, written)
+    deviation = tm.measure(reference, written, pairs=pairs)
     lines = [f"# {line}" for line in header] + [f"# approximation: {note}" for note in notes]
     exact = deviation.exact() and not notes  # "exact" only where nothing was approximated (see mitsuba.write)
     lines.append(("# exact: " if exact else "# measured deviation from the source model (pbrt-v4's "

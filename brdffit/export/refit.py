@@ -2,9 +2,12 @@
 
 For a model whose lobes have no exact plugin (Oren-Nayar, Ward, Lafortune, V-cavity shadowing, a Schlick term
 too bright for Mitsuba's principled, ...), the export can instead fit ``lambert + ggx`` lobes (separable Smith;
-conductor Fresnel where the source lobe is a conductor, dielectric otherwise) to the source's values at
-noise-free uniform direction pairs with brdffit's own fit and its default cosine-weighted loss (Ngan et al.
-2005). `brdffit.export.export_details` compares the candidates and writes the closest (docs/export.md).
+conductor Fresnel where the source lobe is a conductor, dielectric otherwise) to the source's noise-free values
+with brdffit's own fit and its default cosine-weighted loss (Ngan et al. 2005). The values are taken at pairs drawn
+like those of the stated deviation (`brdffit.export.terms.deviation_pairs`: uniform and near the source lobes'
+peaks), with another seed, and each pair's balance-heuristic weight is its quadrature weight, so that the fit
+minimises an unbiased estimate of the cosine-weighted error over both hemispheres, peaks included.
+`brdffit.export.export_details` compares the candidates and writes the closest (docs/export.md).
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ import numpy as np
 
 from ..models import Model
 
-__all__ = ["fit_exportable", "exportable_spec", "FIT_SAMPLES"]
+__all__ = ["fit_exportable", "exportable_spec", "fit_data", "FIT_SAMPLES"]
 
 FIT_SAMPLES = 2000
 _DIFFUSE_LOBES = ("lambert", "oren-nayar", "toon-diffuse")
@@ -44,15 +47,37 @@ def fit_exportable(model: Model, seed: int = 0) -> tuple[Model, str]:
         (the fitted model, a comment line naming the fit).
     """
     from ..fitting.api import fit
-    from ..synth import generate
 
     key = (model.spec, model.channels, seed,
            tuple((name, np.asarray(value, dtype=float).tobytes()) for name, value in sorted(model.params.items())))
     if key not in _FITS:
         spec = exportable_spec(model)
-        data = generate(model, "uniform", n=FIT_SAMPLES, seed=seed)
+        data, pairs = fit_data(model, seed)
         result = fit(data, spec, seed=seed)
-        _FITS[key] = (result.model, f"fit: {spec} was fitted to the source model {model.spec} at {FIT_SAMPLES} "
-                                    "uniform direction pairs by brdffit's cosine-weighted least squares (status "
+        _FITS[key] = (result.model, f"fit: {spec} was fitted to the source model {model.spec} at {pairs.uniform} "
+                                    f"uniform direction pairs and {int(pairs.near.sum())} near its lobes' peaks "
+                                    "(balance-heuristic weights) by brdffit's cosine-weighted least squares (status "
                                     f"{result.status}); that fit is what is written")
     return _FITS[key]
+
+
+def fit_data(model: Model, seed: int = 0):
+    """The noise-free measurements the fit option fits: ``model``'s values at `brdffit.export.terms.deviation_pairs`
+    near its peaks (seed `DEVIATION_SEED` + 1 + ``seed``, not the stated deviation's), weighted by their
+    balance-heuristic weights (scaled to mean 1).
+
+    Returns:
+        (`brdffit.Measurements`, the `brdffit.export.terms.Pairs`).
+    """
+    from ..measurements import Measurements
+    from . import terms as tm
+
+    pairs = tm.deviation_pairs(tm.peaks(model), n=FIT_SAMPLES, seed=tm.DEVIATION_SEED + 1 + seed)
+    values = np.asarray(tm.evaluate_dirs(model, pairs.wi, pairs.wo), dtype=float)
+
+    def angles(w):
+        return np.arccos(np.clip(w[:, 2], 0.0, 1.0)), np.mod(np.arctan2(w[:, 1], w[:, 0]), 2.0 * np.pi)
+
+    data = Measurements(*angles(pairs.wi), *angles(pairs.wo), values, weights=pairs.weight / pairs.weight.mean(),
+                        meta={"source": f"brdffit.export.refit of {model.spec}"})
+    return data, pairs

@@ -4,7 +4,8 @@ index fit.
 
 A target (`brdffit.export.mitsuba`, `brdffit.export.pbrt`) maps the source model's terms onto its plugins and
 returns, with the text, what it wrote as a function of the direction pair. `measure` compares that with the source
-at fixed random direction pairs, and the deviation goes into the export's comments (docs/export.md).
+at fixed direction pairs — uniform ones and ones concentrated near each lobe's peak (`peaks`, `deviation_pairs`),
+combined by the balance heuristic — and the deviation goes into the export's comments (docs/export.md).
 """
 
 from __future__ import annotations
@@ -23,12 +24,15 @@ from ..models.model import evaluate_dirs
 from .registry import ExportError
 
 __all__ = ["ExportError", "Term", "terms", "assemble", "evaluate_dirs", "reflects_nothing", "f0_to_eta",
-           "schlick_to_conductor", "Deviation", "measure", "random_pairs", "number", "rgb"]
+           "schlick_to_conductor", "Deviation", "measure", "random_pairs", "Peak", "peaks", "lobe_peaks", "Pairs",
+           "deviation_pairs", "number", "rgb"]
 
 MICROFACET_LOBES = ("cook-torrance", "ggx")
 # Direction pairs of the measured deviation (uniform in solid angle on each hemisphere).
 DEVIATION_PAIRS = 2000
 DEVIATION_SEED = 20260
+# Draws per peak sampling strategy (one per lobe width and kind, `peaks`), beside the uniform pairs.
+PEAK_PAIRS = 1000
 # The deviation reports the largest relative error over the values above this fraction of the peak, where a
 # relative error means something; the cosine-weighted RMS covers all.
 RELATIVE_FLOOR = 1e-3
@@ -201,52 +205,300 @@ def random_pairs(n: int = DEVIATION_PAIRS, seed: int = DEVIATION_SEED):
 
 
 @dataclasses.dataclass(frozen=True)
+class Peak:
+    """Where a lobe peaks, as a way of drawing ωo for a given ωi (a sampling strategy of `deviation_pairs`).
+
+    Attributes:
+        kind: ``"half"``: the half vector h is drawn about the normal from a GGX distribution of width ``width``
+            (density D(h) cosθh) and ωo = 2 (ωi·h) h − ωi, which puts ωo near the mirror direction for every
+            half-vector lobe (microfacet, Ward, Blinn-Phong, Ashikhmin-Shirley). ``"cone"``: ωo is drawn about the
+            axis d = normalize(A ωi) with the same GGX density in the angle from d: A = (−1, −1, 1) is the mirror
+            direction (Phong, toon highlight), (1, 1, 1) the back-scattering direction ωo = ωi (a retro-reflective
+            Lafortune lobe), Lafortune's (cx, cy, cz) the axis of its lobe in general.
+        width: the GGX width α of the draw (the lobe's own width: a microfacet m or α, Ward's α, or
+            √(2/(n + 2)) for a cosine power n, whose cosⁿ falls like exp(−nθ²/2), a Beckmann lobe of that width).
+        axis: A for ``"cone"`` (None for ``"half"``).
+        lobe: the lobe it belongs to (for descriptions).
+    """
+
+    kind: str
+    width: float
+    axis: tuple | None = None
+    lobe: str = ""
+
+
+_MIRROR = (-1.0, -1.0, 1.0)
+_MIN_WIDTH, _MAX_WIDTH = 1e-4, 1.0
+
+
+def _power_width(n) -> float:
+    # cosⁿθ ≈ exp(−nθ²/2) = exp(−θ²/m²) with m² = 2/n; (n + 2) keeps it finite for n -> 0.
+    return math.sqrt(2.0 / (float(n) + 2.0))
+
+
+def lobe_peaks(lobe, params: dict) -> list[Peak]:
+    """The peaks of one lobe, from its own width parameters.
+
+    Arguments:
+        lobe: a brdffit lobe.
+        params: its parameters under the lobe's own names.
+
+    Returns:
+        A list of `Peak` (empty for diffuse lobes and for lobes not known here; the uniform pairs cover those).
+    """
+    def value(name):
+        return float(np.mean(np.asarray(params[name], dtype=float)))
+
+    name = lobe.name
+    if name in MICROFACET_LOBES:
+        found = [Peak("half", value(lobe.roughness_name))]
+    elif name in ("ward", "ward-duer"):
+        found = [Peak("half", value("alpha"))]
+    elif name == "ward-aniso":
+        found = [Peak("half", value("alpha_x")), Peak("half", value("alpha_y"))]
+    elif name in ("blinn-phong", "ashikhmin-shirley"):
+        found = [Peak("half", _power_width(value("n")))]
+    elif name == "ashikhmin-shirley-aniso":
+        found = [Peak("half", _power_width(value("nu"))), Peak("half", _power_width(value("nv")))]
+    elif name == "phong":
+        # (r·ωo)ⁿ about the mirror direction r.
+        found = [Peak("cone", _power_width(value("n")), _MIRROR)]
+    elif name == "toon-specular":
+        # A disc r·ωo > threshold about the mirror direction: a cone as wide as the disc.
+        found = [Peak("cone", math.tan(math.acos(min(max(value("threshold"), 1e-6), 1.0 - 1e-12))), _MIRROR)]
+    elif name == "lafortune":
+        found = []
+        for j in range(1, lobe.lobes + 1):
+            cx = value(f"cx_{j}") if lobe.anisotropic else value(f"cxy_{j}")
+            cy = value(f"cy_{j}") if lobe.anisotropic else value(f"cxy_{j}")
+            found.append(Peak("cone", _power_width(value(f"n_{j}")), (cx, cy, value(f"cz_{j}"))))
+    else:
+        found = []
+    return [dataclasses.replace(p, width=float(np.clip(p.width, _MIN_WIDTH, _MAX_WIDTH)), lobe=name)
+            for p in found if math.isfinite(p.width)]
+
+
+def peaks(*models, parts=(), extra=()) -> list[Peak]:
+    """The peaks of every lobe of the models (duplicates, same kind and axis with widths within 5%, once).
+
+    Arguments:
+        *models: brdffit models (the source, the written material read back as a model).
+        parts: (lobe, parameters under the lobe's own names) pairs, as a target's written parts.
+        extra: further `Peak`s (a renderer's own lobes, e.g. pbrt-v4's conductor roughness).
+
+    Returns:
+        A list of `Peak`.
+    """
+    found = [p for model in models for j, lobe in enumerate(model.lobes)
+             for p in lobe_peaks(lobe, model.layout.local_params(model.params, j))]
+    found += [p for lobe, local in parts for p in lobe_peaks(lobe, local)] + list(extra)
+    out = []
+    for p in found:
+        if not any(q.kind == p.kind and q.axis == p.axis and abs(math.log(q.width / p.width)) < 0.05 for q in out):
+            out.append(p)
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class Pairs:
+    """Direction pairs of a measured deviation, with the solid-angle measure each stands for.
+
+    Attributes:
+        wi, wo: ``(n, 3)`` unit vectors above the surface.
+        weight: ``(n,)`` in sr²: 1/Σ_k n_k p_k(ωi, ωo) over the sampling strategies k (the uniform pairs and one
+            per `Peak`), with n_k the draws of strategy k and p_k its density in dωi dωo. Σ_j w_j F(pair j) is
+            then an unbiased estimate of ∫∫ F dωi dωo: Veach's multi-sample estimator with the balance heuristic
+            (Veach 1997, Robust Monte Carlo Methods for Light Transport Simulation, ch. 9, Eq. 9.8:
+            w_k(x) = n_k p_k(x)/Σ_l n_l p_l(x)). A uniform pair away from every peak weighs (2π)²/n_uniform.
+        near: ``(n,)`` True for the pairs drawn near a peak.
+        peaks: the `Peak` strategies.
+        uniform: the number of uniform pairs (the first ones).
+    """
+
+    wi: np.ndarray
+    wo: np.ndarray
+    weight: np.ndarray
+    near: np.ndarray
+    peaks: tuple
+    uniform: int
+
+    def __len__(self):
+        return len(self.wi)
+
+
+def _ggx_density(cos, alpha):
+    """D(m) cosθm of the isotropic GGX distribution, the density in solid angle of `_ggx_draw` (0 for cos <= 0)."""
+    c = np.maximum(cos, 0.0)
+    a2 = alpha * alpha
+    return np.where(cos > 0.0, a2 * c / (np.pi * (c * c * (a2 - 1.0) + 1.0) ** 2), 0.0)
+
+
+def _ggx_draw(rng, n, alpha):
+    """Directions about +z with density D cosθ: tan²θ = α² u/(1 − u), φ = 2π v (Walter et al. 2007, Eqs. 35-36)."""
+    u, v = rng.random(n), rng.random(n)
+    cos = 1.0 / np.sqrt(1.0 + alpha * alpha * u / (1.0 - u))
+    sin = np.sqrt(np.maximum(1.0 - cos * cos, 0.0))
+    phi = 2.0 * np.pi * v
+    return np.stack([sin * np.cos(phi), sin * np.sin(phi), cos], axis=1)
+
+
+def _frame(d):
+    """Two unit vectors completing each row of d to an orthonormal basis (Duff et al. 2017, branchless)."""
+    sign = np.where(d[:, 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + d[:, 2])
+    b = d[:, 0] * d[:, 1] * a
+    t = np.stack([1.0 + sign * d[:, 0] ** 2 * a, sign * b, -sign * d[:, 0]], axis=1)
+    s = np.stack([b, sign + d[:, 1] ** 2 * a, -d[:, 1]], axis=1)
+    return t, s
+
+
+def _cone_axis(peak: Peak, wi):
+    d = wi * np.asarray(peak.axis, dtype=float)
+    norm = np.linalg.norm(d, axis=1, keepdims=True)
+    return d / np.maximum(norm, 1e-300), norm[:, 0] > 0.0
+
+
+def _draw(peak: Peak, wi, rng):
+    """ωo of one strategy for each ωi (some fall below the horizon; the caller drops them)."""
+    local = _ggx_draw(rng, len(wi), peak.width)
+    if peak.kind == "half":
+        h = local
+        return 2.0 * np.sum(wi * h, axis=1, keepdims=True) * h - wi
+    d, _ = _cone_axis(peak, wi)
+    t, s = _frame(d)
+    return local[:, :1] * t + local[:, 1:2] * s + local[:, 2:] * d
+
+
+def _density(peak: Peak, wi, wo):
+    """p(ωi, ωo) in dωi dωo of one strategy: ωi uniform, 1/(2π), times the density of ωo given ωi."""
+    if peak.kind == "half":
+        # dωo = 4 (ωo·h) dωh (Walter et al. 2007, Eq. 14), h = normalize(ωi + ωo).
+        h = wi + wo
+        h = h / np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-300)
+        o_h = np.sum(wo * h, axis=1)
+        p = np.where(o_h > 0.0, _ggx_density(h[:, 2], peak.width) / (4.0 * np.maximum(o_h, 1e-300)), 0.0)
+    else:
+        d, ok = _cone_axis(peak, wi)
+        p = np.where(ok, _ggx_density(np.sum(wo * d, axis=1), peak.width), 0.0)
+    return p / (2.0 * np.pi)
+
+
+def deviation_pairs(peak_list=(), n: int = DEVIATION_PAIRS, seed: int = DEVIATION_SEED,
+                    per_peak: int = PEAK_PAIRS) -> Pairs:
+    """The direction pairs of a measured deviation: `random_pairs` plus ``per_peak`` draws near each peak.
+
+    Each near-peak draw takes ωi uniform on the hemisphere and ωo from the `Peak`'s distribution about the mirror
+    (or back-scattering, or Lafortune) direction of ωi; draws below the horizon are dropped (they count as draws,
+    so the weights stay unbiased). The weights combine the strategies by the balance heuristic (`Pairs`).
+
+    Arguments:
+        peak_list: the `Peak` strategies (`peaks` of the models compared); none gives the uniform pairs alone.
+        n: uniform pairs.
+        seed: NumPy seed (the same arguments give the same pairs).
+        per_peak: draws per peak.
+
+    Returns:
+        `Pairs`, the uniform pairs first.
+    """
+    peak_list = tuple(peak_list)
+    wi, wo = random_pairs(n, seed)
+    near = [np.zeros(n, bool)]
+    wis, wos = [wi], [wo]
+    for k, peak in enumerate(peak_list):
+        rng = np.random.default_rng([seed, k + 1])
+        v = rng.normal(size=(per_peak, 3))
+        v[:, 2] = np.abs(v[:, 2]) + 1e-9
+        a = v / np.linalg.norm(v, axis=1, keepdims=True)
+        b = _draw(peak, a, rng)
+        keep = b[:, 2] > 1e-9
+        b = b[keep] / np.linalg.norm(b[keep], axis=1, keepdims=True)
+        wis.append(a[keep])
+        wos.append(b)
+        near.append(np.ones(len(b), bool))
+    wi, wo = np.concatenate(wis), np.concatenate(wos)
+    combined = np.full(len(wi), n / (2.0 * np.pi) ** 2) + sum(per_peak * _density(peak, wi, wo) for peak in peak_list)
+    return Pairs(wi, wo, 1.0 / combined, np.concatenate(near), peak_list, n)
+
+
+@dataclasses.dataclass(frozen=True)
 class Deviation:
     """How far a written material is from the source model.
 
     Attributes:
-        rms: cosine-weighted relative RMS error, ‖(f_written − f) cosθi‖ / ‖f cosθi‖ over all pairs and channels
-            (the error in reflected radiance that the "cosine" loss of a fit minimises).
-        max_rel: largest |f_written − f| / f over the values above `RELATIVE_FLOOR` times the peak.
-        pairs: number of direction pairs.
+        rms: cosine-weighted relative RMS error, (∫∫ ((f_written − f) cosθi)² / ∫∫ (f cosθi)²)^½ over both
+            hemispheres and all channels (the error in reflected radiance that the "cosine" loss of a fit
+            minimises), estimated from the uniform and the near-peak pairs with their balance-heuristic weights
+            (`Pairs`).
+        max_rel: largest |f_written − f| / f over all the pairs, at the values above `RELATIVE_FLOOR` times the
+            largest value found.
+        pairs: number of direction pairs (uniform and near-peak).
+        uniform_rms, uniform_max_rel: the same from the uniform pairs alone (what they would have said; they
+            can miss a sharp peak).
+        near_pairs: how many of the pairs were drawn near a peak.
+        sample: the `Pairs` (not compared, not shown).
     """
 
     rms: float
     max_rel: float
     pairs: int
+    uniform_rms: float = math.nan
+    uniform_max_rel: float = math.nan
+    near_pairs: int = 0
+    sample: Pairs | None = dataclasses.field(default=None, repr=False, compare=False)
 
     def exact(self, tol: float = 1e-6) -> bool:
-        """True where the mapping is exact up to rounding."""
+        """True where the mapping is exact up to rounding (near the peaks too)."""
         return self.rms <= tol and self.max_rel <= tol
 
     def describe(self) -> str:
-        return (f"cosine-weighted relative RMS error {self.rms:.3g}, largest relative error {self.max_rel:.3g} "
-                f"(values above {RELATIVE_FLOOR:g} of the peak), over {self.pairs} random direction pairs")
+        text = (f"cosine-weighted relative RMS error {self.rms:.3g}, largest relative error {self.max_rel:.3g} "
+                f"(values above {RELATIVE_FLOOR:g} of the peak), over {self.pairs - self.near_pairs} uniform random "
+                "direction pairs")
+        if not self.near_pairs:
+            return text + " (no lobe with a peak)"
+        return text + (f" and {self.near_pairs} near the lobes' mirror or back-scattering directions, combined by "
+                       f"the balance heuristic; the uniform pairs alone: {self.uniform_rms:.3g}, "
+                       f"{self.uniform_max_rel:.3g}")
 
 
-def measure(source: Model, written, n: int = DEVIATION_PAIRS, seed: int = DEVIATION_SEED) -> Deviation:
-    """The deviation of a written material from the source model at `random_pairs`.
+def _errors(f, g, cos, weight):
+    """(cosine-weighted relative RMS with these weights, largest relative error above the floor)."""
+    w = weight[:, None]
+    denominator = np.sqrt(np.sum(w * (f * cos) ** 2))
+    rms = float(np.sqrt(np.sum(w * ((g - f) * cos) ** 2)) / denominator) if denominator > 0 else float(np.abs(g).max())
+    keep = f > RELATIVE_FLOOR * f.max() if f.max() > 0 else np.zeros(f.shape, bool)
+    max_rel = float(np.max(np.abs(g - f)[keep] / f[keep])) if keep.any() else 0.0
+    return rms, max_rel
+
+
+def measure(source: Model, written, n: int = DEVIATION_PAIRS, seed: int = DEVIATION_SEED,
+            pairs: Pairs | None = None) -> Deviation:
+    """The deviation of a written material from the source model.
 
     Arguments:
         source: the brdffit model.
         written: a function (wi, wo) -> f_r of shape ``(n, channels)`` (or ``(n, 3)`` for an RGB material of a
             single-channel model), or a `Model`.
-        n, seed: as `random_pairs`.
+        n, seed: as `deviation_pairs`, whose pairs near the `peaks` of ``source`` (and of ``written`` when it is
+            a `Model`) are used unless ``pairs`` is given.
+        pairs: the `Pairs` to measure at (a target passes the pairs near the peaks of both models).
 
     Returns:
         The `Deviation`.
     """
-    wi, wo = random_pairs(n, seed)
+    if pairs is None:
+        pairs = deviation_pairs(peaks(source, *([written] if isinstance(written, Model) else [])), n, seed)
+    wi, wo = pairs.wi, pairs.wo
     f = np.asarray(evaluate_dirs(source, wi, wo), dtype=float)
     evaluate = (lambda a, b: np.asarray(evaluate_dirs(written, a, b))) if isinstance(written, Model) else written
     g = np.asarray(evaluate(wi, wo), dtype=float)
     f = np.broadcast_to(f, g.shape)
     cos = wi[:, 2:3]
-    denominator = np.sqrt(np.sum((f * cos) ** 2))
-    rms = float(np.sqrt(np.sum(((g - f) * cos) ** 2)) / denominator) if denominator > 0 else float(np.abs(g).max())
-    keep = f > RELATIVE_FLOOR * f.max() if f.max() > 0 else np.zeros(f.shape, bool)
-    max_rel = float(np.max(np.abs(g - f)[keep] / f[keep])) if keep.any() else 0.0
-    return Deviation(rms=rms, max_rel=max_rel, pairs=n)
+    rms, max_rel = _errors(f, g, cos, pairs.weight)
+    u = slice(0, pairs.uniform)
+    uniform_rms, uniform_max_rel = _errors(f[u], g[u], cos[u], np.ones(pairs.uniform))
+    return Deviation(rms=rms, max_rel=max_rel, pairs=len(pairs), uniform_rms=uniform_rms,
+                     uniform_max_rel=uniform_max_rel, near_pairs=int(pairs.near.sum()), sample=pairs)
 
 
 def number(v) -> str:
