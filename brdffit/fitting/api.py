@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..metrics import fit_metrics, metrics_from_sums
+from ..metrics import fit_sums, metrics_from_sums
 from ..models.model import Model
 from ..models.registry import get as get_model
 from ..params import at_bound
@@ -41,6 +41,7 @@ from .result import FitResult
 from .search import POLISH_STARTS, SEARCH_SAMPLES, canonical, interior, quasi_random_starts, score, search
 from .solvers import coarse_solver, compiled_solve, make_solver, no_pins, solver_name, working_tolerances
 from .status import diagnose, information_criteria, warnings_of
+from .noise import of_fit as noise_of_fit
 from .uncertainty import Uncertainty, normal_equations_at
 
 __all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
@@ -188,7 +189,8 @@ def _polish_width(count: int) -> int:
     return -(-count // POLISH_STARTS) * POLISH_STARTS
 
 
-def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: list[dict] | None = None):
+def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: list[dict] | None = None,
+            metrics: bool = False):
     """Solve every start of every material in one batched program.
 
     Arguments:
@@ -197,11 +199,12 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
         data: `FitData` with a leading material axis.
         held: for each material, outer name -> physical value to hold (a NaN entry holds nothing), the same for
             every start of that material.
+        metrics: ``data`` is the whole data: let the default solver give the metric sums of its answers too.
 
     Returns:
         ``(outcomes, compile_seconds, run_seconds)``: for each material a list of per-start dicts ``params``
         (physical, every parameter), ``cost``, ``steps``, ``max_steps``, ``nonfinite`` and, from the default
-        solver, ``normal`` (the normal equations at the answer).
+        solver, ``normal`` (the normal equations at the answer) and ``exact`` (`brdffit.fitting.marquardt.solve`).
     """
     specs = problem.specs
     if not problem.outer:  # nothing nonlinear is free: the projection is the whole solve
@@ -224,7 +227,8 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
         padded = [material + [material[-1]] * (width - count) for material in starts]
         out, compile_time, run_time = _timed(lambda: marquardt.solve(
             problem, padded, [solve_data], rtol=problem.solver.rtol, atol=problem.solver.atol,
-            max_steps=problem.max_steps, damping=problem.solver.damping, offset=problem.solver.offset, held=held))
+            max_steps=problem.max_steps, damping=problem.solver.damping, offset=problem.solver.offset, held=held,
+            metrics=metrics))
         return [material[:count] for material in out], compile_time, run_time
     y0 = {name: jnp.asarray(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
                                                 for s in material]) for material in starts]))
@@ -262,6 +266,15 @@ def _normal(problem: Problem, outcome: dict, data: FitData):
     if outcome.get("normal") is not None:
         return outcome["normal"]
     return normal_equations_at(problem, outcome["params"], data)
+
+
+def _answered(outcome: dict, params: dict) -> bool:
+    """Whether the solver's sums of an outcome on the whole data serve as those of the answer ``params``: they
+    carry the metric sums, the solver's last pass evaluated the point itself (``exact``), and the canonical order
+    left the parameters as they were (a reordering of lobes would move the Jacobian's columns)."""
+    normal = outcome.get("normal")
+    return (normal is not None and normal.metric_sums is not None and outcome.get("exact", False)
+            and all(np.array_equal(np.asarray(params[k]), np.asarray(outcome["params"][k])) for k in params))
 
 
 def _start_status(outcome: dict) -> str:
@@ -353,7 +366,8 @@ def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData)
     return [min(increases, key=increases.get)] if increases else []
 
 
-def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, data: FitData, starts: int):
+def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, data: FitData, starts: int,
+           metrics: bool):
     """Solve one material again with the ``dead`` amplitudes held at 0 and the parameters that act only through
     them (`Lobe.amplitude_partners`) held where they are: a problem with fewer free parameters."""
     layout = problem.layout
@@ -371,7 +385,7 @@ def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, dat
     single = jax.tree_util.tree_map(lambda a: a[None], data)
     single = single._replace(fixed={k: jnp.asarray(v)[None] for k, v in start.items() if k not in free})
     outcomes, compile_time, run_time = _polish(dataclasses.replace(solve_problem, free=free), [[start] * starts],
-                                               single)
+                                               single, metrics=metrics)
     pruned = dict(_best(outcomes[0]))
     pruned["steps"] += kept["steps"]
     pruned["notes"] = kept["notes"] + [
@@ -411,8 +425,11 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
     aic, bic = information_criteria(problem.loss, cost, n_valid, k)
     channel_cost = normal.channel_cost if normal is not None else np.full(problem.channels, cost / problem.channels)
     metrics = {"rmse_loss": np.sqrt(channel_cost / np.maximum(valid.sum(axis=0), 1))}
-    metrics.update(metrics_from_sums(normal.metric_sums) if normal is not None
-                   else fit_metrics(fitted, measurements, pair=data.pair))
+    sums = normal.metric_sums if normal is not None else fit_sums(fitted, measurements, pair=data.pair)
+    metrics.update(metrics_from_sums(sums))
+    # The noise model the residuals support decides which covariance the result reports (docs/fitting.md).
+    noise = noise_of_fit(problem, sums, data, channel_cost, n_valid)
+    covariance, correlation, stderr = uncertainty.chosen(noise.covariance)
 
     def per_param(flat):
         offsets = layout.offsets(problem.free)
@@ -420,14 +437,16 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
                        else np.zeros(layout[name].shape)) for name in layout.names}
 
     return FitResult(
-        model=fitted, params=dict(fitted.params), stderr=per_param(uncertainty.stderr),
-        stderr_robust=per_param(uncertainty.stderr_robust), covariance=uncertainty.covariance,
-        correlation=uncertainty.correlation, labels=labels, metrics=metrics, n_samples=n_valid, n_params=k,
+        model=fitted, params=dict(fitted.params), stderr=per_param(stderr),
+        stderr_laplace=per_param(uncertainty.stderr), stderr_robust=per_param(uncertainty.stderr_robust),
+        covariance=covariance, correlation=correlation, labels=labels, metrics=metrics, n_samples=n_valid,
+        n_params=k,
         dof=n_valid - k, cost=cost, aic=aic, bic=bic, status=status, bounds_hit=hit, warnings=warnings,
         steps=int(outcome["steps"]), compile_time=times["compile"], run_time=times["run"], init_time=times["init"],
         loss=problem.loss, solver=solver_name(problem.solver), channel_mode="shared-shape",
         fixed=sorted(n for n in layout.names if n not in problem.free), starts=starts,
-        noise_variance=float(uncertainty.variance), strategy=strategy, models=[fitted],
+        noise_variance=float(uncertainty.variance), strategy=strategy, models=[fitted], noise_model=noise,
+        theta_i_max=float(np.max(measurements.theta_i, initial=0.0)),
     )
 
 
@@ -470,7 +489,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         solve_items, solve_problem = full, problem
     bar.update(1, f"polishing {len(starts[0])} start{'s' if len(starts[0]) > 1 else ''}"
                   f"{f' on {COARSE_SAMPLES} samples' if two_stage else ''}")
-    outcomes, compile_time, run_time = _polish(solve_problem, starts, stack_data(solve_items))
+    outcomes, compile_time, run_time = _polish(solve_problem, starts, stack_data(solve_items), metrics=not two_stage)
 
     records = [[{"init": _json_params(s), "cost": o["cost"], "status": _start_status(o), "steps": o["steps"]}
                 for s, o in zip(starts[m], outcomes[m])] for m in range(len(items))]
@@ -486,7 +505,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         bar.update(2, "holding parameters and solving again")
         again, c_time, r_time = _polish(solve_problem, [[_held_start(problem, b["params"], h)] * len(starts[0])
                                                         for b, h in zip(kept, holds)],
-                                        stack_data(solve_items), holds)
+                                        stack_data(solve_items), holds, metrics=not two_stage)
         compile_time += c_time
         run_time += r_time
         for m, held in enumerate(holds):
@@ -519,7 +538,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         if dead:
             bar.update(2, f"pruning {', '.join(dead)}")
             problems[m], pruned, c_time, r_time = _prune(problem, solve_problem, kept[m], dead, solve_items[m],
-                                                          len(starts[0]))
+                                                          len(starts[0]), not two_stage)
             compile_time += c_time
             run_time += r_time
             records[m].append({"init": _json_params(pruned["params"]), "cost": pruned["cost"],
@@ -538,18 +557,21 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             # whatever solver polished.
             refined, c_time, r_time = _timed(lambda: marquardt.solve(
                 problem, [[params]], chunks(data), rtol=rtol, atol=atol, max_steps=problem.max_steps,
-                damping=REFINE_DAMPING)[0][0])
+                damping=REFINE_DAMPING, metrics=True)[0][0])
             compile_time += c_time
             run_time += r_time
             best = dict(best, params=refined["params"], cost=refined["cost"], steps=best["steps"] + refined["steps"],
-                        max_steps=refined["max_steps"], nonfinite=refined["nonfinite"])
+                        max_steps=refined["max_steps"], nonfinite=refined["nonfinite"], normal=refined["normal"],
+                        exact=refined["exact"])
             params = canonical(problem, refined["params"])
         if not problem.free:
             r = residuals_at(problem, {k: jnp.asarray(v) for k, v in params.items()}, full[m])
             best = dict(best, cost=float(jnp.sum(r * r)))
+        elif _answered(best, params):
+            normal = best["normal"]
         else:
-            # A pass at the answer itself: the solver's last sums were moved with its amplitudes (and the canonical
-            # order may have moved the columns). It gives the status, the covariance and the metrics.
+            # A pass at the answer itself, where the solver's last sums are not those of the answer. It gives the
+            # status, the covariance and the metrics.
             normal = normal_equations_at(problem, params, full[m],
                                          width=1 if two_stage else _polish_width(len(starts[0])))
         results.append(_result(problem, base_model, measurements, full[m], params, best, normal, records[m],

@@ -40,11 +40,11 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from .normal_equations import NormalEquations, accumulate
+from .normal_equations import NormalEquations, accumulate, metric_sums_of
 from .problem import FitData, Problem
 from .separable import solve_box
 
-__all__ = ["Marquardt", "solve", "MAX_DAMPING", "RELATIVE_OFFSET"]
+__all__ = ["Marquardt", "solve", "MAX_DAMPING", "RELATIVE_OFFSET", "EXACT_MOVE"]
 
 # λ beyond which a point is stuck: no step, however short, lowers its cost (a kink, or rounding at the optimum
 # of a loose problem); it ends there and the diagnosis decides between stalled and converged.
@@ -59,6 +59,11 @@ _REPASS = 1e-3
 # ~1e-6 p/n of its minimum. Misspecified multi-lobe fits otherwise walked flat valleys for dozens of steps that
 # changed the cost by 1e-13 of itself (Lambert + 2 Lafortune lobes on 20,000 samples: 61 steps, now 26).
 RELATIVE_OFFSET = 1e-3
+
+# The last projection's move of the amplitudes (relative) within which the solver's sums stand for those of its
+# answer: JᵀJ's outer columns scale with the amplitudes, so they are then exact to this relative order, and the
+# cost is exact (quadratic in the amplitudes).
+EXACT_MOVE = 1e-6
 
 # A projection whose predicted cost differs from the pass's own by more than this fraction is evaluated by a
 # second pass: the prediction is exact in exact arithmetic, but not for a lobe whose Gram matrix is near 0.
@@ -83,11 +88,12 @@ class Marquardt:
 
 
 class _State:
-    """The batch's current points: physical values ``x (M, S, P)`` with their amplitudes projected, and the
-    pass's sums moved with them (see the module doc)."""
+    """The batch's current points: physical values ``x (M, S, P)`` with their amplitudes projected, the pass's
+    sums moved with them (see the module doc), and the pass's model values when the solve keeps them (one device
+    array ``(M, S, N, C)`` per piece, at the evaluated point, before the projection moved ``x`` by ``delta``)."""
 
-    def __init__(self, x, sums: NormalEquations, delta, evaluated=None):
-        self.x, self.sums, self.delta = x, sums, delta
+    def __init__(self, x, sums: NormalEquations, delta, evaluated=None, values=None):
+        self.x, self.sums, self.delta, self.values = x, sums, delta, values
         self.evaluated = sums.cost if evaluated is None else evaluated  # the pass's own cost, before projecting
 
     def where(self, take, other: "_State") -> "_State":
@@ -97,16 +103,23 @@ class _State:
                 return None
             return np.where(np.reshape(take, take.shape + (1,) * (np.ndim(a) - take.ndim)), a, b)
 
+        if self.values is None or take.all():
+            values = self.values
+        elif not take.any():
+            values = other.values
+        else:  # only where the points of a batch disagree does it cost a device operation
+            mask = jnp.asarray(take)[..., None, None]
+            values = [jnp.where(mask, a, b) for a, b in zip(self.values, other.values)]
         return _State(pick(self.x, other.x), NormalEquations(*(pick(a, b) for a, b in zip(self.sums, other.sums))),
-                      pick(self.delta, other.delta), pick(self.evaluated, other.evaluated))
+                      pick(self.delta, other.delta), pick(self.evaluated, other.evaluated), values)
 
 
 class _Batch:
     """The flat layout of a problem's free parameters and the passes over a batch's data."""
 
-    def __init__(self, problem: Problem, pieces: list[FitData]):
+    def __init__(self, problem: Problem, pieces: list[FitData], keep: bool = False):
         layout = problem.layout
-        self.problem, self.pieces, self.layout = problem, pieces, layout
+        self.problem, self.pieces, self.layout, self.keep = problem, pieces, layout, keep
         free = problem.free
         self.offsets = layout.offsets(free)
         self.lower = np.concatenate([np.full(layout[n].size, layout[n].spec.lower) for n in free])
@@ -146,10 +159,11 @@ class _Batch:
         return self._project(state.x) if moved.any() or predicted.any() else state
 
     def _project(self, x) -> _State:
-        sums = accumulate(self.problem, self.trees(x), self.pieces)
+        sums, values = accumulate(self.problem, self.trees(x), self.pieces, values=True)
+        values = values if self.keep else None
         delta = np.zeros(x.shape)
         if not self.amplitudes.size:
-            return _State(x, sums, delta)
+            return _State(x, sums, delta, values=values)
         index = self.amplitudes
         jtj, jtr = sums.jtj, sums.jtr
         with np.errstate(invalid="ignore", over="ignore"):
@@ -171,7 +185,7 @@ class _Batch:
             moved = NormalEquations(jtj=jtj, jtr=jtr + np.einsum("...pq,...q->...p", jtj, delta),
                                     cost=np.where(np.isfinite(sums.cost), np.sum(channel_cost, axis=-1), sums.cost),
                                     meat=sums.meat, channel_cost=channel_cost, metric_sums=sums.metric_sums)
-        return _State(x, moved, delta, sums.cost)
+        return _State(x, moved, delta, sums.cost, values)
 
     def unconstrained(self, x):
         """The outer scalars' unconstrained variables ``(M, S, P)`` (amplitude entries: the physical values)."""
@@ -232,7 +246,7 @@ def _step(batch: _Batch, state: _State, damping, held):
 
 def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, rtol: float, atol: float,
           max_steps: int, damping: float = 1e-3, offset: float = RELATIVE_OFFSET,
-          held: list[dict] | None = None) -> list[list[dict]]:
+          held: list[dict] | None = None, metrics: bool = False) -> list[list[dict]]:
     """Solve every start of every material (the module doc's iteration, all points together).
 
     Arguments:
@@ -246,13 +260,17 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         damping: the initial λ.
         offset: the relative offset test's tolerance (`RELATIVE_OFFSET`; 0: off).
         held: for each material, outer name -> physical value to hold (NaN: free), the same for each start.
+        metrics: also give the metric sums of each returned point (`brdffit.metrics.metric_sums`), from the model
+            values of the pass that evaluated it, which the solve keeps for its current points.
 
     Returns:
         For each material, a list of S dicts: ``params`` (physical, every parameter), ``cost``, ``steps``,
-        ``max_steps`` (the step limit ended it), ``nonfinite`` and ``normal`` (the `NormalEquations` at the
-        returned point, in the physical free parameters).
+        ``max_steps`` (the step limit ended it), ``nonfinite``, ``normal`` (the `NormalEquations` at the
+        returned point, in the physical free parameters; with ``metrics``, its metric sums) and ``exact``: the
+        last pass evaluated the returned point itself, up to an amplitude move within `EXACT_MOVE` (its sums
+        are then those of the point to that order, and no further pass at the answer is needed).
     """
-    batch = _Batch(problem, pieces)
+    batch = _Batch(problem, pieces, keep=metrics)
     layout, free = problem.layout, problem.free
     materials, count = len(starts), len(starts[0])
     x = np.stack([np.stack([layout.flatten(s, free) for s in material]) for material in starts]).astype(float)
@@ -299,6 +317,9 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         lam = np.where(better, np.maximum(lam / 10.0, _MIN_DAMPING), np.where(active, lam * 10.0, lam))
         done |= active & (lam > MAX_DAMPING)
     finite = np.isfinite(state.sums.cost)
+    if metrics:
+        state.sums = state.sums._replace(metric_sums=metric_sums_of(state.values, pieces))
+    exact = np.all(np.abs(state.delta) <= EXACT_MOVE * np.abs(state.x) + atol, axis=-1)
     out = []
     for m, material in enumerate(starts):
         row = []
@@ -307,7 +328,7 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
             params = dict(start, **{k: np.asarray(v) for k, v in values.items()})
             row.append({"params": params, "cost": float(state.sums.cost[m, s]), "steps": int(steps[m, s]),
                         "max_steps": bool(finite[m, s] and not converged[m, s] and steps[m, s] >= max_steps),
-                        "nonfinite": not finite[m, s],
+                        "nonfinite": not finite[m, s], "exact": bool(exact[m, s]),
                         "normal": state.sums.at_point(m, s)})
         out.append(row)
     return out

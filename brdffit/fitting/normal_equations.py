@@ -30,7 +30,8 @@ from ..metrics import metric_sums
 from ..models.model import evaluate_pair
 from .problem import BUCKET_CHUNK, FitData, Problem, chunk_data, physical_params, residuals_of
 
-__all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "CHUNK_SAMPLES"]
+__all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "metric_sums_of",
+           "CHUNK_SAMPLES"]
 
 CHUNK_SAMPLES = BUCKET_CHUNK  # padded data then splits into whole chunks
 
@@ -130,9 +131,11 @@ def _metric_program(f, values, mask, cos_i, sqrt_weight):
     return jax.vmap(per_material)(f, values, mask, cos_i, sqrt_weight)
 
 
-def _metric_sums(f, piece: FitData):
-    """The metric sums ``(M, S, 8, C)`` of model values ``f`` ``(M, S, N, C)`` against one piece."""
-    return np.asarray(_metric_program(f, piece.values, piece.mask, piece.cos_i, piece.sqrt_weight))
+def metric_sums_of(values: list, pieces: list[FitData]) -> np.ndarray:
+    """The metric sums ``(M, S, 8, C)`` of a pass's model values (`accumulate` with ``values=True``: one
+    ``(M, S, N, C)`` array per piece) against the pieces' data."""
+    return sum(np.asarray(_metric_program(f, piece.values, piece.mask, piece.cos_i, piece.sqrt_weight))
+               for f, piece in zip(values, pieces))
 
 
 def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
@@ -141,7 +144,8 @@ def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
     return chunk_data(data, size)
 
 
-def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bool = False) -> NormalEquations:
+def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bool = False,
+               values: bool = False):
     """JᵀJ, Jᵀr, rᵀr, Jᵀ diag(r²) J and the per-channel rᵀr over all of the data, for every point of a batch.
 
     Arguments:
@@ -149,9 +153,12 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
         trees: free name -> physical values ``(M, S) + shape``: S points for each of M materials.
         pieces: the data of the M materials (leading material axis), whole or in chunks (`chunks`).
         metrics: also sum the goodness-of-fit terms of the model values (`_metric_program`).
+        values: also return the model values, one ``(M, S, N, C)`` device array per piece (`metric_sums_of`
+            takes them: a solver keeps them for its current points and sums the metrics of its answer only).
 
     Returns:
-        The `NormalEquations`, each field with leading axes ``(M, S)``.
+        The `NormalEquations`, each field with leading axes ``(M, S)``; with ``values``, the pair
+        ``(sums, model values)``.
 
     Raises:
         ValueError: a value of the wrong shape.
@@ -166,7 +173,7 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
     index, incidence = problem.layout.channel_incidence(problem.free)
     fn = pass_program(problem.structure)
     q = len(problem.free)
-    gram, meat, metric_total = 0.0, 0.0, 0.0
+    gram, meat, kept = 0.0, 0.0, []
     # A diverged solver (undamped Gauss-Newton far away) can overflow the products: inf/NaN then reach the
     # covariance as infinite standard errors, which is what they mean, without a warning per chunk.
     with np.errstate(over="ignore", invalid="ignore"):
@@ -175,8 +182,7 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
             # reductions in XLA, and a (M, S, C, Q + 1, N) transfer per chunk on a GPU.
             a, f = fn(trees, piece)
             a = np.asarray(a)
-            if metrics:
-                metric_total = metric_total + _metric_sums(f, piece)
+            kept.append(f)
             gram = gram + a @ np.swapaxes(a, -1, -2)  # (M, S, C, Q+1, Q+1): tangents and residuals
             weighted = a[..., :q, :] * a[..., q:, :]
             meat = meat + weighted @ np.swapaxes(weighted, -1, -2)
@@ -189,6 +195,7 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
 
         jtr = np.sum(incidence * gram[..., index, q, :], axis=-1)
         channel_cost = np.array(gram[..., q, q, :], dtype=float)
-        return NormalEquations(jtj=expand(gram[..., :q, :q, :]), jtr=jtr, cost=np.sum(channel_cost, axis=-1),
+        sums = NormalEquations(jtj=expand(gram[..., :q, :q, :]), jtr=jtr, cost=np.sum(channel_cost, axis=-1),
                                meat=expand(meat), channel_cost=channel_cost,
-                               metric_sums=metric_total if metrics else None)
+                               metric_sums=metric_sums_of(kept, pieces) if metrics else None)
+    return (sums, kept) if values else sums
