@@ -4,17 +4,22 @@ docs/export.md (between the ``<!-- deviations:start -->`` and ``<!-- deviations:
 Usage:
     python scripts/export_deviations.py [--print]
 
-Mitsuba 3 exports are loaded with Mitsuba itself (``scalar_rgb``) and evaluated at the export's 2,000 random
-direction pairs (`brdffit.export.terms.random_pairs`); pbrt-v4 exports are read back and evaluated with pbrt-v4's
-transcribed formulas (`brdffit.export.pbrt_reference`). Errors are the cosine-weighted relative RMS and the
-largest relative error over the values above 1e-3 of the peak (`brdffit.export.terms.measure`). The fit option
-runs brdffit fits (about a minute on two cores).
+Mitsuba 3 exports are loaded with Mitsuba itself (``scalar_rgb``) and evaluated at the export's own direction
+pairs (`brdffit.export.Export.pairs`: 2,000 uniform random pairs, `brdffit.export.terms.random_pairs`, and 1,000
+draws near each lobe's peak, `brdffit.export.terms.deviation_pairs`); pbrt-v4 exports are read back and evaluated
+with pbrt-v4's transcribed formulas (`brdffit.export.pbrt_reference`). Each table gives the errors of the uniform
+pairs alone and of all pairs with their balance-heuristic weights: the cosine-weighted relative RMS and the largest
+relative error over the values above 1e-3 of the largest one found (`brdffit.export.terms.measure`). The fit
+option runs brdffit fits (a few minutes on two shared cores).
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import math
+import os
+import platform
 import sys
 from pathlib import Path
 
@@ -67,6 +72,15 @@ APPROXIMATE = [
                                                          ks=1.38, f0=0.04)),
     ("Schlick GGX alone, ks = 1, f0 = 0, beside a lambert", get("lambert+ggx", rho_d=0.3, alpha=0.2, ks=1.0,
                                                                  f0=0.0)),
+    # Sharp lobes, where the uniform pairs miss the peak.
+    ("Schlick with Beckmann -> conductor index, m = 0.01, beside a lambert",
+     get("lambert+cook-torrance(shadowing=smith)", rho_d=0.3, m=0.01, ks=1.0, f0=0.04)),
+    ("Blinn -> Beckmann, m = 0.02", get("cook-torrance(distribution=blinn, shadowing=smith, fresnel=conductor)",
+                                        m=0.02, **CONDUCTOR)),
+    ("V-cavity -> Smith, GGX, m = 0.02", get("ggx(shadowing=v-cavity, fresnel=conductor)", alpha=0.02,
+                                             **CONDUCTOR)),
+    ("Beckmann, Smith (Mitsuba's rational G1), m = 0.02",
+     get("cook-torrance(shadowing=smith, fresnel=conductor)", m=0.02, **CONDUCTOR)),
 ]
 PBRT = [
     ("lambert", get("lambert", rho_d=[0.5, 0.25, 0.125])),
@@ -81,6 +95,9 @@ PBRT = [
     ("lambert+ggx(fresnel=conductor), ks = 0.5", get("lambert+ggx(fresnel=conductor)", rho_d=0.2, alpha=0.2,
                                                      ks=0.5, **CONDUCTOR)),
     ("lambert+ggx (Schlick), ks = 0.8", get("lambert+ggx", rho_d=[0.6, 0.3, 0.1], alpha=0.25, ks=0.8, f0=0.04)),
+    ("ggx(fresnel=conductor), alpha = 0.02", get("ggx(fresnel=conductor)", alpha=0.02, ks=1.0, **CONDUCTOR)),
+    ("lambert+cook-torrance (Schlick, Beckmann), m = 0.01", get("lambert+cook-torrance(shadowing=smith)", rho_d=0.3,
+                                                                m=0.01, ks=1.0, f0=0.04)),
 ]
 
 
@@ -88,13 +105,23 @@ def _synthetic(name: str):
     return synth.truth_model(brdffit.io.load(SYNTHETIC / f"{name}.h5"))
 
 
-def _row(label, model, to, fit=False, mitsuba=True):
-    result = export_details(model, to, fit=fit)
+def _deviation(result, to, mitsuba=True):
+    """The deviation of an export at its own pairs, from Mitsuba's own values for a Mitsuba export."""
     if to == "mitsuba" and mitsuba:
-        deviation = measure(result.source, lambda wi, wo: evaluate_in_mitsuba(result.text, wi, wo))
-    else:
-        deviation = result.deviation
-    return f"| {label} | `{model.spec}` | {deviation.rms:.3g} | {deviation.max_rel:.3g} |"
+        return measure(result.source, lambda wi, wo: evaluate_in_mitsuba(result.text, wi, wo), pairs=result.pairs)
+    return result.deviation
+
+
+def _cells(d) -> str:
+    return f"{d.uniform_rms:.3g} | {d.uniform_max_rel:.3g} | {d.rms:.3g} | {d.max_rel:.3g} | {d.near_pairs}"
+
+
+def _row(label, model, to, fit=False, mitsuba=True):
+    return f"| {label} | `{model.spec}` | {_cells(_deviation(export_details(model, to, fit=fit), to, mitsuba))} |"
+
+
+HEAD = ("| uniform: RMS | uniform: largest | with near-peak pairs: RMS | with near-peak pairs: largest | "
+        "near-peak pairs |")
 
 
 def _fresnel_table() -> list[str]:
@@ -120,27 +147,34 @@ def _fresnel_table() -> list[str]:
 
 
 def tables() -> str:
-    head = ["| mapping | model | cosine-weighted relative RMS | largest relative |", "|---|---|---|---|"]
-    out = ["### Mitsuba 3, exact mappings (Mitsuba's own `eval`, float32)", ""] + head
+    head = ["| mapping | model " + HEAD, "|---|---|---|---|---|---|---|"]
+    stamp = (f"Measured {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC on {platform.machine()} "
+             f"Linux, {os.cpu_count()} cores (shared), Python {platform.python_version()}, Mitsuba "
+             f"{_mitsuba_version()}, by `python scripts/export_deviations.py`.")
+    out = [stamp, "", "### Mitsuba 3, exact mappings (Mitsuba's own `eval`, float32)", ""] + head
     out += [_row(label, model, "mitsuba") for label, model in EXACT]
     out += ["", "### Mitsuba 3, approximate mappings (Mitsuba's own `eval`)", ""] + head
     out += [_row(label, model, "mitsuba") for label, model in APPROXIMATE]
     out += ["", "### pbrt-v4 (pbrt-v4's formulas, `brdffit.export.pbrt_reference`)", ""] + head
     out += [_row(label, model, "pbrt") for label, model in PBRT]
     out += ["", "### Shipped synthetic models (`data/synthetic/*.h5` truths)", "",
-            "| file | model | export | cosine-weighted relative RMS | largest relative |", "|---|---|---|---|---|"]
+            "| file | model | export " + HEAD, "|---|---|---|---|---|---|---|---|"]
     for name in ("plastic", "gold", "clay", "brushed-aluminium", "lafortune-retro", "toon"):
         model = _synthetic(name)
         exportable = all(lobe.name in ("lambert", "cook-torrance", "ggx") for lobe in model.lobes)
         for to in ("mitsuba", "pbrt"):
             for fit in ((False, True) if exportable else (True,)):
-                result = export_details(model, to, fit=fit)
-                deviation = (measure(model, lambda wi, wo: evaluate_in_mitsuba(result.text, wi, wo))
-                             if to == "mitsuba" else result.deviation)
+                deviation = _deviation(export_details(model, to, fit=fit), to)
                 how = f"{to}{' --fit' if fit else ''}"
-                out.append(f"| `{name}.h5` | `{model.spec}` | {how} | {deviation.rms:.3g} | {deviation.max_rel:.3g} |")
+                out.append(f"| `{name}.h5` | `{model.spec}` | {how} | {_cells(deviation)} |")
     out += ["", "### Fresnel: Schlick's curve against the exact terms the renderers have", ""] + _fresnel_table()
     return "\n".join(out) + "\n"
+
+
+def _mitsuba_version() -> str:
+    import mitsuba
+
+    return mitsuba.__version__
 
 
 def main(argv=None) -> int:
