@@ -9,7 +9,7 @@ import numpy as np
 from .geometry import LocalPair
 from .models.model import Model, evaluate_pair
 
-__all__ = ["fit_metrics", "metric_sums", "metrics_from_sums", "METRICS"]
+__all__ = ["fit_metrics", "fit_sums", "metric_sums", "metrics_from_sums", "METRICS", "NOISE_ROWS"]
 
 METRICS = ("rmse_abs", "rmse_rel", "ngan", "low")
 
@@ -17,10 +17,30 @@ METRICS = ("rmse_abs", "rmse_rel", "ngan", "low")
 _CHUNK = 65_536
 
 
+# Rows of `metric_sums` after the metrics' numerators and denominators: the sums from which the noise models of
+# `brdffit.fitting.noise` get their maximum-likelihood scales and log-likelihoods (no second pass over the data).
+NOISE_ROWS = ("n", "d2", "log_f", "d2_over_f", "d2_over_f2", "log_weight", "weighted_d2")
+_METRIC_ROWS = 2 * len(METRICS)
+
+# Model values below this (1/sr) count as this in the noise sums: σ ∝ f or σ² ∝ f would be 0 there.
+MODEL_FLOOR = 1e-8
+# Samples with cosθi below this (θi > 81.4°) are left out of the noise sums. The cosine loss hardly weighs them,
+# so their residuals hold the fit's own error where the specular lobes grow fastest (Ward's peak at grazing
+# incidence reached 600 1/sr, fitted 35σ off): absolute noise was taken for signal-dependent in 14 of 150 fits of
+# a synthetic Ward material, 0 of 150 without them.
+NOISE_MIN_COS = 0.15
+# The noise sums are taken over every k-th sample of a call with k = max(1, N // NOISE_SAMPLES): they need a log
+# and two divisions per value, which over every sample added about 80 ms of CPU time to the ~350 ms of the metric
+# sums of a MERL-size fit; over 4,096 samples of each chunk of 65,536 they add under 5 ms (measured with
+# process_time), and 94,000 samples still tell the noise models apart by thousands of log-likelihood units.
+NOISE_SAMPLES = 4096
+
+
 def metric_sums(f_model, values, valid, cos_i, weights, xp=jnp):
-    """Numerators and denominators of the metrics over some samples: ``(8, C)`` (`metrics_from_sums` finishes
-    them). The fits take the same sums from the model values of their last pass, in one program per data shape
-    that every model shares (`brdffit.fitting.normal_equations.accumulate`).
+    """Numerators and denominators of the metrics over some samples, and the noise models' sums: ``(15, C)``
+    (`metrics_from_sums` finishes the metrics, `brdffit.fitting.noise.compare` the noise models). The fits take
+    the same sums from the model values of their last pass, in one program per data shape that every model
+    shares (`brdffit.fitting.normal_equations.accumulate`).
 
     Arguments:
         f_model: model values ``(N, C)``.
@@ -31,7 +51,10 @@ def metric_sums(f_model, values, valid, cos_i, weights, xp=jnp):
         xp: `jax.numpy` (traced) or ``numpy``.
 
     Returns:
-        ``(8, C)``: for each metric of `METRICS` its numerator, then its denominator.
+        ``(15, C)``: for each metric of `METRICS` its numerator, then its denominator; then the rows of
+        `NOISE_ROWS`, over the valid samples with cosθi ≥ `NOISE_MIN_COS` among every k-th (`NOISE_SAMPLES`),
+        with d = f_m − f_d, f̃ = max(f_m, `MODEL_FLOOR`) and ω = cosθi √w (the cosine loss's weight): their count,
+        Σ d², Σ ln f̃, Σ d²/f̃, Σ d²/f̃², Σ ln ω and Σ ω² d².
     """
     f_data = xp.where(valid, values, 0.0)
     c = cos_i[:, None]
@@ -40,13 +63,23 @@ def metric_sums(f_model, values, valid, cos_i, weights, xp=jnp):
     positive = valid & (f_data > 0)
     relative = xp.where(positive, diff / xp.where(positive, f_data, 1.0), 0.0)
     low = xp.where(valid, xp.log1p(xp.maximum(f_model * c, -0.999)) - xp.log1p(f_data * c), 0.0)
-    terms = (diff * diff, valid, relative * relative, positive, w * (diff * c) ** 2, w, w * low * low, w)
+    terms = [diff * diff, valid, relative * relative, positive, w * (diff * c) ** 2, w, w * low * low, w]
+    step = max(1, f_model.shape[0] // NOISE_SAMPLES)
+    sub_valid = valid[::step] & (cos_i[::step] >= NOISE_MIN_COS)[:, None]
+    sub_diff = xp.where(sub_valid, diff[::step], 0.0)
+    floored = xp.where(sub_valid, xp.maximum(f_model[::step], MODEL_FLOOR), 1.0)
+    d2 = sub_diff * sub_diff
+    d2_over_f = d2 / floored
+    omega2 = (xp.maximum(cos_i[::step], NOISE_MIN_COS) ** 2 * weights[::step])[:, None]
+    log_weight = xp.where(sub_valid, 0.5 * xp.log(xp.maximum(omega2, 1e-300)), 0.0)
+    terms += [sub_valid, d2, xp.log(floored), d2_over_f, d2_over_f / floored, log_weight,
+              xp.where(sub_valid, omega2, 0.0) * d2]
     return xp.stack([xp.sum(t, axis=0, dtype=diff.dtype) for t in terms])
 
 
 def metrics_from_sums(sums) -> dict:
     """The metrics from `metric_sums` (added over chunks): name -> NumPy array ``(C,)``."""
-    sums = np.asarray(sums, dtype=float)
+    sums = np.asarray(sums, dtype=float)[:_METRIC_ROWS]
     return dict(zip(METRICS, np.sqrt(sums[0::2] / np.maximum(sums[1::2], 1e-300))))
 
 
@@ -92,6 +125,12 @@ def fit_metrics(model: Model, measurements, pair: LocalPair | None = None) -> di
     Returns:
         name -> NumPy array ``(C,)``.
     """
+    return metrics_from_sums(fit_sums(model, measurements, pair))
+
+
+def fit_sums(model: Model, measurements, pair: LocalPair | None = None) -> np.ndarray:
+    """The `metric_sums` ``(15, C)`` of ``model`` on the valid samples of ``measurements`` (arguments as
+    `fit_metrics`): the metrics and the noise models' sums in one evaluation of the model."""
     if pair is None:
         pair = LocalPair.from_dirs(jnp.asarray(measurements.wi()), jnp.asarray(measurements.wo()))
     extra = pair.wi.shape[0] - measurements.n
@@ -101,5 +140,5 @@ def fit_metrics(model: Model, measurements, pair: LocalPair | None = None) -> di
         values = np.concatenate([values, np.full((extra, values.shape[1]), np.nan)])
         cos_i = np.concatenate([cos_i, np.ones(extra)])
         weights = np.concatenate([np.asarray(weights, dtype=float), np.ones(extra)])
-    return metrics_from_sums(_metrics(model, pair, jnp.asarray(values), jnp.asarray(cos_i),
-                                      jnp.asarray(weights, dtype=float)))
+    return np.asarray(_metrics(model, pair, jnp.asarray(values), jnp.asarray(cos_i),
+                               jnp.asarray(weights, dtype=float)))

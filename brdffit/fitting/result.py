@@ -1,4 +1,5 @@
-"""The result of a fit: parameters, Laplace uncertainties, metrics, information criteria and status."""
+"""The result of a fit: parameters, uncertainties, the noise model, metrics, information criteria, status and
+plausibility."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from ..models.model import Model, evaluate
 from ..models.registry import model_from_dict, model_to_dict
+from .noise import NoiseModel
 from .status import STATUSES
 
 __all__ = ["FitResult", "STATUSES"]
@@ -30,10 +32,14 @@ class FitResult:
     Attributes:
         model: the fitted `Model` (None in ``channel_mode="independent"``, where `models` holds one per channel).
         params: name -> fitted value (as ``model.params``; independent mode stacks shape parameters per channel).
-        stderr: name -> Laplace (Gauss-Newton) standard error in physical units; 0 for fixed parameters.
-        stderr_robust: name -> sandwich (White 1980, HC0) standard error, valid also when the residual variance
+        stderr: name -> standard error in physical units (0 for fixed parameters): the one the residuals' noise
+            model supports (`noise_model`): `stderr_laplace` when the noise is the one the loss weights for,
+            `stderr_robust` otherwise (docs/fitting.md).
+        stderr_laplace: name -> Laplace (Gauss-Newton) standard error, s² (JᵀJ)⁻¹.
+        stderr_robust: name -> sandwich (White 1980, HC1) standard error, valid also when the residual variance
             differs between samples (e.g. relative noise fitted with the cosine loss).
-        covariance: covariance matrix of the free scalar parameters, rows labelled by `labels`.
+        covariance: covariance matrix of the free scalar parameters (the kind `stderr` comes from), rows labelled
+            by `labels`.
         correlation: the matching correlation matrix.
         labels: labels of the covariance rows (``name`` or ``name[i]`` per channel).
         metrics: name -> per-channel array: ``rmse_loss``, ``rmse_abs``, ``rmse_rel``, ``ngan``, ``low``.
@@ -53,6 +59,10 @@ class FitResult:
         noise_variance: the residual variance used to scale the covariance (1 for ``loss="sigma"``).
         strategy: ``"full"``, or the coarse subsample solve followed by the full-data refinement.
         models: one model per channel in independent mode, else ``[model]``.
+        noise_model: the `brdffit.fitting.noise.NoiseModel` chosen from the residuals (None in results written
+            before noise models were compared, and in independent mode).
+        theta_i_max: the data's largest θi (radians), where the energy check of `plausibility` ends its
+            "measured" range (None: unknown).
     """
 
     model: Model | None
@@ -84,6 +94,29 @@ class FitResult:
     noise_variance: float
     strategy: str = "full"
     models: list = dataclasses.field(default_factory=list)
+    stderr_laplace: dict = dataclasses.field(default_factory=dict)
+    noise_model: NoiseModel | None = None
+    theta_i_max: float | None = None
+    _plausibility: object = dataclasses.field(default=None, init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        if not self.stderr_laplace:  # results built without it (older files, hand-made ones) reported Laplace
+            self.stderr_laplace = dict(self.stderr)
+
+    @property
+    def stderr_kind(self) -> str:
+        """``"laplace"`` or ``"sandwich"``: what `stderr` holds."""
+        return self.noise_model.covariance if self.noise_model is not None else "laplace"
+
+    def plausibility(self):
+        """The `brdffit.properties.Plausibility` of the fitted model(s): energy conservation, ks·F, parameters
+        at bounds, each with what to do (computed on first use, then kept)."""
+        if self._plausibility is None:
+            from ..properties import plausibility
+
+            self._plausibility = plausibility(self.models, bounds_hit=self.bounds_hit, stderr=self.stderr,
+                                              theta_max=self.theta_i_max)
+        return self._plausibility
 
     @property
     def converged(self) -> bool:
@@ -102,31 +135,46 @@ class FitResult:
         return np.concatenate([np.asarray(evaluate(m, theta_i, phi_i, theta_o, phi_o)) for m in self.models],
                               axis=-1)
 
-    def summary(self) -> str:
-        """A readable table of parameters (value ± stderr, bounds, fixed), metrics and status."""
+    def summary(self, plausibility: bool = True) -> str:
+        """A readable table of parameters (value ± stderr, the other standard error, bounds, fixed), the noise
+        model, metrics, status, warnings and (unless ``plausibility=False``) the plausibility checks."""
         specs = self.models[0].param_specs
+        kind = self.stderr_kind
+        other_name, other = ("sandwich", self.stderr_robust) if kind == "laplace" else ("laplace",
+                                                                                         self.stderr_laplace)
         lines = [f"model {self.spec}  loss {self.loss}  solver {self.solver}  channel mode {self.channel_mode}",
                  f"status {self.status}  steps {self.steps}  compile {self.compile_time:.2f} s  "
                  f"run {self.run_time:.2f} s  init {self.init_time:.2f} s",
-                 f"{'parameter':<14}{'value':>14}{'± stderr':>14}   bounds"]
-        for label, value, err in zip(*self._flat_entries()):
+                 f"{'parameter':<14}{'value':>14}{'± stderr':>14}{'(' + other_name + ')':>14}   bounds"]
+        others = self._flat_entries(other)[2]
+        for label, value, err, alt in zip(*self._flat_entries(), others):
             name = label.split("[")[0]
             spec = specs[name]
             note = " fixed" if name in self.fixed else (" AT BOUND" if label in self.bounds_hit else "")
-            lines.append(f"{label:<14}{value:>14.6g}{err:>14.3g}   [{spec.lower:g}, {spec.upper:g}] "
+            lines.append(f"{label:<14}{value:>14.6g}{err:>14.3g}{alt:>14.3g}   [{spec.lower:g}, {spec.upper:g}] "
                          f"{spec.unit}{note}")
         lines.append(f"samples {self.n_samples}  free parameters {self.n_params}  dof {self.dof}  "
                      f"AIC {self.aic:.6g}  BIC {self.bic:.6g}")
+        if self.noise_model is not None:
+            lines.extend(self.noise_model.describe(self.loss))
+        elif self.channel_mode == "independent":
+            lines.append("noise: not compared across independent channels; stderr Laplace")
+        else:
+            lines.append("noise: not recorded (a result written before noise models were compared); "
+                         "stderr Laplace")
         for name, values in self.metrics.items():
             lines.append(f"{name:<10}" + "  ".join(f"{v:.4g}" for v in np.atleast_1d(values)))
         lines.extend(f"warning: {w}" for w in self.warnings)
+        if plausibility:
+            lines.extend(self.plausibility().lines())
         return "\n".join(lines)
 
-    def _flat_entries(self):
+    def _flat_entries(self, stderr: dict | None = None):
         labels, values, errors = [], [], []
+        stderr = self.stderr if stderr is None else stderr
         for name, value in self.params.items():
             value = np.asarray(value, dtype=float)
-            err = np.asarray(self.stderr[name], dtype=float)
+            err = np.broadcast_to(np.asarray(stderr.get(name, np.nan), dtype=float), value.shape)
             if value.ndim == 0:
                 labels.append(name), values.append(float(value)), errors.append(float(err))
             else:
@@ -145,6 +193,10 @@ class FitResult:
             "params": {k: _json_value(v) for k, v in self.params.items()},
             "stderr": {k: _json_value(v) for k, v in self.stderr.items()},
             "stderr_robust": {k: _json_value(v) for k, v in self.stderr_robust.items()},
+            "stderr_laplace": {k: _json_value(v) for k, v in self.stderr_laplace.items()},
+            "stderr_kind": self.stderr_kind,
+            "noise_model": None if self.noise_model is None else self.noise_model.to_dict(),
+            "theta_i_max": self.theta_i_max,
             "labels": list(self.labels),
             "covariance": [_json_value(row) for row in np.atleast_2d(self.covariance)] if self.labels else [],
             "correlation": [_json_value(row) for row in np.atleast_2d(self.correlation)] if self.labels else [],
@@ -221,6 +273,10 @@ class FitResult:
             compile_time=d["compile_time"], run_time=d["run_time"], init_time=d["init_time"], loss=d["loss"],
             solver=d["solver"], channel_mode=d["channel_mode"], fixed=list(d["fixed"]), starts=d["starts"],
             noise_variance=float(fix(d["noise_variance"])), strategy=d.get("strategy", "full"), models=models,
+            # Files written before the noise models were compared hold the Laplace standard error as "stderr".
+            stderr_laplace={k: fix(v) for k, v in d.get("stderr_laplace", d["stderr"]).items()},
+            noise_model=NoiseModel.from_dict(d["noise_model"]) if d.get("noise_model") else None,
+            theta_i_max=d.get("theta_i_max"),
         )
 
     @classmethod

@@ -106,8 +106,9 @@ def warnings_of(problem: Problem, labels: list, uncertainty, hit: list, status: 
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = std_sandwich / std
     if np.any(np.isfinite(ratio) & ((ratio > 2.0) | (ratio < 0.5))):
-        warnings.append("Laplace and sandwich standard errors differ by more than 2x: the residuals' variance "
-                        "is not uniform (use loss='sigma' with known sigma, or read stderr_robust)")
+        warnings.append("Laplace and sandwich standard errors differ by more than 2x: the loss's residuals do "
+                        "not have one variance (stderr follows the noise model chosen from the residuals; the "
+                        "summary's noise line says which)")
     if uncertainty.undetermined.any():
         names = [label for label, u in zip(labels, uncertainty.undetermined) if u]
         warnings.append(f"JᵀJ is singular: {', '.join(names)} not determined by these data (stderr = inf)")

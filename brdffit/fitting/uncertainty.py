@@ -1,12 +1,14 @@
-"""Standard errors of a fit: the Laplace (Gauss-Newton) covariance and the heteroscedasticity-consistent sandwich.
+"""Standard errors of a fit: the Laplace (Gauss-Newton) covariance and the heteroscedasticity-consistent sandwich;
+which of them a result reports by default is decided by the noise model its residuals support
+(`brdffit.fitting.noise`).
 
 Both come from the residual Jacobian J in the physical parameters at the optimum, over every free parameter
 (the projected amplitudes included: at the optimum the joint Gauss-Newton covariance is that of the separable
 problem, Golub & Pereyra 1973, section 5):
 
 - Laplace: s² (JᵀJ)⁻¹ with s² = Σr²/dof (1 for ``loss="sigma"``, whose residuals are already in units of σ);
-- sandwich (White 1980, HC0): (JᵀJ)⁻¹ Jᵀ diag(r²) J (JᵀJ)⁻¹, valid when the residuals' variance differs
-  between samples.
+- sandwich (White 1980, with MacKinnon & White 1985's HC1 factor n/(n − p) for the degrees of freedom the fit
+  used): n/(n − p) (JᵀJ)⁻¹ Jᵀ diag(r²) J (JᵀJ)⁻¹, valid when the residuals' variance differs between samples.
 
 Directions of JᵀJ with eigenvalues below 1e-12 of the largest are undetermined by the data: parameters with a
 component along them get infinite variance.
@@ -45,7 +47,8 @@ class Uncertainty:
     """The covariances and what derives from them.
 
     Attributes:
-        covariance, sandwich: ``(P, P)`` over the free scalars (`Layout.flatten` order).
+        covariance, sandwich: the Laplace and sandwich covariances ``(P, P)`` over the free scalars
+            (`Layout.flatten` order).
         stderr, stderr_robust: their square-rooted diagonals.
         correlation: the Laplace correlation matrix.
         variance: the noise variance s².
@@ -64,6 +67,14 @@ class Uncertainty:
             self.stderr = np.sqrt(np.diag(self.covariance))
             self.stderr_robust = np.sqrt(np.diag(self.sandwich))
             self.correlation = self.covariance / np.outer(self.stderr, self.stderr)
+
+    def chosen(self, kind: str):
+        """``(covariance, correlation, stderr)`` of ``kind``: ``"laplace"`` or ``"sandwich"``."""
+        if kind == "laplace":
+            return self.covariance, self.correlation, self.stderr
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.sandwich, self.sandwich / np.outer(self.stderr_robust, self.stderr_robust), \
+                self.stderr_robust
 
 
 def covariances(jtj, meat, rss: float, loss: str, n_valid: int):
@@ -87,7 +98,7 @@ def covariances(jtj, meat, rss: float, loss: str, n_valid: int):
     good = eigval > 1e-12 * max(eigval.max(initial=0.0), 1e-300)
     inv = (eigvec[:, good] / eigval[good]) @ eigvec[:, good].T
     cov = variance * inv
-    sandwich = inv @ np.nan_to_num(meat) @ inv
+    sandwich = (max(n_valid, 1) / dof) * (inv @ np.nan_to_num(meat) @ inv)
     undetermined = np.any(np.abs(eigvec[:, ~good]) > 1e-6, axis=1) if (~good).any() else np.zeros(p, bool)
     if not finite:
         undetermined = np.ones(p, bool)
