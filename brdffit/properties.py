@@ -54,6 +54,11 @@ __all__ = [
     "RECIPROCITY_TOL",
     "ISOTROPY_TOL",
     "direction_pairs",
+    "scan_albedo",
+    "plausibility",
+    "Plausibility",
+    "Check",
+    "PLAUSIBILITY_THETA_I",
 ]
 
 # Gauss-Legendre nodes in θh per half-vector azimuth, and azimuth nodes per half circle.
@@ -82,6 +87,16 @@ def _albedo_chunk(model: Model, theta_i, phi_i, t, wt, u, wu, centre):
     theta_i, phi_i have shape (B,); t, wt the θh rule on [0, 1], shape (T,); u, wu, centre the azimuth nodes on
     [−1, 1] with the centre (π/2 or 3π/2) of their half circle, shape (S,). Returns (B, C).
     """
+    wi, wo, weight = _albedo_nodes(theta_i, phi_i, t, wt, u, wu, centre)
+    f = evaluate_dirs(model, jnp.broadcast_to(wi, wo.shape), wo)  # (B, S, T, C)
+    albedo = jnp.einsum("bst,bstc->bc", weight, f)
+    # No light arrives from at or below the horizon: the albedo is zero there (f_r needs cosθi > 0).
+    return jnp.where((jnp.cos(theta_i) > 1e-12)[:, None], albedo, 0.0)
+
+
+def _albedo_nodes(theta_i, phi_i, t, wt, u, wu, centre):
+    """The quadrature of `_albedo_chunk` (arguments the same): ``(wi (B, 1, 1, 3), wo (B, S, T, 3), weight
+    (B, S, T))`` with a(ωi) = Σ weight · f_r(ωi, wo)."""
     ti = theta_i[:, None, None]  # (B, 1, 1): chunk × azimuth node × θh node
     cos_i, sin_i = jnp.cos(ti), jnp.sin(ti)
     sigma = jnp.clip(cos_i / jnp.maximum(sin_i, _SIGMA_MIN), _SIGMA_MIN, _SIGMA_MAX)
@@ -107,10 +122,11 @@ def _albedo_chunk(model: Model, theta_i, phi_i, t, wt, u, wu, centre):
 
     # dωo = 4 (ωi·h) sinθh dθh dφ, times the cosine cosθo of the albedo integrand.
     weight = w_phi * w_theta * jnp.sin(theta_h) * 4.0 * jnp.maximum(i_dot_h, 0.0) * jnp.maximum(cos_o, 0.0)
-    f = evaluate_dirs(model, jnp.broadcast_to(wi, wo.shape), wo)  # (B, S, T, C)
-    albedo = jnp.einsum("bst,bstc->bc", weight, f)
-    # No light arrives from at or below the horizon: the albedo is zero there (f_r needs cosθi > 0).
-    return jnp.where((jnp.cos(theta_i) > 1e-12)[:, None], albedo, 0.0)
+    return wi, wo, weight
+
+
+# The nodes alone, compiled once per shape for every model (`scan_albedo`).
+_albedo_nodes_jit = jax.jit(_albedo_nodes)
 
 
 def _gauss_legendre(n: int, lower: float, upper: float):
@@ -501,3 +517,218 @@ def check(model: Model, *, tol: float = 1e-3, n: int = DEFAULT_PAIRS, seed: int 
         tol=float(tol),
         declared_reciprocal=bool(model.reciprocal),
     )
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Plausibility of a fitted model
+
+# The incidence directions of `scan_albedo`: θi 0 to 85° in 5° steps, then 87.5° and 89°, each at φi = 0 and 90°
+# (an anisotropic lobe of the library is symmetric about those planes and takes its extremes near them).
+PLAUSIBILITY_THETA_I = np.deg2rad(np.r_[np.arange(0.0, 86.0, 5.0), 87.5, 89.0])
+PLAUSIBILITY_PHI_I = np.deg2rad([0.0, 90.0])
+# 2 n² half vectors per direction: within 3e-4 of the albedo at 128 for every lobe tried, Cook-Torrance m = 0.02
+# (the sharpest) included.
+PLAUSIBILITY_RESOLUTION = 64
+# An albedo or a specular factor counts as above 1 beyond this allowance (the quadrature's accuracy) and, for a
+# fitted amplitude, beyond this many of its standard errors.
+PLAUSIBILITY_TOL = 1e-3
+PLAUSIBILITY_SIGMAS = 2.0
+
+
+def scan_albedo(model: Model, theta_i=PLAUSIBILITY_THETA_I, phi_i=PLAUSIBILITY_PHI_I,
+                resolution: int = PLAUSIBILITY_RESOLUTION) -> np.ndarray:
+    """The directional albedo on a grid of incidence directions, quickly: ``(len(theta_i), len(phi_i), C)``.
+
+    The quadrature of `directional_albedo`, with its nodes compiled once for every model and the model evaluated
+    by `brdffit.evaluate_dirs` (compiled once per model structure; the whole quadrature compiled per model took
+    4-8 s on the project's CPU, this 1 s). Summaries and reports use it (`plausibility`).
+    """
+    theta, phi = (np.asarray(x, dtype=float).reshape(-1) for x in np.meshgrid(theta_i, phi_i, indexing="ij"))
+    t, wt = _gauss_legendre(resolution, 0.0, 1.0)
+    u_half, wu_half = _gauss_legendre(resolution, -1.0, 1.0)
+    u, wu = np.concatenate([u_half, u_half]), np.concatenate([wu_half, wu_half])
+    centre = np.repeat([0.5 * math.pi, 1.5 * math.pi], resolution)
+    wi, wo, weight = _albedo_nodes_jit(*(jnp.asarray(x) for x in (theta, phi, t, wt, u, wu, centre)))
+    f = np.asarray(evaluate_dirs(model, jnp.broadcast_to(wi, wo.shape), wo))
+    albedo = np.einsum("bst,bstc->bc", np.asarray(weight), f)
+    albedo[np.cos(theta) <= 1e-12] = 0.0
+    return albedo.reshape(np.size(theta_i), np.size(phi_i), model.channels)
+
+
+@dataclasses.dataclass(frozen=True)
+class Check:
+    """One plausibility check of a fitted model.
+
+    Attributes:
+        name: ``"energy"``, ``"specular"`` or ``"bounds"``.
+        level: ``"ok"``, ``"caution"`` (holds where the data are, not beyond them) or ``"implausible"``.
+        message: what was measured, with its numbers.
+        advice: what the user can do (empty when ok).
+        value: the number judged (the largest albedo, the largest ks·F, the count of parameters at a bound).
+    """
+
+    name: str
+    level: str
+    message: str
+    advice: str = ""
+    value: float = float("nan")
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "level": self.level, "message": self.message, "advice": self.advice,
+                "value": self.value if math.isfinite(self.value) else None}
+
+
+@dataclasses.dataclass(frozen=True)
+class Plausibility:
+    """The plausibility checks of a fit (`plausibility`): ``checks`` in the order energy, specular, bounds."""
+
+    checks: tuple
+
+    @property
+    def ok(self) -> bool:
+        """True if no check is ``implausible``."""
+        return all(c.level != "implausible" for c in self.checks)
+
+    def __getitem__(self, name: str) -> Check:
+        return next(c for c in self.checks if c.name == name)
+
+    def lines(self) -> list[str]:
+        """One line per check (``plausible``/``CAUTION``/``IMPLAUSIBLE``: message), then its advice."""
+        tag = {"ok": "plausible", "caution": "CAUTION", "implausible": "IMPLAUSIBLE"}
+        out = []
+        for c in self.checks:
+            out.append(f"{tag[c.level]} {c.name}: {c.message}")
+            if c.advice:
+                out.append(f"  what to do: {c.advice}")
+        return out
+
+    def to_dict(self) -> dict:
+        return {"ok": self.ok, "checks": [c.to_dict() for c in self.checks]}
+
+
+def _energy(models, theta_max) -> Check:
+    worst, where, inside = -math.inf, (0.0, 0.0, 0), -math.inf
+    for k, model in enumerate(models):
+        albedo = scan_albedo(model)  # (T, P, C)
+        i, j, c = np.unravel_index(int(np.argmax(albedo)), albedo.shape)
+        if albedo[i, j, c] > worst:
+            # φi is worth naming only where the albedo depends on it (an anisotropic model, off the normal).
+            azimuthal = np.ptp(albedo[i, :, c]) > 1e-4 * max(abs(float(albedo[i, j, c])), 1e-12)
+            worst = float(albedo[i, j, c])
+            where = (PLAUSIBILITY_THETA_I[i], PLAUSIBILITY_PHI_I[j] if azimuthal else 0.0, c + k)
+        measured = PLAUSIBILITY_THETA_I <= theta_max + 1e-9
+        if measured.any():
+            inside = max(inside, float(albedo[measured].max()))
+    theta, phi, channel = where
+    at = f"θi = {math.degrees(theta):.1f}°" + (f", φi = {math.degrees(phi):.0f}°" if phi else "")
+    limit = 1.0 + PLAUSIBILITY_TOL
+    if worst <= limit:
+        return Check("energy", "ok", f"max albedo {worst:.4g} at {at} (channel {channel}) ≤ 1: energy conserving",
+                     value=worst)
+    cause = ("the data may be scaled wrong (brdffit wants f_r in 1/sr without the cosine: a reflectance factor is "
+             "π f_r), or the model makes up for a missing lobe or a Fresnel rise it lacks with too large an "
+             "amplitude")
+    if inside <= limit:
+        return Check("energy", "caution",
+                     f"max albedo {inside:.4g} ≤ 1 over the data's θi ≤ {math.degrees(theta_max):.0f}°, but "
+                     f"{worst:.4g} at {at} (channel {channel}) beyond them: the fitted lobes, uncoupled, reflect "
+                     "more than 1 towards grazing",
+                     "trust the model only within the measured angles, or choose a model whose Fresnel or "
+                     "energy coupling limits it at grazing (compare candidates with brdffit.select)", worst)
+    return Check("energy", "implausible",
+                 f"max albedo {worst:.4g} at {at} (channel {channel}) > 1: the fit reflects more light than it "
+                 "receives",
+                 f"{cause}; check the data's units, fix f0 or bound the amplitude, or choose another model "
+                 "(brdffit.select)", worst)
+
+
+def _specular(models, stderr) -> Check:
+    # Every Fresnel factor of the library reaches 1 at grazing (Schlick, dielectric and conductor alike) and
+    # lobes without one have F = 1, so the largest ks·F over the angles is ks itself: no evaluation needed.
+    worst, label, err = -math.inf, "", 0.0
+    for k, model in enumerate(models):
+        for slot in model.layout.slots:
+            spec = slot.spec
+            if not (spec.linear and spec.colour and math.isinf(spec.upper)):
+                continue  # only unbounded amplitudes can exceed 1 (ρd, rs, the toon tones are declared ≤ 1)
+            amplitude = np.asarray(model.params[slot.name], dtype=float).reshape(-1)
+            c = int(np.argmax(amplitude))
+            if amplitude[c] > worst:
+                e = np.asarray((stderr or {}).get(slot.name, 0.0), dtype=float).reshape(-1)
+                e = float(e[min(c, e.size - 1)]) if e.size else 0.0
+                worst, err = float(amplitude[c]), (e if math.isfinite(e) else 0.0)
+                fresnel = "·F" if hasattr(model.lobes[slot.lobe], "fresnel_term") else ""
+                label = (f"{slot.name}[{c}]" if slot.shape else slot.name) + fresnel
+                label += f"@{k}" if len(models) > 1 else ""
+    if not math.isfinite(worst):
+        return Check("specular", "ok", "no unbounded specular amplitude")
+    if worst <= 1.0 + PLAUSIBILITY_TOL + PLAUSIBILITY_SIGMAS * err:
+        within = f" within {PLAUSIBILITY_SIGMAS:g} standard errors" if worst > 1.0 + PLAUSIBILITY_TOL else ""
+        return Check("specular", "ok", f"largest ks·F {worst:.4g} ({label}) ≤ 1{within}", value=worst)
+    return Check("specular", "implausible",
+                 f"largest ks·F {worst:.4g} ({label}, ± {err:.2g}) > 1: the specular term reflects more than the "
+                 "light it receives where its Fresnel factor reaches 1 (towards grazing)",
+                 "ks trades off against f0/η or the roughness over the measured angles: fix f0 (0.04 for "
+                 "dielectrics), use fresnel='dielectric', or check the data's scale", worst)
+
+
+def _bound_advice(label: str, spec, value: float) -> str:
+    lower = math.isfinite(spec.lower) and abs(value - spec.lower) <= abs(value - spec.upper)
+    if spec.linear and lower:
+        return f"{label} = {value:.3g}: its lobe adds nothing there; a model without that lobe fits as well"
+    if spec.name.startswith("rho") and not lower:
+        return (f"{label} = {value:.3g} at 1: brighter than any passive diffuse surface; check the data's scale "
+                "or add a lobe for the light the diffuse term takes")
+    if spec.name in ("f0",) or spec.name.startswith(("eta", "k")) and not spec.linear:
+        return (f"{label} = {value:.3g} on its bound: the data cannot separate ks from the Fresnel term; fix it "
+                "(fixed={'f0': 0.04} for dielectrics) or use fresnel='dielectric'")
+    if spec.scale and lower:
+        return (f"{label} = {value:.3g} at its lower bound: sharper than these data resolve; sample the peak "
+                "more densely or accept a mirror-like lobe")
+    return (f"{label} = {value:.3g} on its bound [{spec.lower:g}, {spec.upper:g}]: the optimum lies outside the "
+            "model's range; this model may not describe the material (compare others with brdffit.select)")
+
+
+def _bounds(models, bounds_hit) -> Check:
+    if not bounds_hit:
+        return Check("bounds", "ok", "no parameter at a bound", value=0.0)
+    advice = []
+    for entry in bounds_hit:
+        label, _, channel = entry.partition("@")
+        model = models[int(channel)] if channel and int(channel) < len(models) else models[0]
+        name, _, index = label.partition("[")
+        try:
+            spec = model.param_specs[name]
+        except KeyError:
+            advice.append(f"{entry} on a bound")
+            continue
+        value = np.asarray(model.params[name], dtype=float).reshape(-1)
+        value = float(value[int(index[:-1])] if index else value[0])
+        advice.append(_bound_advice(entry, spec, value))
+    return Check("bounds", "caution", f"{len(bounds_hit)} at a bound: {', '.join(bounds_hit)}", "; ".join(advice),
+                 float(len(bounds_hit)))
+
+
+def plausibility(models, *, bounds_hit=(), stderr=None, theta_max: float | None = None) -> Plausibility:
+    """Whether a fitted model is physically plausible, and what to do where it is not.
+
+    - energy: the largest directional albedo (`scan_albedo`, θi 0-89°) must not exceed 1 (+ 1e-3); above 1
+      only beyond the data's largest θi it is a caution (the lobes of a sum are not energy-coupled, so Lambert +
+      a Fresnel lobe passes 1 towards grazing), within them it is implausible;
+    - specular: every unbounded amplitude (ks, ks_j) times the largest value of its lobe's Fresnel factor over
+      the angles must not exceed 1 by more than `PLAUSIBILITY_SIGMAS` standard errors; every Fresnel factor of the
+      library reaches 1 at grazing (and lobes without one have F = 1), so that largest ks·F is ks;
+    - bounds: parameters that ended on a bound, each with a line of advice.
+
+    Arguments:
+        models: the fitted `Model` (or a list: one per channel of an independent fit).
+        bounds_hit: labels at a bound (`FitResult.bounds_hit`).
+        stderr: name -> standard error (`FitResult.stderr`), to judge ks·F against its uncertainty.
+        theta_max: the data's largest θi (radians); None: every θi counts as measured.
+
+    Returns:
+        A `Plausibility`.
+    """
+    models = [models] if isinstance(models, Model) else list(models)
+    theta_max = PLAUSIBILITY_THETA_I[-1] if theta_max is None else float(theta_max)
+    return Plausibility((_energy(models, theta_max), _specular(models, stderr), _bounds(models, bounds_hit)))
