@@ -29,6 +29,9 @@ from .progress import Progress
 
 __all__ = ["select", "Selection", "DEFAULT_CANDIDATES", "CRITERIA", "DEFAULT_MARGIN"]
 
+# The standard candidates (docs/model-selection.md says why each is here): diffuse alone, one specular lobe of
+# each family, GGX with a dielectric's Fresnel term (η bounds ks·F where the data cannot separate ks from f0),
+# two GGX lobes with one Fresnel term, and Lafortune lobes (forward, off-specular or retro-reflective).
 DEFAULT_CANDIDATES = (
     "lambert",
     "oren-nayar",
@@ -36,7 +39,9 @@ DEFAULT_CANDIDATES = (
     "lambert+ward",
     "lambert+cook-torrance",
     "lambert+ggx",
+    "lambert+ggx(fresnel=dielectric)",
     "lambert+ashikhmin-shirley",
+    "lambert+ggx+ggx(share=f0)",
     "lambert+lafortune",
     "lambert+lafortune(lobes=2)",
     "lambert+lafortune(lobes=3)",
@@ -394,16 +399,23 @@ def _screened_rows(candidates, measurements, screen_data, held, criterion, margi
     finite = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r[criterion])]
     if not finite:
         return rows
-    best = min(r[criterion] for r in finite)
-    for row in finite:
-        ratio = n_values / max(screened[row["spec"]].n_samples, 1)
-        if row[criterion] - SCREEN_SLACK * row["n_params"] * ratio > best + margin:
-            continue  # cannot come within the margin of the best, even fitted to all the data
-        bar.update(len(rows) - 1, f"fitting {row['spec']} to all {measurements.n} samples")
-        result = fit(measurements, row["spec"], init=screened[row["spec"]].model, **options)
-        done[row["spec"]] = result
-        row.update(_full_fit_fields(result))
-    return rows
+    refitted: set[str] = set()
+    while True:
+        # The best that can be chosen: a converged fit's score (a refit that ended unconverged is no longer the
+        # bar, and the candidates it had ruled out are measured against the next best).
+        eligible = [r for r in finite if r["status"] in _CONVERGED] or finite
+        best = min(r[criterion] for r in eligible)
+        todo = [row for row in finite if row["spec"] not in refitted
+                and row[criterion] - SCREEN_SLACK * row["n_params"] * n_values
+                / max(screened[row["spec"]].n_samples, 1) <= best + margin]
+        if not todo:  # the others cannot come within the margin of the best, even fitted to all the data
+            return rows
+        for row in todo:
+            bar.update(len(rows) - 1, f"fitting {row['spec']} to all {measurements.n} samples")
+            result = fit(measurements, row["spec"], init=screened[row["spec"]].model, **options)
+            done[row["spec"]] = result
+            refitted.add(row["spec"])
+            row.update(_full_fit_fields(result))
 
 
 def _scene_measurements(scene, values, channels):

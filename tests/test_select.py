@@ -163,3 +163,65 @@ def test_an_unconverged_candidate_is_not_chosen_and_the_verdict_says_why():
     assert selection.chosen == "lambert"
     assert rows["lambert+blinn-phong"]["verdict"] == "not eligible: its fit ended max-steps"
     assert "lambert+blinn-phong: not eligible: its fit ended max-steps" in selection.summary()
+
+
+def test_two_specular_lobes_select_two_ggx_lobes_sharing_fresnel_and_recover_them():
+    truth = models.get("lambert+ggx+ggx(share=f0)", rho_d=[0.3, 0.2, 0.1], ks=[0.5, 0.4, 0.3], alpha=0.06,
+                       ks_2=[0.3, 0.3, 0.3], alpha_2=0.3, f0=0.04)
+    data = synth.generate(truth, pattern="half-diff", n=1500, noise="relative:0.01", seed=5)
+    candidates = ["lambert+ggx", "lambert+ggx+ggx(share=f0)", "lambert+lafortune(lobes=2)"]
+    selection = select(data, candidates, criterion="bic", loss="sigma")
+    assert selection.chosen == "lambert+ggx+ggx(share=f0)", selection.summary()
+    result = selection.result
+    assert result.converged, result.summary()
+    # The two lobes in either order: (alpha, ks) of the sharp and of the wide one.
+    lobes = sorted([(float(result.params["alpha"]), np.asarray(result.params["ks"])),
+                    (float(result.params["alpha_2"]), np.asarray(result.params["ks_2"]))], key=lambda lobe: lobe[0])
+    assert lobes[0][0] == pytest.approx(0.06, rel=0.02) and lobes[1][0] == pytest.approx(0.3, rel=0.02)
+    np.testing.assert_allclose(lobes[0][1], [0.5, 0.4, 0.3], rtol=0.02)
+    np.testing.assert_allclose(lobes[1][1], [0.3, 0.3, 0.3], rtol=0.02)
+    assert float(result.params["f0"]) == pytest.approx(0.04, rel=0.02)
+
+
+def test_retro_reflective_data_select_a_retro_lobe():
+    # Lambert plus a Lafortune lobe around ωi (cxy = cz: the retro-reflection direction).
+    truth = models.get("lambert+lafortune", rho_d=[0.3, 0.25, 0.2], ks_1=[0.4, 0.4, 0.4], cxy_1=1.0, n_1=40.0)
+    data = synth.generate(truth, pattern="half-diff", n=1000, noise="relative:0.01", seed=6)
+    candidates = ["lambert", "lambert+ggx", "lambert+ggx+ggx(share=f0)", "lambert+lafortune"]
+    selection = select(data, candidates, criterion="bic", loss="sigma")
+    assert selection.chosen == "lambert+lafortune", selection.summary()
+    result = selection.result
+    assert result.converged and float(result.params["cxy_1"]) == pytest.approx(1.0, rel=0.02), result.summary()
+    assert float(result.params["n_1"]) == pytest.approx(40.0, rel=0.02)
+
+
+RETRO = ROOT.parent / "shared" / "data" / "alta-cea-retro" / "retro-gray-tape.dat"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not RETRO.exists(), reason=f"the ALTA retro-reflector is not at {RETRO} (../shared/data)")
+def test_the_real_retro_reflector_gets_a_converged_retro_lobe():
+    """The CEA retro-reflective tape (../shared/data/README.md): the default selection chooses a converged model
+    with a Lafortune lobe around ωi (cxy_j ≈ cz_j) that carries the measured retro peak."""
+    from brdffit.geometry import spherical_to_vector
+    from brdffit.models.model import evaluate_dirs
+
+    data = io.load(RETRO)
+    selection = select(data)
+    result = selection.result
+    assert result.converged and result.n_samples == data.n, selection.summary()
+    model = result.model
+    lafortune = [j for j, lobe in enumerate(model.lobes) if lobe.name == "lafortune"]
+    assert lafortune, selection.summary()
+    local = model.layout.local_params(model.params, lafortune[0])
+    retro = [k for k in range(1, model.lobes[lafortune[0]].lobes + 1)
+             if abs(float(local[f"cxy_{k}"]) / float(local[f"cz_{k}"]) - 1.0) < 0.02
+             and float(np.max(local[f"ks_{k}"])) > 0]
+    assert retro, result.summary()
+    # At 15 and 30 degrees of incidence the model reaches the measured retro peak within a factor 1.5.
+    for theta in (15.0, 30.0):
+        rows = np.isclose(np.degrees(data.theta_i), theta, atol=0.5)
+        wi = spherical_to_vector(np.radians(theta), 0.0)
+        measured = float(np.max(data.values[rows]))
+        fitted = float(np.asarray(evaluate_dirs(model, wi[None], wi[None]))[0, 0])
+        assert 1 / 1.5 < fitted / measured < 1.5, (theta, fitted, measured, selection.summary())
