@@ -364,3 +364,16 @@ def test_killed_worker_loses_no_result(scheduler, local_run, database, serial, c
     assert _same(read_results(out)) == _same(rows)
     undisturbed, _ = local_run  # the same batches on the LocalCluster: the same numbers, bit for bit
     assert _same({**row, "time": 0} for row in rows) == _same({**row, "time": 0} for row in undisturbed)
+
+
+def test_batches_are_cut_evenly_over_the_workers():
+    from brdffit.distributed.database import cut
+
+    sizes = lambda items, batch, workers: [len(group) for group in cut(items, batch, workers)]  # noqa: E731
+    assert sizes(list(range(200)), 32, 2) == [25] * 8  # not 6 x 32 + 8: 7 tasks on 2 workers end 4 against 3
+    assert sizes(list(range(1000)), 32, 2) == [32] * 8 + [31] * 24
+    assert sizes(list(range(1000)), 32, 1) == [32] * 8 + [31] * 24  # even sizes on one worker too
+    assert sizes(list(range(100)), 32, 3) == [17] * 4 + [16] * 2
+    assert sizes(list(range(3)), 32, 4) == [1, 1, 1] and cut([], 32, 2) == []
+    assert [x for group in cut(list(range(77)), 5, 3) for x in group] == list(range(77))  # the order is kept
+    assert max(sizes(list(range(77)), 5, 3)) <= 5
