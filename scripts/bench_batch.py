@@ -4,8 +4,11 @@ against the number of workers, after compilation (docs/benchmarks.md).
 The database: ``--materials`` files (default 1,000) of ``--samples`` uniform samples (default 2,000) of Lambert +
 GGX materials with 1% relative noise, each its own brdffit HDF5 file. For each worker count a LocalCluster of
 single-threaded worker processes is started, every worker compiles on a warm-up run of one batch per worker (its
-rows are discarded), then the whole database is fitted into a CSV table; the wall time of that run is the figure.
-A serial baseline fits ``--serial`` of the materials one by one with `brdffit.fit` in this process.
+rows are discarded), then the whole database is fitted into a CSV table; the wall time of that run is the figure,
+beside the time of the ``fit_many`` calls a worker (the rows' ``time`` summed, over the workers): what the wall
+time holds beyond it is reading, rows, scheduling, idle workers and the table.
+A serial baseline fits ``--serial`` of the materials one by one with `brdffit.fit` in this process, which then
+measures the cost of reading a file (`read_cost`).
 
     python scripts/bench_batch.py [--materials 1000] [--samples 2000] [--workers 1,2] [--batch 32] [--serial 50]
 """
@@ -55,7 +58,7 @@ def run(paths: list[str], workers: int, batch: int, cache: str, out: Path) -> di
     converged = sum(row["status"] in ("converged", "converged-at-bound") for row in rows)
     return {"workers": workers, "warm-up": warm, "wall": wall, "throughput": len(rows) / wall,
             "median time": statistics.median(row["time"] for row in rows), "converged": converged,
-            "rows": len(rows)}
+            "rows": len(rows), "fitting": sum(row["time"] for row in rows) / workers}
 
 
 def serial(paths: list[str]) -> dict:
@@ -71,6 +74,26 @@ def serial(paths: list[str]) -> dict:
         brdffit.fit(m, SPEC)
         times.append(time.perf_counter() - start)
     return {"fits": len(paths), "median": statistics.median(times), "throughput": 1 / statistics.median(times)}
+
+
+def read_cost(paths: list[str], batch: int) -> dict:
+    """Seconds a file of reading (in this process, with JAX loaded and a fit compiled, as on a worker): `io.load`
+    one file after another (one inspecting child a file) and `read_sources` a batch at a time (one child a batch,
+    as a task reads), the best of three passes over the same files."""
+    from brdffit import io
+    from brdffit.distributed.sources import Source, read_sources
+
+    def best(read) -> float:
+        times = []
+        for _ in range(3):
+            start = time.perf_counter()
+            read()
+            times.append(time.perf_counter() - start)
+        return min(times) / len(paths)
+
+    return {"load": best(lambda: [io.load(path) for path in paths]),
+            "batch": best(lambda: [read_sources([Source(p) for p in paths[i:i + batch]])
+                                   for i in range(0, len(paths), batch)])}
 
 
 def main() -> None:
@@ -92,13 +115,17 @@ def main() -> None:
             base = serial(paths[:args.serial])
             print(f"serial fit(): median {base['median']:.3f} s a material over {base['fits']} "
                   f"({base['throughput']:.2f} materials/s)")
+            read = read_cost(paths[:2 * args.batch], args.batch)
+            print(f"reading a file: io.load {1e3 * read['load']:.1f} ms, a task's batch of {args.batch} "
+                  f"{1e3 * read['batch']:.1f} ms")
         print("| workers | warm-up (compiles) | wall, all materials | materials/s | median time a material "
-              "(its share of its batch) | converged |")
-        print("|---|---|---|---|---|---|")
+              "(its share of its batch) | fit_many a worker (wall beyond it) | converged |")
+        print("|---|---|---|---|---|---|---|")
         for workers in (int(w) for w in args.workers.split(",")):
             r = run(paths, workers, args.batch, cache, tmp / f"results-{workers}.csv")
             print(f"| {r['workers']} | {r['warm-up']:.1f} s | {r['wall']:.1f} s | {r['throughput']:.1f} | "
-                  f"{r['median time']:.3f} s | {r['converged']}/{r['rows']} |", flush=True)
+                  f"{r['median time']:.3f} s | {r['fitting']:.1f} s ({r['wall'] - r['fitting']:.1f} s) | "
+                  f"{r['converged']}/{r['rows']} |", flush=True)
 
 
 if __name__ == "__main__":
