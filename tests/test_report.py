@@ -80,15 +80,21 @@ def test_markdown_has_parameter_table_and_run_info(fitted, full_report):
     assert len(rows) == 1
     cells = [c.strip() for c in rows[0].strip("|").split("|")]
     assert cells[1] == format_value(result.params["alpha"])
+    # the default standard error, then the other kind (loss="sigma" with the σ the noise used: the residuals
+    # choose the stated σ, so Laplace, then the sandwich)
+    assert result.noise_model.name == "sigma" and result.stderr_kind == "laplace"
+    assert "± stderr (Laplace) | ± sandwich" in md
     assert cells[2] == format_value(result.stderr["alpha"], 3)
-    assert cells[3] == format_value(post.summary["alpha"]["median"])
+    assert cells[3] == format_value(result.stderr_robust["alpha"], 3)
+    assert cells[4] == format_value(post.summary["alpha"]["median"])
     s = post.summary["alpha"]
-    assert cells[4] == f"[{format_value(s['q16'])}, {format_value(s['q84'])}]"
-    assert cells[5] == f"[{format_value(s['q2.5'])}, {format_value(s['q97.5'])}]"
+    assert cells[5] == f"[{format_value(s['q16'])}, {format_value(s['q84'])}]"
+    assert cells[6] == f"[{format_value(s['q2.5'])}, {format_value(s['q97.5'])}]"
     # every parameter of the model has a row, and the noise scales of the posterior too
     for label in post.names:
         assert f"| {label} |" in md
-    for name in ("## Fit metrics", "rmse_rel", "## Warnings", "## Run information", "brdffit: ", "jax: ",
+    for name in ("## Noise model", "## Plausibility", "## Fit metrics", "rmse_rel", "## Warnings",
+                 "## Run information", "brdffit: ", "jax: ",
                  "python: ", "seed: 0", "command: pytest", "date: "):
         assert name in md
     # the chain is short, so the posterior warns, and the warning is in the report

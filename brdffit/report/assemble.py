@@ -43,22 +43,34 @@ def _flat(params: dict) -> list[tuple[str, str, float]]:
     return rows
 
 
-def _flat_stderr(fit_result) -> dict:
-    return {label: v for label, _, v in _flat(fit_result.stderr)}
+def _flat_stderr(stderr: dict) -> dict:
+    return {label: v for label, _, v in _flat(stderr)}
+
+
+_KIND = {"laplace": "Laplace", "sandwich": "sandwich"}
+
+
+def _other_stderr(fit_result) -> tuple[str, dict]:
+    """The standard error the result does not report by default, with its name."""
+    if fit_result.stderr_kind == "laplace":
+        return "sandwich", fit_result.stderr_robust
+    return "laplace", fit_result.stderr_laplace
 
 
 # --------------------------------------------------------------------------------------------- content
 def _parameter_table(fit_result, posterior):
     specs = fit_result.models[0].param_specs
-    errors = _flat_stderr(fit_result)
-    headers = ["parameter", "least squares", "Laplace ±"]
+    errors = _flat_stderr(fit_result.stderr)
+    other_kind, other = _other_stderr(fit_result)
+    others = _flat_stderr(other)
+    headers = ["parameter", "least squares", f"± stderr ({_KIND[fit_result.stderr_kind]})", f"± {_KIND[other_kind]}"]
     if posterior is not None:
         headers += ["posterior median", "68 % interval", "95 % interval"]
     headers += ["unit", "bounds", "note"]
     rows = []
     for label, name, value in _flat(fit_result.params):
         spec = specs[name]
-        row = [label, format_value(value), format_value(errors.get(label), 3)]
+        row = [label, format_value(value), format_value(errors.get(label), 3), format_value(others.get(label), 3)]
         if posterior is not None:
             s = posterior.summary.get(label)
             if s is None:
@@ -73,7 +85,7 @@ def _parameter_table(fit_result, posterior):
         for label in posterior.names:
             if label.startswith("noise_sigma"):
                 s = posterior.summary[label]
-                rows.append([label, "–", "–", format_value(s["median"]),
+                rows.append([label, "–", "–", "–", format_value(s["median"]),
                              f"[{format_value(s['q16'])}, {format_value(s['q84'])}]",
                              f"[{format_value(s['q2.5'])}, {format_value(s['q97.5'])}]",
                              f"{fit_result.loss}-loss residual units", "(0, inf)", "noise scale"])
@@ -116,6 +128,36 @@ def _selection_table(selection):
     return ["candidate"] + keys[1:], rows
 
 
+def _noise_blocks(fit_result) -> list:
+    """The noise-model section: what the residuals chose, which standard error follows, and every candidate."""
+    from ..fitting.noise import NOISE_FORMULAS
+
+    noise = fit_result.noise_model
+    blocks = [("h2", "Noise model")]
+    if noise is None:
+        reason = ("not compared across independent channels" if fit_result.channel_mode == "independent"
+                  else "not recorded (a result written before noise models were compared)")
+        return blocks + [("p", f"The noise model was {reason}; the standard errors are Laplace.")]
+    blocks += [("p", line) for line in noise.describe(fit_result.loss)]
+    gaps = noise.aic_gap()
+    rows = []
+    for name, ll in sorted(noise.loglik.items(), key=lambda kv: -kv[1]):
+        label = f"**{name} (chosen)**" if name == noise.name else name
+        if name == noise.loss_model:
+            label += " (the loss's own)"
+        rows.append([label, NOISE_FORMULAS[name], ", ".join(format_value(x, 3) for x in noise.scale[name]),
+                     format_value(ll, 7), format_value(gaps[name], 4)])
+    return blocks + [("table", ["noise", "σ", "s per channel", "log-likelihood", "ΔAIC"], rows)]
+
+
+def _plausibility_blocks(fit_result) -> list:
+    """The plausibility section: one row per check with what to do."""
+    checks = fit_result.plausibility().checks
+    tag = {"ok": "plausible", "caution": "caution", "implausible": "**IMPLAUSIBLE**"}
+    rows = [[c.name, tag[c.level], c.message, c.advice or "–"] for c in checks]
+    return [("h2", "Plausibility"), ("table", ["check", "verdict", "measured", "what to do"], rows)]
+
+
 def _run_info(run_info) -> list[str]:
     import jax
 
@@ -136,12 +178,16 @@ def _blocks(measurements, fit_result, posterior, selection, run_info, figure_pat
                    f"{fit_result.solver}, channel mode {fit_result.channel_mode}; status **{fit_result.status}** "
                    f"after {fit_result.steps} steps."))
     b.append(("h2", "Parameters"))
-    b.append(("p", "Least-squares values with their Laplace (Gauss-Newton) standard errors"
+    kind = _KIND[fit_result.stderr_kind]
+    b.append(("p", f"Least-squares values with the standard errors the noise model supports ({kind}; see Noise "
+                   "model) and the other kind beside them"
                    + ("; posterior medians and central 68 % / 95 % credible intervals from the MCMC samples"
                       if posterior is not None else "") + ". f_r is in 1/sr; unit 1 means dimensionless."))
     b.append(("table",) + _parameter_table(fit_result, posterior))
     if fit_result.bounds_hit:
         b.append(("p", "Parameters on a bound: " + ", ".join(fit_result.bounds_hit) + "."))
+    b.extend(_noise_blocks(fit_result))
+    b.extend(_plausibility_blocks(fit_result))
     b.append(("h2", "Fit metrics"))
     b.append(("table",) + _metrics_table(fit_result, measurements.channels))
     b.append(("p", f"samples {fit_result.n_samples}, free parameters {fit_result.n_params}, dof {fit_result.dof}, "

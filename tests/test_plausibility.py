@@ -1,0 +1,94 @@
+"""Plausibility of fitted models in every summary and report (brdffit.properties.plausibility)."""
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit import properties as P
+
+
+@pytest.fixture(scope="module")
+def implausible():
+    # ks = 2 with a wide Ward lobe: the fitted albedo is about 1.5 at normal incidence.
+    truth = brdffit.models.get("lambert+ward", channels=1, rho_d=0.3, ks=2.0, alpha=0.5)
+    data = brdffit.synth.generate(truth, pattern="half-diff", n=600, noise="relative:0.01", seed=1,
+                                  max_theta=np.deg2rad(80.0), channels=["c0"])
+    return truth, brdffit.fit(data, "lambert+ward")
+
+
+@pytest.fixture(scope="module")
+def plausible():
+    truth = brdffit.models.get("lambert+ward", channels=1, rho_d=0.3, ks=0.3, alpha=0.15)
+    data = brdffit.synth.generate(truth, pattern="half-diff", n=600, noise="relative:0.01", seed=2,
+                                  max_theta=np.deg2rad(80.0), channels=["c0"])
+    return truth, brdffit.fit(data, "lambert+ward")
+
+
+def test_scan_albedo_is_the_albedo_quadrature():
+    model = brdffit.models.get("lambert+cook-torrance", channels=3, rho_d=0.5, ks=1.0, m=0.02)
+    fast = P.scan_albedo(model)[:, 0, :]
+    exact = np.asarray(P.directional_albedo(model, P.PLAUSIBILITY_THETA_I))
+    np.testing.assert_allclose(fast, exact, atol=3e-4)  # resolution 64 against 128, the sharpest lobe
+
+
+def test_implausible_fit_is_flagged_with_its_albedo(implausible):
+    truth, result = implausible
+    check = result.plausibility()
+    albedo = float(np.max(P.directional_albedo(result.model, P.PLAUSIBILITY_THETA_I)))
+    assert albedo > 1.3
+    energy = check["energy"]
+    assert energy.level == "implausible" and energy.value == pytest.approx(albedo, abs=1e-3)
+    assert f"max albedo {energy.value:.4g}" in energy.message and energy.advice
+    specular = check["specular"]
+    assert specular.level == "implausible" and specular.value == pytest.approx(float(result.params["ks"][0]))
+    assert specular.value == pytest.approx(2.0, rel=0.02) and "ks" in specular.message
+    assert not check.ok
+    summary = result.summary()
+    assert f"IMPLAUSIBLE energy: max albedo {energy.value:.4g}" in summary
+    assert "IMPLAUSIBLE specular: largest ks·F" in summary and "what to do:" in summary
+
+
+def test_plausible_fit_is_not_flagged(plausible):
+    _, result = plausible
+    check = result.plausibility()
+    assert check.ok and [c.level for c in check.checks] == ["ok", "ok", "ok"]
+    assert check["energy"].value < 1.0 and check["specular"].value == pytest.approx(0.3, rel=0.05)
+    summary = result.summary()
+    assert "IMPLAUSIBLE" not in summary and "CAUTION" not in summary and "plausible energy: max albedo" in summary
+
+
+def test_albedo_above_one_only_beyond_the_data_is_a_caution():
+    # Lambert + a Fresnel lobe is not energy-coupled: towards grazing F -> 1 and the sum passes 1.
+    model = brdffit.models.get("lambert+cook-torrance", channels=1, rho_d=0.55, ks=1.0, m=0.15, f0=0.04)
+    check = P.plausibility(model, theta_max=np.deg2rad(70.0))
+    assert check["energy"].level == "caution" and check["energy"].value > 1.1
+    assert "beyond them" in check["energy"].message
+    assert P.plausibility(model)["energy"].level == "implausible"  # when every θi counts as measured
+
+
+def test_ks_above_one_within_its_errors_is_plausible():
+    model = brdffit.models.get("lambert+ward", channels=1, rho_d=0.3, ks=1.004, alpha=0.5)
+    assert P.plausibility(model, stderr={"ks": np.array([0.003])})["specular"].level == "ok"
+    assert P.plausibility(model, stderr={"ks": np.array([0.001])})["specular"].level == "implausible"
+
+
+def test_parameters_at_bounds_get_advice():
+    model = brdffit.models.get("lambert+cook-torrance", channels=3, rho_d=[1.0, 0.5, 0.5], ks=[0.0, 0.3, 0.3],
+                               m=0.001, f0=1.0)
+    check = P.plausibility(model, bounds_hit=["rho_d[0]", "ks[0]", "m", "f0"])["bounds"]
+    assert check.level == "caution" and check.value == 4
+    assert "rho_d[0] = 1 at 1" in check.advice and "ks[0] = 0: its lobe adds nothing" in check.advice
+    assert "m = 0.001 at its lower bound" in check.advice and "f0 = 1 on its bound" in check.advice
+
+
+def test_report_shows_noise_model_and_plausibility(implausible, tmp_path):
+    from brdffit.report import write_report
+
+    truth, result = implausible
+    data = brdffit.synth.generate(truth, pattern="half-diff", n=600, noise="relative:0.01", seed=1,
+                                  max_theta=np.deg2rad(80.0), channels=["c0"])
+    paths = write_report(tmp_path, data, result)
+    md = open(paths["md"], encoding="utf-8").read()
+    assert "## Noise model" in md and "**relative (chosen)**" in md and "stderr sandwich" in md
+    assert "## Plausibility" in md and "| energy | **IMPLAUSIBLE** | max albedo" in md
+    assert "± stderr (sandwich)" in md and "± Laplace" in md
