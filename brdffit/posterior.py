@@ -541,7 +541,9 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
         q = np.percentile(x, QUANTILES)
         summary[n] = {"mean": float(x.mean()), "median": float(q[2]), "std": float(x.std(ddof=1)),
                       "q2.5": float(q[0]), "q16": float(q[1]), "q84": float(q[3]), "q97.5": float(q[4])}
-    laplace = dict(zip(labels, np.concatenate([np.ravel(fit_result.stderr[n]) for n in free])))
+    # The posterior's likelihood weights the residuals as the loss does, so its widths compare with the Laplace
+    # standard errors (which `FitResult.stderr` holds only when the noise model matches the loss).
+    laplace = dict(zip(labels, np.concatenate([np.ravel(fit_result.stderr_laplace[n]) for n in free])))
     laplace.update({n: float("nan") for n in names[p:]})
     values = dict(zip(labels, np.asarray(flat0, dtype=float)))
     diagnostics = {
@@ -575,7 +577,7 @@ def _initial_ball(fit_result, free, labels, flat0, lowers, uppers, nwalkers, ndi
     """Walkers in a ball around the optimum: 0.1 Laplace standard errors wide, kept inside the bounds."""
     rng = np.random.default_rng(seed)
     centre = np.asarray(flat0, dtype=float)
-    width = np.concatenate([np.ravel(np.asarray(fit_result.stderr[n], dtype=float)) for n in free])
+    width = np.concatenate([np.ravel(np.asarray(fit_result.stderr_laplace[n], dtype=float)) for n in free])
     fallback = 1e-3 * np.maximum(np.abs(centre), 1e-3)
     width = np.where(np.isfinite(width) & (width > 0), width, fallback)
     ball = centre + 0.1 * width * rng.standard_normal((nwalkers, p))

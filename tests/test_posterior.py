@@ -98,7 +98,7 @@ def test_user_prior_pulls_the_posterior(ward_fit):
     truth, data, result = ward_fit
     # A Gaussian prior as wide as the likelihood, centred two widths above the optimum: the product of the two
     # Gaussians is centred one width above it (to the extent that alpha's likelihood is Gaussian).
-    width = float(result.stderr["alpha"])
+    width = float(result.stderr_laplace["alpha"])  # the likelihood's width, whatever stderr reports
     centre = float(result.params["alpha"])
     pulled = posterior(result, data, nwalkers=24, nsteps=1500, noise="known", progress=False,
                        prior={"alpha": ("normal", centre + 2 * width, width)}, seed=0)
