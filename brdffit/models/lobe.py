@@ -56,9 +56,10 @@ class Lobe(abc.ABC):
         return {name: getattr(self, name) for name in self.option_names()}
 
     def token(self) -> str:
-        """The spec token of this lobe: its name, with its non-default options in brackets."""
+        """The spec token of this lobe: its name, with its non-default options in brackets (``share`` last)."""
         defaults = type(self)()
-        changed = [f"{k}={v}" for k, v in self.options().items() if getattr(defaults, k) != v]
+        options = sorted(self.options().items(), key=lambda item: item[0] == "share")
+        changed = [f"{k}={v}" for k, v in options if getattr(defaults, k) != v]
         return self.name + (f"({', '.join(changed)})" if changed else "")
 
     def start_candidates(self) -> list[dict]:
