@@ -11,6 +11,7 @@ A serial baseline fits ``--serial`` of the materials one by one with `brdffit.fi
 measures the cost of reading a file (`read_cost`).
 
     python scripts/bench_batch.py [--materials 1000] [--samples 2000] [--workers 1,2] [--batch 32] [--serial 50]
+                                  [--data DIR]
 """
 
 from __future__ import annotations
@@ -28,14 +29,18 @@ SPEC = "lambert+ggx"
 
 
 def make_database(folder: Path, count: int, samples: int) -> list[str]:
-    """``count`` Lambert + GGX materials with varied parameters, one HDF5 file each."""
+    """``count`` Lambert + GGX materials with varied parameters, one HDF5 file each (a file already in ``folder``
+    is kept: it holds what would be written, the data seeded by the material's number)."""
     from brdffit import io, models, synth
 
     paths = []
     for i in range(count):
+        path = folder / f"m{i:04d}.h5"
+        if path.exists():
+            paths.append(str(path))
+            continue
         truth = models.get(SPEC, alpha=0.05 + 0.4 * (i % 97) / 97, ks=[0.05 + 0.3 * (i % 13) / 13] * 3,
                            rho_d=[0.2 + 0.6 * (i % 7) / 7] * 3)
-        path = folder / f"m{i:04d}.h5"
         io.save(synth.generate(truth, n=samples, noise="relative:0.01", seed=i), path)
         paths.append(str(path))
     return paths
@@ -103,12 +108,15 @@ def main() -> None:
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts")
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--serial", type=int, default=50, help="materials fitted one by one for the baseline")
+    parser.add_argument("--data", type=Path, help="a folder for the database, whose files a later run reuses "
+                                                  "(default: a temporary folder)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench-batch-") as tmp:
         tmp = Path(tmp)
-        (tmp / "data").mkdir()
+        data = (args.data or tmp / "data") / f"samples-{args.samples}"
+        data.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
-        paths = make_database(tmp / "data", args.materials, args.samples)
+        paths = make_database(data, args.materials, args.samples)
         print(f"{len(paths)} materials of {args.samples} samples written in {time.perf_counter() - start:.1f} s")
         cache = str(tmp / "jax-cache")
         if args.serial:
