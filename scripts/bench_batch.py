@@ -101,6 +101,13 @@ def read_cost(paths: list[str], batch: int) -> dict:
                                    for i in range(0, len(paths), batch)])}
 
 
+def machine() -> str:
+    """When and where: the UTC time, the cores and the load average (the host may be shared)."""
+    load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+    return (f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, {os.cpu_count()} cores, load average "
+            f"{load} (1, 5, 15 min)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--materials", type=int, default=1000)
@@ -115,6 +122,7 @@ def main() -> None:
         tmp = Path(tmp)
         data = (args.data or tmp / "data") / f"samples-{args.samples}"
         data.mkdir(parents=True, exist_ok=True)
+        print(machine())
         start = time.perf_counter()
         paths = make_database(data, args.materials, args.samples)
         print(f"{len(paths)} materials of {args.samples} samples written in {time.perf_counter() - start:.1f} s")
@@ -134,6 +142,7 @@ def main() -> None:
             print(f"| {r['workers']} | {r['warm-up']:.1f} s | {r['wall']:.1f} s | {r['throughput']:.1f} | "
                   f"{r['median time']:.3f} s | {r['fitting']:.1f} s ({r['wall'] - r['fitting']:.1f} s) | "
                   f"{r['converged']}/{r['rows']} |", flush=True)
+            print(f"<!-- after {workers} worker(s): {machine()} -->", flush=True)
 
 
 if __name__ == "__main__":
