@@ -40,7 +40,7 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from .normal_equations import NormalEquations, accumulate, metric_sums_of
+from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of
 from .problem import FitData, Problem
 from .separable import solve_box
 
@@ -89,8 +89,8 @@ class Marquardt:
 
 class _State:
     """The batch's current points: physical values ``x (M, S, P)`` with their amplitudes projected, the pass's
-    sums moved with them (see the module doc), and the pass's model values when the solve keeps them (one device
-    array ``(M, S, N, C)`` per piece, at the evaluated point, before the projection moved ``x`` by ``delta``)."""
+    sums moved with them (see the module doc), and, when the solve keeps them, the pass's arrays of each piece
+    (`accumulate` with ``values=True``), at the evaluated point, before the projection moved ``x`` by ``delta``."""
 
     def __init__(self, x, sums: NormalEquations, delta, evaluated=None, values=None):
         self.x, self.sums, self.delta, self.values = x, sums, delta, values
@@ -108,8 +108,9 @@ class _State:
         elif not take.any():
             values = other.values
         else:  # only where the points of a batch disagree does it cost a device operation
-            mask = jnp.asarray(take)[..., None, None]
-            values = [jnp.where(mask, a, b) for a, b in zip(self.values, other.values)]
+            host, device = np.reshape(take, take.shape + (1, 1, 1)), jnp.asarray(take)[..., None, None]
+            values = [(np.where(host, a, c), jnp.where(device, f, g))
+                      for (a, f), (c, g) in zip(self.values, other.values)]
         return _State(pick(self.x, other.x), NormalEquations(*(pick(a, b) for a, b in zip(self.sums, other.sums))),
                       pick(self.delta, other.delta), pick(self.evaluated, other.evaluated), values)
 
@@ -159,7 +160,8 @@ class _Batch:
         return self._project(state.x) if moved.any() or predicted.any() else state
 
     def _project(self, x) -> _State:
-        sums, values = accumulate(self.problem, self.trees(x), self.pieces, values=True)
+        # A solve that keeps its passes' arrays forms the meat of its answer only (`solve`).
+        sums, values = accumulate(self.problem, self.trees(x), self.pieces, values=True, meat=not self.keep)
         values = values if self.keep else None
         delta = np.zeros(x.shape)
         if not self.amplitudes.size:
@@ -318,7 +320,8 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         done |= active & (lam > MAX_DAMPING)
     finite = np.isfinite(state.sums.cost)
     if metrics:
-        state.sums = state.sums._replace(metric_sums=metric_sums_of(state.values, pieces))
+        state.sums = state.sums._replace(meat=meat_of(problem, [a for a, _ in state.values]),
+                                         metric_sums=metric_sums_of([f for _, f in state.values], pieces))
     exact = np.all(np.abs(state.delta) <= EXACT_MOVE * np.abs(state.x) + atol, axis=-1)
     out = []
     for m, material in enumerate(starts):
