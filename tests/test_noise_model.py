@@ -2,8 +2,8 @@
 
 The coverage tests fit many seeded replicates of one synthetic material with `brdffit.fit_many` (one batched
 solve; warm, each batch takes seconds) and count how often the reported default 68% interval
-(value ± stderr) holds the truth: for R = 100 replicates the binomial standard error of a 68% coverage is 4.7%,
-so 55-82% is the nominal value within about ±2.7 of them.
+(value ± stderr) holds the truth: for R = 150 replicates the binomial standard error of a 68% coverage is 3.8%,
+so 55-82% is the nominal value within about ±3.5 of them.
 """
 
 import json
@@ -14,11 +14,11 @@ import pytest
 
 import brdffit
 from brdffit import synth
-from brdffit.fitting.noise import NoiseModel, compare
+from brdffit.fitting.noise import NoiseModel, compare, merge
 
 ROOT = Path(__file__).resolve().parents[1]
 TRUTH = {"rho_d": 0.3, "ks": 0.4, "alpha": 0.15}
-REPLICATES = 100
+REPLICATES = 150
 COVERAGE = (0.55, 0.82)
 
 
@@ -144,3 +144,21 @@ def test_compare_maximum_likelihood_by_hand():
         assert noise.scale[name][0] == pytest.approx(np.sqrt(s2), rel=1e-10)
     assert noise.scale["relative"][0] == pytest.approx(0.02, rel=0.05)
     assert NoiseModel.from_dict(json.loads(json.dumps(noise.to_dict()))) == noise
+
+
+def test_independent_channels_merge_their_noise_models():
+    rng = np.random.default_rng(2)
+    f = rng.uniform(0.1, 3.0, 3000)
+    cos_i = rng.uniform(0.2, 1.0, f.size)
+    models = []
+    for d in (0.02 * f * rng.standard_normal(f.size), 0.01 * rng.standard_normal(f.size)):
+        sums = brdffit.metrics.metric_sums(f[:, None], (f - d)[:, None], np.ones((f.size, 1), bool), cos_i,
+                                           np.ones(f.size), xp=np)
+        models.append(compare(sums, "absolute", n_total=f.size))
+    assert [m.name for m in models] == ["relative", "absolute"]
+    assert [m.covariance for m in models] == ["sandwich", "laplace"]
+    merged = merge(models)
+    assert merged.name == "relative/absolute" and merged.covariance == "sandwich/laplace"
+    assert merged.loglik["signal"] == pytest.approx(models[0].loglik["signal"] + models[1].loglik["signal"])
+    assert len(merged.scale["relative"]) == 2 and "per channel relative/absolute" in merged.describe("absolute")[0]
+    assert merge([models[1], models[1]]).name == "absolute" and merge([None]) is None

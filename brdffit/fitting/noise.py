@@ -41,7 +41,7 @@ import numpy as np
 
 from ..metrics import NOISE_ROWS
 
-__all__ = ["NoiseModel", "CANDIDATES", "LOSS_NOISE", "compare", "of_fit", "NOISE_FORMULAS"]
+__all__ = ["NoiseModel", "CANDIDATES", "LOSS_NOISE", "compare", "of_fit", "merge", "NOISE_FORMULAS"]
 
 CANDIDATES = ("absolute", "relative", "signal", "cosine", "sigma")
 
@@ -100,6 +100,9 @@ class NoiseModel:
         error the fit reports and why."""
         if self.name == "exact":
             return ["noise: the residuals are 0 (an exact fit): no noise model to compare; stderr Laplace"]
+        if self.name not in NOISE_FORMULAS:  # independent channels that chose differently (`merge`)
+            return [f"noise per channel {self.name}; stderr per channel {self.covariance} (Laplace where the "
+                    f"channel's noise is the {loss} loss's own, else the sandwich)"]
         scale = ", ".join(f"{v:.3g}" for v in self.scale[self.name])
         gaps = ", ".join(f"{k} +{g:.3g}" for k, g in sorted(self.aic_gap().items(), key=lambda kv: kv[1])
                          if k != self.name)
@@ -212,3 +215,21 @@ def of_fit(problem, sums, data, channel_cost, n_valid: int) -> NoiseModel:
         chi2 = np.asarray(channel_cost, dtype=float)
         log_sigma = np.sum(np.where(mask, np.log(np.asarray(data.sigma, dtype=float)), 0.0), axis=0)
     return compare(sums, problem.loss, problem.robust, n_total=n_valid, chi2=chi2, log_sigma=log_sigma)
+
+
+def merge(models: list) -> NoiseModel | None:
+    """The noise model of an independent-channel fit from its channels' (`brdffit.fit` with
+    ``channel_mode="independent"`` fits each channel alone, and each channel's stderr follows its own choice):
+    log-likelihoods added, scales concatenated; the name is the channels' if they agree, else theirs joined by
+    "/", and likewise the covariance kind."""
+    models = [m for m in models if m is not None]
+    if not models:
+        return None
+    names = [m.name for m in models]
+    kinds = [m.covariance for m in models]
+    common = set.intersection(*(set(m.loglik) for m in models))
+    join = lambda xs: xs[0] if len(set(xs)) == 1 else "/".join(xs)  # noqa: E731
+    return NoiseModel(name=join(names), loss_model=models[0].loss_model, covariance=join(kinds),
+                      loglik={k: float(sum(m.loglik[k] for m in models)) for k in common},
+                      scale={k: [x for m in models for x in m.scale[k]] for k in common},
+                      n=sum(m.n for m in models), compared=sum(m.compared for m in models))

@@ -63,7 +63,8 @@ def _parameter_table(fit_result, posterior):
     errors = _flat_stderr(fit_result.stderr)
     other_kind, other = _other_stderr(fit_result)
     others = _flat_stderr(other)
-    headers = ["parameter", "least squares", f"± stderr ({_KIND[fit_result.stderr_kind]})", f"± {_KIND[other_kind]}"]
+    kind = _KIND.get(fit_result.stderr_kind, fit_result.stderr_kind)
+    headers = ["parameter", "least squares", f"± stderr ({kind})", f"± {_KIND[other_kind]}"]
     if posterior is not None:
         headers += ["posterior median", "68 % interval", "95 % interval"]
     headers += ["unit", "bounds", "note"]
@@ -178,7 +179,7 @@ def _blocks(measurements, fit_result, posterior, selection, run_info, figure_pat
                    f"{fit_result.solver}, channel mode {fit_result.channel_mode}; status **{fit_result.status}** "
                    f"after {fit_result.steps} steps."))
     b.append(("h2", "Parameters"))
-    kind = _KIND[fit_result.stderr_kind]
+    kind = _KIND.get(fit_result.stderr_kind, fit_result.stderr_kind)
     b.append(("p", f"Least-squares values with the standard errors the noise model supports ({kind}; see Noise "
                    "model) and the other kind beside them"
                    + ("; posterior medians and central 68 % / 95 % credible intervals from the MCMC samples"
