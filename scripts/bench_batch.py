@@ -125,7 +125,8 @@ def main() -> None:
         print(machine())
         start = time.perf_counter()
         paths = make_database(data, args.materials, args.samples)
-        print(f"{len(paths)} materials of {args.samples} samples written in {time.perf_counter() - start:.1f} s")
+        print(f"{len(paths)} materials of {args.samples} samples ready (written or kept) in "
+              f"{time.perf_counter() - start:.1f} s")
         cache = str(tmp / "jax-cache")
         if args.serial:
             base = serial(paths[:args.serial])
