@@ -413,3 +413,19 @@ def test_tolerances_are_raised_to_what_float32_can_meet_and_unchanged_in_float64
         rtol, atol = working_tolerances(1e-8, 1e-12)
     eps32 = float(np.finfo(np.float32).eps)
     assert rtol == pytest.approx(100 * eps32) and atol == pytest.approx(eps32)
+
+
+def test_dead_lobe_warning_only_for_amplitudes_at_zero():
+    """The "went to 0" warning names an amplitude that sits at 0 in every channel, not one on its upper bound:
+    Lambert data with albedo π·1.5 (beyond ρd's bound of 1) end with ρd at 1, a GGX lobe beside Lambert data of
+    albedo 0.4 ends with ks at 0."""
+    bright = synth.generate(models.get("lambert", rho_d=[0.5, 0.5, 0.5]), n=600, noise=None, seed=3)
+    bright = bright.replace(values=bright.values * 3.0)
+    result = fit(bright, "lambert")
+    np.testing.assert_allclose(result.params["rho_d"], 1.0)
+    assert "rho_d[0]" in result.bounds_hit
+    assert not any("went to 0" in w for w in result.warnings), result.warnings
+    dull = synth.generate(models.get("lambert", rho_d=[0.4, 0.4, 0.4]), n=600, noise=None, seed=4)
+    result = fit(dull, "lambert+ggx")
+    np.testing.assert_array_equal(result.params["ks"], 0.0)
+    assert any(w.startswith("ks went to 0 in every channel") for w in result.warnings), result.warnings

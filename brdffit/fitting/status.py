@@ -98,9 +98,9 @@ def diagnose(problem: Problem, params: dict, cost: float, max_steps: bool, nonfi
 
 
 def warnings_of(problem: Problem, labels: list, uncertainty, hit: list, status: str, decrease: float,
-                cost: float) -> list[str]:
+                cost: float, params: dict) -> list[str]:
     """The human-readable warnings of a fit: non-uniform noise, undetermined or correlated parameters, bounds,
-    dead lobes, a stall."""
+    dead lobes (``params``: the physical values, to tell a lower bound from an upper one), a stall."""
     warnings = []
     std, std_sandwich = uncertainty.stderr, uncertainty.stderr_robust
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -123,7 +123,7 @@ def warnings_of(problem: Problem, labels: list, uncertainty, hit: list, status: 
     layout = problem.layout
     for name in problem.free:
         spec = layout[name].spec
-        if spec.linear and spec.lower == 0 and all(label in hit for label in layout[name].labels()):
+        if spec.linear and spec.lower == 0 and np.all(np.asarray(params[name]) == 0.0):
             warnings.append(f"{name} went to 0 in every channel: its lobe contributes nothing, a model without "
                             "it suffices")
     if status == "stalled":
