@@ -419,7 +419,7 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
     hit = hit + pruned
     uncertainty = Uncertainty(normal if problem.free else None, cost, problem.loss, n_valid)
     labels = layout.labels(problem.free)
-    warnings = warnings_of(problem, labels, uncertainty, hit, status, decrease, cost)
+    warnings = warnings_of(problem, labels, uncertainty, hit, status, decrease, cost, params)
     warnings = outcome.get("notes", []) + warnings
     k = len(labels)
     aic, bic = information_criteria(problem.loss, cost, n_valid, k)
