@@ -22,12 +22,12 @@ REPLICATES = 150
 COVERAGE = (0.55, 0.82)
 
 
-def _replicates(noise, seed):
+def _replicates(noise, seed, count=REPLICATES):
     truth = brdffit.models.get("lambert+ward", channels=1, **TRUTH)
     # Half-diff samples cover the specular peak (a uniform pattern leaves a few samples with most of the leverage,
     # which no sandwich estimate covers at n = 500); θ ≤ 80°, as a gonio-reflectometer measures.
     return [synth.generate(truth, pattern="half-diff", n=500, noise=noise, seed=seed + i,
-                           max_theta=np.deg2rad(80.0), channels=["c0"]) for i in range(REPLICATES)]
+                           max_theta=np.deg2rad(80.0), channels=["c0"]) for i in range(count)]
 
 
 def _coverage(results, attribute="stderr"):
@@ -83,7 +83,7 @@ def test_signal_dependent_noise_is_identified(absolute_fits):
     # σ² = k f (photon noise), drawn here: synth's signal-dependent noise is σ = a + b f.
     truth = brdffit.models.get("lambert+ward", channels=1, **TRUTH)
     items = []
-    for i, clean in enumerate(_replicates(None, 6000)[:40]):
+    for i, clean in enumerate(_replicates(None, 6000, 40)):
         f = clean.values[:, 0]
         noisy = f + np.sqrt(1e-4 * f) * np.random.default_rng(i).standard_normal(f.shape)
         items.append(clean.replace(values=np.maximum(noisy, 1e-6)[:, None]))

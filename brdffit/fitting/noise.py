@@ -62,6 +62,9 @@ SIGMA_SCALE_RANGE = (0.5, 2.0)
 
 _ROW = {name: 8 + i for i, name in enumerate(NOISE_ROWS)}
 
+# A fit whose relative RMS error is below this in every channel is exact (noise-free data): nothing to compare.
+EXACT_RELATIVE_RMS = 1e-9
+
 # ΔAIC within which the loss's own candidate is kept (Burnham & Anderson 2002, 2.6: ΔAIC ≤ 2 is substantial
 # support); 10 for ``sigma``, whose log-likelihood comes from all values and the others' from the sampled ones, so
 # that a constant stated σ (the same model as ``absolute``) differs by their sampling alone.
@@ -73,7 +76,8 @@ class NoiseModel:
     """The noise models' comparison of one fit.
 
     Attributes:
-        name: the chosen candidate (largest log-likelihood), or ``"exact"`` when the residuals are 0.
+        name: the chosen candidate (largest log-likelihood), or ``"exact"`` when the residuals are at rounding
+            level (`EXACT_RELATIVE_RMS`).
         loss_model: the candidate the fit's loss implies (None for ``log`` or a robust rewrite).
         covariance: ``"laplace"`` or ``"sandwich"``: the one `FitResult.stderr` holds.
         loglik: candidate -> maximised log-likelihood, scaled to all ``n`` values.
@@ -99,7 +103,8 @@ class NoiseModel:
         """Lines for a summary: the chosen model with its scale and the others' AIC gaps, and which standard
         error the fit reports and why."""
         if self.name == "exact":
-            return ["noise: the residuals are 0 (an exact fit): no noise model to compare; stderr Laplace"]
+            return ["noise: none: the residuals are at rounding level (noise-free data), nothing to compare; stderr "
+                    "Laplace"]
         if self.name not in NOISE_FORMULAS:  # independent channels that chose differently (`merge`)
             return [f"noise per channel {self.name}; stderr per channel {self.covariance} (Laplace where the "
                     f"channel's noise is the {loss} loss's own, else the sandwich)"]
@@ -114,6 +119,7 @@ class NoiseModel:
             return lines
         implied = (f"the {loss} loss weights the residuals for {self.loss_model} noise "
                    f"({NOISE_FORMULAS[self.loss_model]})" if self.loss_model
+                   else f"the robust rewrite of the {loss} loss implies none of these" if LOSS_NOISE.get(loss)
                    else f"the {loss} loss implies none of these")
         if self.name == "sigma":
             implied = f"the stated σ are off by a factor {np.max(self.scale['sigma']):.3g}"
@@ -189,7 +195,9 @@ def compare(sums, loss: str, robust=None, *, n_total: int, chi2=None, log_sigma=
         ll, s = _loglik(counts, np.asarray(chi2, float), np.asarray(log_sigma, float))
         loglik["sigma"], scale["sigma"] = float(np.sum(ll)) * n_total / max(float(np.sum(counts)), 1.0), \
             [float(x) for x in s]
-    exact = not np.any(row("d2") > 0)
+    # Residuals at rounding level (noise-free data): relative RMS error below 1e-9 in every channel.
+    relative_rms = np.sqrt(sums[2] / np.maximum(sums[3], 1.0))
+    exact = not np.any(row("d2") > 0) or bool(np.all(relative_rms < EXACT_RELATIVE_RMS))
     if exact:
         return NoiseModel("exact", loss_model, "laplace", loglik, scale, int(n_total), int(compared))
     name = max(loglik, key=lambda k: loglik[k] if math.isfinite(loglik[k]) else -math.inf)

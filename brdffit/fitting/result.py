@@ -158,7 +158,8 @@ class FitResult:
         if self.noise_model is not None:
             lines.extend(self.noise_model.describe(self.loss))
         elif self.channel_mode == "independent":
-            lines.append("noise: not compared across independent channels; stderr Laplace")
+            lines.append("noise: chosen channel by channel, not recorded in this merged result (stderr holds each "
+                         "channel's choice)")
         else:
             lines.append("noise: not recorded (a result written before noise models were compared); "
                          "stderr Laplace")

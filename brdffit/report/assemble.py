@@ -136,9 +136,11 @@ def _noise_blocks(fit_result) -> list:
     noise = fit_result.noise_model
     blocks = [("h2", "Noise model")]
     if noise is None:
-        reason = ("not compared across independent channels" if fit_result.channel_mode == "independent"
-                  else "not recorded (a result written before noise models were compared)")
-        return blocks + [("p", f"The noise model was {reason}; the standard errors are Laplace.")]
+        text = ("The noise model was chosen channel by channel and is not recorded in this merged result; each "
+                "channel's standard errors follow its own choice." if fit_result.channel_mode == "independent"
+                else "The noise model was not recorded (a result written before noise models were compared); the "
+                     "standard errors are Laplace.")
+        return blocks + [("p", text)]
     blocks += [("p", line) for line in noise.describe(fit_result.loss)]
     gaps = noise.aic_gap()
     rows = []
