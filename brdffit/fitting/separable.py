@@ -40,6 +40,12 @@ __all__ = ["amplitude_basis", "amplitude_sums", "solve_box", "box_patterns", "pr
 # function vanishes on the data (a lobe that no sample sees) or two coincide (lambert+lambert); far below any
 # conditioning the data can support.
 _RIDGE = 1e-13
+# A basis column whose weighted squared norm on the data is below this is no column: its amplitude stays on its
+# lower bound. Such a lobe (a spike between the samples: Ward with α = 0.002 on 300 uniform samples) contributes
+# < 1e-100 of a unit amplitude at every sample; it could matter only with an amplitude beyond 1e97, where its
+# Gram entries are float64 denormals and the solve returned ks = 4e158 at a cost that rounding made 0, which then
+# won the search.
+_NEGLIGIBLE_COLUMN = 1e-200
 
 
 def amplitude_basis(problem: Problem, params: dict, names: tuple, data: FitData):
@@ -128,8 +134,9 @@ def _enumerate_box_qp(gram, rhs, lower, upper, patterns, xp=jnp):
         ``(a, free)``: the optima ``(..., K)`` and the masks of their amplitudes off their bounds.
     """
     k = gram.shape[-1]
+    diagonal = xp.diagonal(gram, axis1=-2, axis2=-1)
     # Jacobi scaling: the basis functions of a diffuse and a sharp lobe differ by decades in magnitude.
-    scale = xp.sqrt(xp.maximum(xp.diagonal(gram, axis1=-2, axis2=-1), 1e-300))  # (..., K)
+    scale = xp.sqrt(xp.maximum(diagonal, _NEGLIGIBLE_COLUMN))  # (..., K)
     g = gram / (scale[..., :, None] * scale[..., None, :]) + _RIDGE * np.eye(k)
     b = rhs / scale
     lo = np.where(np.isfinite(lower), lower, 0.0)
@@ -144,6 +151,10 @@ def _enumerate_box_qp(gram, rhs, lower, upper, patterns, xp=jnp):
     a = cand / scale[..., None, :]
     slack = 1e-10 * (1.0 + xp.abs(a))
     feasible = xp.all((a >= lower - slack) & (a <= upper + slack), axis=-1)
+    # A negligible column's amplitude is never free (`_NEGLIGIBLE_COLUMN`; an amplitude without a lower bound
+    # has no other pattern, and keeps its solve).
+    negligible = (diagonal < _NEGLIGIBLE_COLUMN) & np.isfinite(lower)  # (..., K)
+    feasible = feasible & ~xp.any(negligible[..., None, :] & (free > 0), axis=-1)
     objective = 0.5 * xp.sum(cand * (cand @ g), axis=-1) - xp.sum(cand * b[..., None, :], axis=-1)
     best = xp.argmin(xp.where(feasible, objective, np.inf), axis=-1)
     chosen = xp.take_along_axis(a, best[..., None, None], axis=-2)[..., 0, :]
@@ -169,7 +180,7 @@ def _box_qp(lower: tuple, upper: tuple):
         d_gram, d_rhs = tangents
         a, free = _enumerate_box_qp(gram, rhs, lo, hi, patterns)
         k = gram.shape[0]
-        scale = jnp.sqrt(jnp.maximum(jnp.diag(gram), 1e-300))
+        scale = jnp.sqrt(jnp.maximum(jnp.diag(gram), _NEGLIGIBLE_COLUMN))
         g = gram / jnp.outer(scale, scale) + _RIDGE * jnp.eye(k)
         lhs = free[:, None] * g * free[None, :] + jnp.diag(1.0 - free)
         right = free * (d_rhs - d_gram @ a) / scale
@@ -309,7 +320,7 @@ def projected_residuals(problem: Problem, to_params, y, data: FitData):
         values = jnp.stack([params[a] for a in names], axis=-1)  # (C, K)
         free = ((values > lower + 1e-12) & (values < upper - 1e-12)).astype(r.dtype)
         gram = jnp.einsum("nck,ncl->ckl", weighted, weighted)
-        scale = jnp.sqrt(jnp.maximum(jnp.einsum("ckk->ck", gram), 1e-300))
+        scale = jnp.sqrt(jnp.maximum(jnp.einsum("ckk->ck", gram), _NEGLIGIBLE_COLUMN))
         g = gram / (scale[:, :, None] * scale[:, None, :]) + _RIDGE * jnp.eye(len(names))
         lhs = free[:, :, None] * g * free[:, None, :] + jnp.eye(len(names)) * (1.0 - free)[:, :, None]
         coefficient = _spd_solve(lhs, free * jnp.einsum("nck,nc->ck", weighted, t) / scale) / scale
