@@ -179,6 +179,12 @@ def test_independent_channel_mode_fits_shape_per_channel():
     assert result.model is None and len(result.models) == 3
     np.testing.assert_allclose(result.params["alpha"], [0.1, 0.3, 0.3], rtol=0.02)
     assert result.predict(data.theta_i, data.phi_i, data.theta_o, data.phi_o).shape == data.values.shape
+    # The merged result carries the channels' noise models (each σ-weighted fit to data of that σ: the loss's own
+    # noise, whose stderr is the Laplace one) and their Laplace stderr.
+    assert result.noise_model is not None and result.noise_model.name == "sigma", result.noise_model
+    np.testing.assert_array_equal(result.stderr_laplace["alpha"], result.stderr["alpha"])
+    assert np.shape(result.stderr_laplace["alpha"]) == (3,) and np.all(result.stderr_laplace["alpha"] > 0)
+    assert result.theta_i_max == pytest.approx(float(np.max(data.theta_i)))
 
 
 def test_result_serialises_to_json_and_hdf5(plastic, tmp_path):

@@ -34,7 +34,7 @@ from ..models.registry import get as get_model
 from ..params import at_bound
 from ..progress import Progress
 from .losses import ROBUST, get_loss, loss_epsilon
-from . import marquardt
+from . import marquardt, noise
 from .normal_equations import chunks, compile_seconds
 from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data
 from .result import FitResult
@@ -677,7 +677,8 @@ def _fit_independent(measurements, model, options: dict, bar: Progress) -> FitRe
         offset += s
     return FitResult(
         model=None, params=merge("params"), stderr=merge("stderr"), stderr_robust=merge("stderr_robust"),
-        covariance=cov, correlation=cor,
+        stderr_laplace=merge("stderr_laplace"), noise_model=noise.merge([r.noise_model for r in results]),
+        theta_i_max=max(r.theta_i_max for r in results), covariance=cov, correlation=cor,
         labels=labels, metrics={m: np.concatenate([r.metrics[m] for r in results]) for m in results[0].metrics},
         n_samples=n, n_params=k, dof=n - k, cost=cost, aic=aic, bic=bic, status=worst,
         bounds_hit=[f"{b}@{c}" for c, r in enumerate(results) for b in r.bounds_hit],
