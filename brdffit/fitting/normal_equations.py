@@ -46,9 +46,9 @@ class NormalEquations(NamedTuple):
         cost: rᵀr ``(...)``.
         meat: Jᵀ diag(r²) J ``(..., P, P)`` (the sandwich covariance's middle).
         channel_cost: rᵀr of each channel ``(..., C)``.
-        metric_sums: the goodness-of-fit sums of `brdffit.metrics.metric_sums` ``(..., 8, C)`` at the evaluated
-            point when `accumulate` was asked for them, else None (`brdffit.metrics.metrics_from_sums` turns them
-            into the metrics).
+        metric_sums: the sums of `brdffit.metrics.metric_sums` ``(..., R, C)`` (its R rows: the metrics' and the
+            noise models') at the evaluated point when `accumulate` was asked for them, else None
+            (`brdffit.metrics.metrics_from_sums` turns them into the metrics).
     """
 
     jtj: np.ndarray
@@ -146,7 +146,8 @@ def compile_seconds() -> float:
 
 @jax.jit
 def _metric_program(f, values, mask, cos_i, sqrt_weight):
-    """`brdffit.metrics.metric_sums` of model values ``f`` ``(M, S, N, C)`` against a piece's data: ``(M, S, 8, C)``.
+    """`brdffit.metrics.metric_sums` of model values ``f`` ``(M, S, N, C)`` against a piece's data:
+    ``(M, S, R, C)``.
     It does not depend on the model, so one compiled program per data shape serves every model of a selection
     (inside the pass it doubled the pass's compilation; in NumPy it took 0.4 s of a MERL-size fit)."""
     def one(point, values, mask, cos_i, sqrt_weight):
@@ -157,7 +158,7 @@ def _metric_program(f, values, mask, cos_i, sqrt_weight):
 
 
 def metric_sums_of(values: list, pieces: list[FitData]) -> np.ndarray:
-    """The metric sums ``(M, S, 8, C)`` of a pass's model values (`accumulate` with ``values=True``: one
+    """The metric sums ``(M, S, R, C)`` of a pass's model values (`accumulate` with ``values=True``: one
     ``(M, S, N, C)`` array per piece) against the pieces' data."""
     return sum(np.asarray(_metric_program(f, piece.values, piece.mask, piece.cos_i, piece.sqrt_weight))
                for f, piece in zip(values, pieces))
