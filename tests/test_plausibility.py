@@ -7,21 +7,23 @@ import brdffit
 from brdffit import properties as P
 
 
+def _ward_fit(ks: float, alpha: float, seed: int):
+    """A Lambert + Ward truth (ρd = 0.3, one channel) and the fit of its 600 half-diff samples to θ ≤ 80°."""
+    truth = brdffit.models.get("lambert+ward", channels=1, rho_d=0.3, ks=ks, alpha=alpha)
+    data = brdffit.synth.generate(truth, pattern="half-diff", n=600, noise="relative:0.01", seed=seed,
+                                  max_theta=np.deg2rad(80.0), channels=["c0"])
+    return truth, brdffit.fit(data, "lambert+ward")
+
+
 @pytest.fixture(scope="module")
 def implausible():
     # ks = 2 with a wide Ward lobe: the fitted albedo is about 1.5 at normal incidence.
-    truth = brdffit.models.get("lambert+ward", channels=1, rho_d=0.3, ks=2.0, alpha=0.5)
-    data = brdffit.synth.generate(truth, pattern="half-diff", n=600, noise="relative:0.01", seed=1,
-                                  max_theta=np.deg2rad(80.0), channels=["c0"])
-    return truth, brdffit.fit(data, "lambert+ward")
+    return _ward_fit(ks=2.0, alpha=0.5, seed=1)
 
 
 @pytest.fixture(scope="module")
 def plausible():
-    truth = brdffit.models.get("lambert+ward", channels=1, rho_d=0.3, ks=0.3, alpha=0.15)
-    data = brdffit.synth.generate(truth, pattern="half-diff", n=600, noise="relative:0.01", seed=2,
-                                  max_theta=np.deg2rad(80.0), channels=["c0"])
-    return truth, brdffit.fit(data, "lambert+ward")
+    return _ward_fit(ks=0.3, alpha=0.15, seed=2)
 
 
 def test_scan_albedo_is_the_albedo_quadrature():
