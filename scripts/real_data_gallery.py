@@ -22,7 +22,8 @@ It writes ``docs/real-data/gallery.json`` (every number), ``docs/real-data/fits/
 export), ``docs/images/real-data/<name>-{slices,spheres}.png`` and ``docs/real-data.md``. tests/test_real_data.py
 checks the stored fits against the shared files.
 
-Usage (from the project root; 30 min for the ten rows on the 2-core development machine shared with other jobs)::
+Usage (from the project root; 14-30 min for the ten rows on the 2-core development machine shared with other jobs,
+at load averages 3-10)::
 
     .venv/bin/python scripts/real_data_gallery.py                 # every material
     .venv/bin/python scripts/real_data_gallery.py --only paper_white ptfe-0.532um   # some, the others kept
@@ -432,8 +433,10 @@ def markdown(gallery: dict) -> str:
         f"evaluates against the held-out data (the first {MITSUBA_PAIRS:,} held-out points).",
         "",
         f"**Time**: wall time of the `brdffit fit` command (a subprocess, report included, an empty compilation "
-        f"cache: a user's first run), measured {gallery['date']} on {gallery['machine']}, "
-        f"{gallery['load']}.",
+        f"cache: a user's first run) on {gallery['machine']}, shared with other jobs: each row's details give "
+        f"when it was measured, at which commit (and which library files were uncommitted then) and the load "
+        f"average. Measured between {min(r['measured'] for r in rows)} and {max(r['measured'] for r in rows)}; "
+        f"the last run: {gallery['load']}.",
         "",
         "| material | chosen model | status | exit | held-out cosine | held-out relative RMS / median | "
         "Mitsuba stated / vs data | time (s): command / selection |",
@@ -519,7 +522,7 @@ def shortfalls(rows: list[dict]) -> list[str]:
     slow = [r for r in rows if r["wall_s"] > 60.0]
     if slow:
         out.append(f"- Time: {len(slow)} of {len(rows)} commands took longer than 60 s here (issue 17 point 1): "
-                   + ", ".join(f"{r['name']} {r['wall_s']:.0f} s at load {r.get('load_average', math.nan):.1f}"
+                   + ", ".join(f"{r['name']} {r['wall_s']:.1f} s at load {r.get('load_average', math.nan):.1f}"
                                for r in slow) + ".")
     failed = [r for r in rows if r["exit_code"] != 0 or r["status"] not in ("converged", "converged-at-bound")]
     if failed:
