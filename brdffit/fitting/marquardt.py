@@ -161,8 +161,8 @@ class _Batch:
 
     def _project(self, x) -> _State:
         # A solve that keeps its passes' arrays forms the meat of its answer only (`solve`).
-        sums, values = accumulate(self.problem, self.trees(x), self.pieces, values=True, meat=not self.keep)
-        values = values if self.keep else None
+        out = accumulate(self.problem, self.trees(x), self.pieces, values=self.keep, meat=not self.keep)
+        sums, values = out if self.keep else (out, None)
         delta = np.zeros(x.shape)
         if not self.amplitudes.size:
             return _State(x, sums, delta, values=values)
