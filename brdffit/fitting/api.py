@@ -41,7 +41,6 @@ from .result import FitResult
 from .search import POLISH_STARTS, SEARCH_SAMPLES, canonical, interior, quasi_random_starts, score, search
 from .solvers import coarse_solver, compiled_solve, make_solver, no_pins, solver_name, working_tolerances
 from .status import diagnose, information_criteria, warnings_of
-from .noise import of_fit as noise_of_fit
 from .uncertainty import Uncertainty, normal_equations_at
 
 __all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
@@ -428,8 +427,8 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
     sums = normal.metric_sums if normal is not None else fit_sums(fitted, measurements, pair=data.pair)
     metrics.update(metrics_from_sums(sums))
     # The noise model the residuals support decides which covariance the result reports (docs/fitting.md).
-    noise = noise_of_fit(problem, sums, data, channel_cost, n_valid)
-    covariance, correlation, stderr = uncertainty.chosen(noise.covariance)
+    noise_model = noise.of_fit(problem, sums, data, channel_cost, n_valid)
+    covariance, correlation, stderr = uncertainty.chosen(noise_model.covariance)
 
     def per_param(flat):
         offsets = layout.offsets(problem.free)
@@ -445,7 +444,7 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
         steps=int(outcome["steps"]), compile_time=times["compile"], run_time=times["run"], init_time=times["init"],
         loss=problem.loss, solver=solver_name(problem.solver), channel_mode="shared-shape",
         fixed=sorted(n for n in layout.names if n not in problem.free), starts=starts,
-        noise_variance=float(uncertainty.variance), strategy=strategy, models=[fitted], noise_model=noise,
+        noise_variance=float(uncertainty.variance), strategy=strategy, models=[fitted], noise_model=noise_model,
         theta_i_max=float(np.max(measurements.theta_i, initial=0.0)),
     )
 
