@@ -28,7 +28,10 @@ The result is the lowest cost found, recomputed with `brdffit.evaluate` from the
 larger grids, Sobol sets and polish counts, other Sobol seeds and wider exponent ranges: 49 of 50 pairs agreed
 within 1e-9 relative and the last (three-lobe Lafortune on Blinn-Phong data, whose small-exponent lobe makes the
 cost jagged) within 2e-5; on data drawn with other seeds (40 pairs, the diffuse-only candidates left out) 39
-within 1e-9 and the same pair within 5e-5. No brdffit fit of the matrix came out lower by more than 1e-13.
+within 1e-9 and the same pair within 5e-5. One brdffit fit of the matrix comes out lower: three Lafortune lobes
+on the Ashikhmin-Shirley data, 0.3 % below the reference, with a lobe of n = 1.1e4 at cxy = −1.16 whose
+normalisation max(cxy², 1)^(n/2) is offset by ks = 6e17 (found since the engine searches exponents up to 10⁶
+times their default); the matrix test asserts only that a fit is not above the reference.
 
 Parameters declared ``fixed`` (Lafortune's cz_j, the toon width) stay at their defaults, as in a default fit.
 """

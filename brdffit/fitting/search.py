@@ -32,7 +32,7 @@ from .losses import get_loss
 from .problem import FitData, Problem, residual_fn
 from .separable import amplitude_sums, solve_box
 
-__all__ = ["search", "interior", "canonical", "search_range", "SEARCH_SAMPLES", "MAX_CANDIDATES", "POLISH_STARTS"]
+__all__ = ["search", "grid", "interior", "canonical", "search_range", "SEARCH_SAMPLES", "MAX_CANDIDATES", "POLISH_STARTS"]
 
 SEARCH_SAMPLES = 4000
 MAX_CANDIDATES = 256
@@ -61,13 +61,14 @@ def interior(value, spec):
 
 
 def search_range(spec) -> tuple[float, float]:
-    """Interval searched for a parameter: its bounds, narrowed to 1/100..10⁴ times the default for an unbounded
-    scale parameter (an exponent n in (0, ∞) with default 20 is searched over 0.2..2·10⁵: misspecified lobes
-    often fit best as a spike far sharper than any default) and to ±10 scales around the default for an
-    unbounded other one."""
+    """Interval searched for a parameter: its bounds, narrowed to 1/100..10⁶ times the default for an unbounded
+    scale parameter (an exponent n in (0, ∞) with default 20 is searched over 0.2..2·10⁷: a misspecified lobe
+    often fits best as a spike far sharper than any default, down to one on the single sample nearest its peak,
+    n ~ 1/δ² for a sample δ rad away; Ashikhmin-Shirley's optimum on 500 Blinn-Phong samples is n = 2·10⁷) and
+    to ±10 scales around the default for an unbounded other one."""
     if spec.scale:
         lo = spec.lower if spec.lower > 0 else spec.default / 100.0
-        hi = spec.upper if math.isfinite(spec.upper) else spec.default * 1e4
+        hi = spec.upper if math.isfinite(spec.upper) else spec.default * 1e6
     else:
         width = 10.0 * max(abs(spec.default), 1.0)
         lo = spec.lower if math.isfinite(spec.lower) else spec.default - width
@@ -104,6 +105,21 @@ def _grid_units(d: int, seed: int) -> np.ndarray:
     from scipy.stats import qmc  # here, not at import: scipy.stats takes ~1 s to import
 
     return qmc.Sobol(d, scramble=True, seed=seed).random(MAX_CANDIDATES)
+
+
+def grid(specs: list, seed: int) -> list[dict]:
+    """Settings of the named scalars on the search's grid over their search ranges (`_grid_units`).
+
+    Arguments:
+        specs: the `ParamSpec`s of the searched scalars.
+        seed: seed of the Sobol points (four or more scalars).
+
+    Returns:
+        A list of dicts name -> physical value (empty for no scalars).
+    """
+    if not specs:
+        return []
+    return [{s.name: _from_unit(u[k], s) for k, s in enumerate(specs)} for u in _grid_units(len(specs), seed)]
 
 
 def _lobe_candidates(problem: Problem, names: set, seed: int) -> list[dict]:
@@ -251,9 +267,7 @@ def search(problem: Problem, base: dict, data: FitData, seed: int, candidates: l
     if candidates is not None:
         settings = [own] + [{k: v for k, v in c.items() if k in own} for c in candidates]
     else:
-        settings = [own] + [{s.name: _from_unit(u[k], s) for k, s in enumerate(outer)}
-                            for u in (_grid_units(len(outer), seed) if outer else np.zeros((0, 0)))]
-        settings += _lobe_candidates(problem, set(own), seed)
+        settings = [own] + grid(outer, seed) + _lobe_candidates(problem, set(own), seed)
     full = []
     for setting in settings:
         params = dict(base)

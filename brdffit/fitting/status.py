@@ -20,7 +20,7 @@ import numpy as np
 from ..params import at_bound
 from .problem import Problem
 
-__all__ = ["STATUSES", "STALL_TOLERANCE", "bounds_hit", "predicted_decrease", "diagnose", "warnings_of",
+__all__ = ["STATUSES", "STALL_TOLERANCE", "bounds_hit", "bounded_step", "predicted_decrease", "diagnose", "warnings_of",
            "information_criteria"]
 
 STATUSES = ("converged", "converged-at-bound", "max-steps", "stalled", "nonfinite")
@@ -41,11 +41,14 @@ def bounds_hit(problem: Problem, params: dict) -> list[str]:
     return hit
 
 
-def predicted_decrease(problem: Problem, params: dict, jtj, jtr) -> float:
-    """The decrease of Σr² that a Gauss-Newton step from ``params`` predicts, moving only the way the bounds
-    allow: rᵀJ (JᵀJ)⁺ Jᵀr over the free scalars, leaving out those at a bound whose descent direction −Jᵀr
-    points out of the box (Karush-Kuhn-Tucker: there the bound is active). Near 0 at a true (constrained)
-    optimum.
+def bounded_step(problem: Problem, params: dict, jtj, jtr) -> tuple[np.ndarray, float]:
+    """The Gauss-Newton step from ``params`` that stays inside the bounds, and the decrease of Σr² it predicts.
+
+    The linearised problem min ‖JΔ + r‖² is solved over the box lower − p ≤ Δ ≤ upper − p, in Jacobi-scaled
+    coordinates (physical units span many decades) and on the range of JᵀJ (a direction the data do not see
+    predicts nothing). A scalar within `brdffit.params.at_bound`'s margin of a bound counts as on it. The plain
+    step rᵀJ (JᵀJ)⁺ Jᵀr is the answer when it stays inside; otherwise the box-constrained linear least squares
+    (scipy.optimize.lsq_linear) is. Near 0 at a true (constrained) optimum: Karush-Kuhn-Tucker.
 
     Arguments:
         problem: the `Problem`.
@@ -53,7 +56,8 @@ def predicted_decrease(problem: Problem, params: dict, jtj, jtr) -> float:
         jtj, jtr: JᵀJ and Jᵀr in the physical free parameters at ``params``.
 
     Returns:
-        The predicted decrease (>= 0).
+        ``(step, decrease)``: the step over the flattened free scalars (physical units) and the predicted
+        decrease (>= 0).
     """
     layout = problem.layout
     values = layout.flatten(params, problem.free)
@@ -63,14 +67,34 @@ def predicted_decrease(problem: Problem, params: dict, jtj, jtr) -> float:
     at_lower = near & (np.abs(values - lower) <= np.abs(values - upper))
     at_upper = near & ~at_lower
     g = np.asarray(jtr, dtype=float)
-    moving = ~((at_lower & (g > 0)) | (at_upper & (g < 0)))
-    if not moving.any() or not np.all(np.isfinite(jtj)):  # nothing can move, or nothing to linearise
-        return 0.0
-    h = np.asarray(jtj, dtype=float)[np.ix_(moving, moving)]
-    g = g[moving]
-    scale = np.sqrt(np.maximum(np.diag(h), 1e-300))  # Jacobi scaling: physical units span many decades
-    step = np.linalg.lstsq(h / np.outer(scale, scale), g / scale, rcond=1e-12)[0]
-    return float(max((g / scale) @ step, 0.0))
+    h = np.asarray(jtj, dtype=float)
+    zero = np.zeros_like(values)
+    if not g.size or not np.all(np.isfinite(h)) or not np.all(np.isfinite(g)):  # nothing to linearise
+        return zero, 0.0
+    scale = np.sqrt(np.maximum(np.diag(h), 1e-300))
+    eigenvalues, vectors = np.linalg.eigh(h / np.outer(scale, scale))
+    seen = eigenvalues > 1e-12 * max(eigenvalues.max(initial=0.0), 1e-300)
+    if not seen.any():
+        return zero, 0.0
+    root, basis = np.sqrt(eigenvalues[seen]), vectors[:, seen]
+    projected = basis.T @ (g / scale)  # ‖AΔ' + b‖² = Δ'ᵀHΔ' + 2gᵀΔ' + gᵀH⁺g with A = √Λ Vᵀ, b = Λ^(-1/2) Vᵀ g
+    a, b = root[:, None] * basis.T, projected / root
+    full = float(b @ b)
+    z = -basis @ (projected / eigenvalues[seen])
+    low = np.where(at_lower, 0.0, (lower - values) * scale)
+    high = np.where(at_upper, 0.0, (upper - values) * scale)
+    if np.all((z >= low) & (z <= high)):
+        return z / scale, max(full, 0.0)
+    from scipy.optimize import lsq_linear  # here, not at import: only a step that leaves the box needs it
+
+    z = lsq_linear(a, -b, bounds=(low, np.maximum(high, low)), method="bvls").x
+    rest = a @ z + b
+    return z / scale, max(full - float(rest @ rest), 0.0)
+
+
+def predicted_decrease(problem: Problem, params: dict, jtj, jtr) -> float:
+    """The decrease of Σr² that a Gauss-Newton step from ``params`` predicts within the bounds (`bounded_step`)."""
+    return bounded_step(problem, params, jtj, jtr)[1]
 
 
 def diagnose(problem: Problem, params: dict, cost: float, max_steps: bool, nonfinite: bool, jtj, jtr):
