@@ -211,7 +211,9 @@ def determination(oracle, truth, free: list[str]) -> tuple[dict | None, str]:
         return None, f"oracle {oracle.status}"
     tolerance = {}
     for name in free:
-        stderr = np.maximum(np.asarray(oracle.stderr[name], dtype=float),
+        # stderr_laplace, not stderr: since the noise model (25136ca) `stderr` holds the kind the residuals support,
+        # often the sandwich itself, and the larger of the two kinds is what the tolerance takes.
+        stderr = np.maximum(np.asarray(oracle.stderr_laplace[name], dtype=float),
                             np.asarray(oracle.stderr_robust[name], dtype=float))
         if not np.all(np.isfinite(stderr)):
             return None, f"oracle stderr of {name} infinite"
