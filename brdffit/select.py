@@ -58,6 +58,10 @@ _CONVERGED = ("converged", "converged-at-bound")
 # times the full-data covariance); SCREEN_SLACK times k n/n_s bounds it for misspecified ones too
 # (docs/model-selection.md, and the measurement there).
 SCREEN_SAMPLES = 4096
+# A fit whose directional albedo stays within 1 where the data were measured but exceeds this beyond their largest
+# θi is not chosen while another converged candidate does not (``plausible``): a diffuse lobe and a specular one,
+# uncoupled and each within 1, could reach 2 towards grazing; more is a lobe the data never constrained.
+EXTRAPOLATION_ALBEDO = 2.0
 SCREEN_SLACK = 10.0
 _LAFORTUNE = re.compile(r"^(?P<base>.*?)\+?lafortune(?:\((?P<options>[^)]*)\))?$")
 
@@ -201,12 +205,15 @@ def _fit_candidate(spec, measurements, done, fit_options):
     return fit(measurements, spec, init=init, **fit_options), init
 
 
-def _verdict(row: dict, chosen: dict, best: dict, threshold: float, criterion: str, usable: list) -> str:
+def _verdict(row: dict, chosen: dict, best: dict, threshold: float, criterion: str, usable: list,
+             implausible: dict) -> str:
     """Why a candidate was or was not chosen, in words."""
     name = {"aic": "ΔAIC", "bic": "ΔBIC", "cv": "CV error"}[criterion]
     if row is chosen:
         return "chosen: the simplest candidate within " + ("one standard error of the best CV error"
                                                             if criterion == "cv" else "the margin of the best")
+    if row["spec"] in implausible:
+        return f"not eligible: implausible beyond the data ({implausible[row['spec']]})"
     if row not in usable:
         return f"not eligible: its fit ended {row['status']}"
     if row["score"] > threshold:
@@ -218,6 +225,15 @@ def _verdict(row: dict, chosen: dict, best: dict, threshold: float, criterion: s
     return f"as good and as small, but slower to evaluate ({row['cost_ns']:.3g} against {chosen['cost_ns']:.3g} ns)"
 
 
+def _implausibility(result: FitResult) -> str:
+    """Why a fit extrapolates implausibly (`FitResult.plausibility`'s energy check: within 1 where the data are,
+    above `EXTRAPOLATION_ALBEDO` beyond their largest θi), in words; empty when it does not."""
+    energy = result.plausibility()["energy"]
+    if energy.level == "caution" and energy.value > EXTRAPOLATION_ALBEDO:
+        return f"energy: {energy.message}"
+    return ""
+
+
 def _simplest(rows: list[dict], eligible) -> dict:
     return min((r for r in rows if eligible(r)), key=lambda r: (r["n_params"], r["cost_ns"]))
 
@@ -225,7 +241,7 @@ def _simplest(rows: list[dict], eligible) -> dict:
 def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", *, loss: str = "cosine",
            margin: float | None = None, folds: int = 5, holdout: float = 0.2, scene=None,
            tolerance: float | None = None, scene_metric: str = "relative", reference: str = "data", seed: int = 0,
-           screen: bool = True, progress: bool = False, **fit_options) -> Selection:
+           screen: bool = True, plausible: bool = True, progress: bool = False, **fit_options) -> Selection:
     """Fit candidate models and choose the smallest one that is good enough.
 
     Arguments:
@@ -251,6 +267,9 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
         screen: with ``aic``/``bic``, fit every candidate to the training rows first (at most `SCREEN_SAMPLES` of
             them) and refit to all the data only the candidates that can still be chosen (docs/model-selection.md);
             False fits every candidate to all the data and again with the held-out rows masked.
+        plausible: leave out fits that conserve energy where the data were measured but whose directional
+            albedo exceeds `EXTRAPOLATION_ALBEDO` beyond the data's largest θi (`brdffit.properties.plausibility`)
+            while a converged candidate remains; such a candidate's verdict says so.
         progress: show a progress line on stderr, one update per candidate (and per scene refit).
         **fit_options: passed to every `brdffit.fit` (solver, fixed, max_steps, ...).
 
@@ -283,10 +302,10 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
             screen_data = measurements.take(np.sort(rng.choice(train_rows, SCREEN_SAMPLES, replace=False)))
         else:  # all the training rows, the held-out ones masked: the refits reuse the screening's programs
             screen_data = _masked(measurements, fold_rows[0])
-        rows = _screened_rows(candidates, measurements, screen_data, fold_rows[0], criterion, margin, seed, options,
-                              done, bar)
+        rows, screened = _screened_rows(candidates, measurements, screen_data, fold_rows[0], criterion, margin, seed,
+                                        options, done, bar)
     else:
-        rows = _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar)
+        rows, screened = _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar), None
     for row in rows:
         row["score"] = row["heldout_error"] if criterion == "cv" else row[criterion]
     finite = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r["score"])]
@@ -298,15 +317,40 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
         usable = finite
         warnings.append("no candidate's fit converged: the choice is among unconverged fits (raise max_steps, "
                         "or check the data)")
-    best = min(usable, key=lambda r: r["score"])
-    if criterion == "cv":
-        se = best["heldout_se"] if math.isfinite(best["heldout_se"]) else 0.0
-        threshold = best["score"] + se
-    else:
-        threshold = best["score"] + margin
-    chosen = _simplest(usable, lambda r: r["score"] <= threshold)
+    implausible: dict[str, str] = {}
+    while True:
+        best = min(usable, key=lambda r: r["score"])
+        if criterion == "cv":
+            se = best["heldout_se"] if math.isfinite(best["heldout_se"]) else 0.0
+            threshold = best["score"] + se
+        else:
+            threshold = best["score"] + margin
+        chosen = _simplest(usable, lambda r: r["score"] <= threshold)
+        # Nor is a fit plausible where the data are that reflects far more light than it receives beyond them
+        # while another converged candidate remains: it would render wrong there (docs/model-selection.md). A fit
+        # implausible where the data are is kept: the data may be in other units (their summary says so).
+        # Checked lazily: the choice and the bar.
+        found = {r["spec"]: _implausibility(done[r["spec"]]) for r in (best, chosen)
+                 if plausible and r["spec"] not in implausible}
+        found = {k: v for k, v in found.items() if v}
+        if not found:
+            break
+        remaining = [r for r in usable if r["spec"] not in found]
+        if not remaining:
+            warnings.append("every converged candidate reflects more than EXTRAPOLATION_ALBEDO beyond the data's "
+                            "angles (its summary says so): the choice is among them")
+            break
+        implausible.update(found)
+        usable = remaining
+        if screened is not None:  # a lower bar's candidates, ruled out by the screening, may now be within it
+            _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar,
+                              excluded=set(implausible))
+            for row in rows:
+                row["score"] = row["heldout_error"] if criterion == "cv" else row[criterion]
+            usable = [r for r in rows if r["status"] in _CONVERGED and math.isfinite(r["score"])
+                      and r["spec"] not in implausible] or usable
     for row in rows:
-        row["verdict"] = _verdict(row, chosen, best, threshold, criterion, usable)
+        row["verdict"] = _verdict(row, chosen, best, threshold, criterion, usable, implausible)
     by_scene = None
     scene_results = {}
     if scene is not None:
@@ -396,25 +440,31 @@ def _screened_rows(candidates, measurements, screen_data, held, criterion, margi
                      "heldout_error": _rms(r[held]), "heldout_se": math.nan, "aic": aic,
                      "bic": bic, "cost_ns": _eval_cost_ns(result, seed), "status": result.status,
                      "samples": result.n_samples})
+    _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar)
+    return rows, screened
+
+
+def _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar, excluded=()):
+    """Refit to all the data, from their screening fits, the screened candidates that can still come within the
+    margin of the best eligible one (a converged fit not in ``excluded``), until none is left; a refitted row
+    gets its full-data fields and ``done`` its full-data fit (a row whose ``done`` entry is still its screening
+    fit has not been refitted)."""
+    n_values = int(np.isfinite(measurements.values).sum())
     finite = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r[criterion])]
-    if not finite:
-        return rows
-    refitted: set[str] = set()
-    while True:
+    while finite:
         # The best that can be chosen: a converged fit's score (a refit that ended unconverged is no longer the
         # bar, and the candidates it had ruled out are measured against the next best).
-        eligible = [r for r in finite if r["status"] in _CONVERGED] or finite
+        eligible = [r for r in finite if r["status"] in _CONVERGED and r["spec"] not in excluded] or finite
         best = min(r[criterion] for r in eligible)
-        todo = [row for row in finite if row["spec"] not in refitted
+        todo = [row for row in finite if done[row["spec"]] is screened[row["spec"]] and row["spec"] not in excluded
                 and row[criterion] - SCREEN_SLACK * row["n_params"] * n_values
                 / max(screened[row["spec"]].n_samples, 1) <= best + margin]
         if not todo:  # the others cannot come within the margin of the best, even fitted to all the data
-            return rows
+            return
         for row in todo:
             bar.update(len(rows) - 1, f"fitting {row['spec']} to all {measurements.n} samples")
             result = fit(measurements, row["spec"], init=screened[row["spec"]].model, **options)
             done[row["spec"]] = result
-            refitted.add(row["spec"])
             row.update(_full_fit_fields(result))
 
 

@@ -165,6 +165,29 @@ def test_an_unconverged_candidate_is_not_chosen_and_the_verdict_says_why():
     assert "lambert+blinn-phong: not eligible: its fit ended max-steps" in selection.summary()
 
 
+def test_a_candidate_implausible_only_beyond_the_data_is_not_chosen_and_the_verdict_says_why():
+    """Data up to 60° from a Lafortune lobe with cxy = −1.3 (its normalised cosine reaches 1 only at grazing, like
+    the satin film's fit in docs/real-data.md; ks = 100, n = 100: albedo 0.49 up to 60°, 7.8 at 80°): the
+    Lafortune fit, the truth's own model, has the best BIC and conserves energy where the data are, but its
+    directional albedo passes EXTRAPOLATION_ALBEDO (2) towards grazing, so the GGX fit is chosen; with plausible=False the criterion alone decides. A candidate implausible
+    where the data are stays eligible (the retro-reflector below)."""
+    truth = models.get("lambert+lafortune", rho_d=[0.3, 0.2, 0.1], ks_1=[100.0] * 3, cxy_1=-1.3, n_1=100.0)
+    data = synth.generate(truth, pattern="half-diff", n=800, noise="relative:0.01", seed=0,
+                          max_theta=np.radians(60.0))
+    candidates = ["lambert+ggx", "lambert+lafortune"]
+    selection = select(data, candidates, criterion="bic")
+    rows = {r["spec"]: r for r in selection.table}
+    assert rows["lambert+lafortune"]["status"].startswith("converged")
+    assert rows["lambert+lafortune"]["bic"] < rows["lambert+ggx"]["bic"] - 10, selection.summary()
+    energy = selection.results["lambert+lafortune"].plausibility()["energy"]
+    assert energy.level == "caution" and energy.value > 2.0, energy
+    assert selection.chosen == "lambert+ggx", selection.summary()
+    assert rows["lambert+lafortune"]["verdict"].startswith("not eligible: implausible beyond the data (energy: max "
+                                                          "albedo"), rows["lambert+lafortune"]["verdict"]
+    assert "lambert+lafortune: not eligible: implausible beyond the data" in selection.summary()
+    assert select(data, candidates, criterion="bic", plausible=False).chosen == "lambert+lafortune"
+
+
 def test_two_specular_lobes_select_two_ggx_lobes_sharing_fresnel_and_recover_them():
     truth = models.get("lambert+ggx+ggx(share=f0)", rho_d=[0.3, 0.2, 0.1], ks=[0.5, 0.4, 0.3], alpha=0.06,
                        ks_2=[0.3, 0.3, 0.3], alpha_2=0.3, f0=0.04)
