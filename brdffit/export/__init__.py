@@ -103,10 +103,11 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
     except ExportError:
         pass
     if not candidates or not (target.refines or candidates[0].deviation.exact()):
-        from .refit import fit_exportable
+        from .refit import exportable_specs, fit_exportable
 
-        fitted, line = fit_exportable(model)
-        candidates.append(_export(target, fitted, name, header + [line], model))
+        for spec in exportable_specs(model):
+            fitted, line = fit_exportable(model, spec=spec)
+            candidates.append(_export(target, fitted, name, header + [line], model))
     return min(candidates, key=lambda c: c.deviation.rms)
 
 

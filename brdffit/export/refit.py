@@ -16,7 +16,7 @@ import numpy as np
 
 from ..models import Model
 
-__all__ = ["fit_exportable", "exportable_spec", "fit_data", "FIT_SAMPLES"]
+__all__ = ["fit_exportable", "exportable_spec", "exportable_specs", "fit_data", "FIT_SAMPLES"]
 
 FIT_SAMPLES = 2000
 _DIFFUSE_LOBES = ("lambert", "oren-nayar", "toon-diffuse")
@@ -36,22 +36,32 @@ def exportable_spec(model: Model) -> str:
 _FITS: dict = {}
 
 
-def fit_exportable(model: Model, seed: int = 0) -> tuple[Model, str]:
-    """Fit `exportable_spec` to ``model`` (remembered per model and seed).
+def exportable_specs(model: Model) -> list[str]:
+    """The exportable families fitted in place of ``model``: `exportable_spec`, and where the model has a diffuse
+    lobe and more, ``lambert`` alone (a floor: a lobe fitted where the source has a spike that the hemisphere
+    samples see but a renderer's own model cannot follow can end farther from the source than its diffuse part
+    alone; the export writes whichever candidate deviates least)."""
+    spec = exportable_spec(model)
+    return [spec] + (["lambert"] if spec.startswith("lambert+") else [])
+
+
+def fit_exportable(model: Model, seed: int = 0, spec: str | None = None) -> tuple[Model, str]:
+    """Fit an exportable family to ``model`` (remembered per model, family and seed).
 
     Arguments:
         model: the source model.
         seed: seed of the direction pairs and of the fit.
+        spec: the family (one of `exportable_specs`); default `exportable_spec`.
 
     Returns:
         (the fitted model, a comment line naming the fit).
     """
     from ..fitting.api import fit
 
-    key = (model.spec, model.channels, seed,
+    spec = exportable_spec(model) if spec is None else spec
+    key = (model.spec, model.channels, seed, spec,
            tuple((name, np.asarray(value, dtype=float).tobytes()) for name, value in sorted(model.params.items())))
     if key not in _FITS:
-        spec = exportable_spec(model)
         data, pairs = fit_data(model, seed)
         result = fit(data, spec, seed=seed)
         _FITS[key] = (result.model, f"fit: {spec} was fitted to the source model {model.spec} at {pairs.uniform} "
