@@ -373,7 +373,7 @@ def _held_start(problem: Problem, params: dict, held: dict) -> dict:
 
 # -------------------------------------------------------------------------------------------------------- revive
 def _revive(problem: Problem, solve_problem: Problem, kept: dict, search_data: FitData, data: FitData, seed: int,
-            starts: int, metrics: bool) -> dict | None:
+            starts: int, metrics: bool) -> tuple[dict | None, float, float]:
     """Search a lobe whose amplitudes all went to 0 again, the rest of one material's answer held: a grid over
     the lobe's own shape parameters (`search.grid`), every amplitude re-solved at each setting, the best separated
     settings polished with everything free. This is the nested search of Lafortune et al. (1997) and Ngan et
@@ -389,11 +389,12 @@ def _revive(problem: Problem, solve_problem: Problem, kept: dict, search_data: F
         metrics: ``data`` is the whole data (`_polish`).
 
     Returns:
-        The best revived outcome, with a note, when it costs less than ``kept``; else None.
+        ``(outcome, compile_seconds, run_seconds)``: the best revived outcome, with a note, when it converged
+        below ``kept``'s cost, else None; and the seconds the polish spent either way.
     """
     groups = _dead_shapes(problem, kept["params"])
     if not groups:
-        return None
+        return None, 0.0, 0.0
     specs = problem.specs
     candidates = [setting for names in groups for setting in grid([specs[n] for n in names], seed)]
     single = jax.tree_util.tree_map(lambda a: a[None], search_data)
@@ -405,13 +406,12 @@ def _revive(problem: Problem, solve_problem: Problem, kept: dict, search_data: F
     # Only a converged answer replaces one: a lower point still moving after REVIVE_STEPS lies in a flat valley
     # (two GGX lobes sharing f0 on paper_white: 0.15 % lower after 256 steps, not converged).
     if revived["max_steps"] or revived["nonfinite"] or not revived["cost"] < kept["cost"] * (1.0 - 1e-12):
-        return None
+        return None, compile_time, run_time
     revived["steps"] += kept["steps"]
     revived["notes"] = kept["notes"] + [
         f"{'; '.join(', '.join(names) for names in groups)} searched again where their lobe's amplitudes had all "
         f"gone to 0 (cost {kept['cost']:.6g} -> {revived['cost']:.6g})"]
-    revived["times"] = (compile_time, run_time)
-    return revived
+    return revived, compile_time, run_time
 
 
 # --------------------------------------------------------------------------------------------------------- prune
@@ -574,13 +574,12 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
                 for s, o in zip(starts[m], outcomes[m])] for m in range(len(items))]
     kept = [dict(_best(o), notes=[]) for o in outcomes]
     for m in range(len(items)):
-        revived = _revive(problem, solve_problem, kept[m], jax.tree_util.tree_map(lambda a, m=m: a[m], search_data),
-                          solve_items[m], seed, len(starts[0]), not two_stage)
+        revived, c_time, r_time = _revive(problem, solve_problem, kept[m],
+                                          jax.tree_util.tree_map(lambda a, m=m: a[m], search_data), solve_items[m],
+                                          seed, len(starts[0]), not two_stage)
+        compile_time += c_time
+        run_time += r_time
         if revived is not None:
-            bar.update(1, "searching a dead lobe again")
-            c_time, r_time = revived.pop("times")
-            compile_time += c_time
-            run_time += r_time
             records[m].append({"init": _json_params(kept[m]["params"]), "cost": revived["cost"],
                                "status": _start_status(revived), "steps": revived["steps"], "revived": True})
             kept[m] = revived
@@ -615,7 +614,8 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
                     f"left them) after a solve that ended {statuses[m]} "
                     f"(cost {kept[m]['cost']:.6g} -> {retry['cost']:.6g})"]
                 kept[m], normals[m], statuses[m] = retry, retry_normal, retry_status
-            # Karush-Kuhn-Tucker: a held bound whose descent direction points into the box is released.
+            # The active-set update: a held bound whose descent direction points into the box (Karush-Kuhn-Tucker)
+            # is released, a scalar the re-solve took to a bound is added.
             holds[m] = _next_holds(problem, held, retry["params"], retry_normal.jtj, retry_normal.jtr) \
                 if statuses[m] in ("max-steps", "stalled") else {}
 
