@@ -232,3 +232,39 @@ def test_nist_round_trip_gives_back_the_files_numbers(tmp_path):
     np.testing.assert_allclose(mine["phi_o"], np.mod(raw["phir"], 360), rtol=2e-16, atol=0)
     assert np.count_nonzero(mine["phi_o"] != np.mod(raw["phir"], 360)) <= 6
     assert np.array_equal(mine["f_r11"], raw["f_r11"])
+
+
+@pytest.mark.parametrize("delimiter", [",", "\t", " "])
+def test_an_all_number_table_is_read_as_one_array_with_the_values_cell_by_cell_reading_gives(tmp_path, delimiter):
+    """The one-array reading (`numpy.loadtxt`) of a table of plain numbers gives what the cell-by-cell reading
+    gives: the same table with one missing marker ("NA") takes that path, and every other value agrees exactly;
+    a cell with a digit group ("1_0") still is an error naming its line and column."""
+    from brdffit.io.table import _read_text, _split_lines
+
+    rng = np.random.default_rng(4)
+    angles = np.column_stack([rng.uniform(0, 80, 40), rng.uniform(0, 360, 40), rng.uniform(0, 80, 40),
+                              rng.uniform(0, 360, 40)])
+    values = rng.uniform(0.01, 3.0, 40)
+    cells = [[f"{a:.9g}" for a in row] + [f"{v:.6e}" if r % 3 else f"+{v:.9g}"] for r, (row, v) in
+             enumerate(zip(angles, values))]
+    header = ["theta_i", "phi_i", "theta_o", "phi_o", "R"]
+
+    def write(name, rows):
+        path = tmp_path / name
+        path.write_text("# a gonio scan\n" + delimiter.join(header) + "\n"
+                        + "\n".join(delimiter.join(row) for row in rows) + "\n")
+        return path
+
+    fast_path = write("fast.txt", cells)
+    slow_path = write("slow.txt", cells[:-1] + [cells[-1][:4] + ["NA"]])
+    assert _split_lines(fast_path, _read_text(fast_path), None)._rows is None  # read as one array
+    assert _split_lines(slow_path, _read_text(slow_path), None)._rows is not None  # cell by cell
+    fast, slow = read_table(fast_path), read_table(slow_path)
+    np.testing.assert_array_equal(fast.values[:-1], slow.values[:-1])
+    np.testing.assert_array_equal(fast.values[:, 0], [float(row[4]) for row in cells])  # as Python reads each
+    for name in ("theta_i", "phi_i", "theta_o", "phi_o"):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name))
+    assert np.isnan(slow.values[-1, 0])
+    bad = write("bad.txt", cells[:5] + [cells[5][:4] + ["1_0"]] + cells[6:])
+    with pytest.raises(FormatError, match=r"line 8.*column 5 \('R'\)|column 5 \('R'\).*line 8"):
+        read_table(bad)

