@@ -40,7 +40,7 @@ from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data
 from .result import FitResult
 from .search import POLISH_STARTS, SEARCH_SAMPLES, canonical, grid, interior, quasi_random_starts, score, search
 from .solvers import coarse_solver, compiled_solve, make_solver, no_pins, solver_name, working_tolerances
-from .status import bounded_step, diagnose, information_criteria, warnings_of
+from .status import diagnose, information_criteria, warnings_of
 from .uncertainty import Uncertainty, normal_equations_at
 
 __all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
@@ -303,22 +303,17 @@ def _best(outcomes: list[dict]) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------------------- hold
-def _to_hold(problem: Problem, params: dict, jtj, jtr) -> dict:
-    """Outer parameters to hold for a re-solve: scalars within `HOLD_FRACTION` of a bound, or that the
-    Gauss-Newton step within the bounds (`status.bounded_step`) takes there, snapped onto it (an active-set
-    prediction, as a projected Newton method makes), and the shape of lobes whose amplitudes are all 0 (held
-    where they are). NaN marks a scalar left free."""
+def _to_hold(problem: Problem, params: dict) -> dict:
+    """Outer parameters to hold for a re-solve: scalars within `HOLD_FRACTION` of a bound (snapped onto it), and
+    the shape of lobes whose amplitudes are all 0 (held where they are). NaN marks a scalar left free."""
     layout = problem.layout
-    step = bounded_step(problem, params, jtj, jtr)[0] if problem.free else None
-    offsets = layout.offsets(problem.free)
     held = {}
     for name in problem.outer:
         spec = layout[name].spec
         value = np.array(params[name], dtype=float)
-        landed = value + np.reshape(step[offsets[name]], value.shape)
-        near = np.asarray(at_bound(value, spec, HOLD_FRACTION) | at_bound(landed, spec, HOLD_FRACTION))
+        near = np.asarray(at_bound(value, spec, HOLD_FRACTION))
         if near.any():
-            nearest = np.where(np.abs(landed - spec.lower) <= np.abs(landed - spec.upper), spec.lower, spec.upper)
+            nearest = np.where(np.abs(value - spec.lower) <= np.abs(value - spec.upper), spec.lower, spec.upper)
             held[name] = np.where(near, nearest, np.nan)
     for names in _dead_shapes(problem, params):
         held.update({name: np.asarray(params[name], dtype=float) for name in names})
@@ -338,7 +333,7 @@ def _dead_shapes(problem: Problem, params: dict) -> list[tuple[str, ...]]:
     return groups
 
 
-def _next_holds(problem: Problem, held: dict, params: dict, jtj, jtr) -> dict:
+def _next_holds(problem: Problem, held: dict, params: dict, jtr) -> dict:
     """The holds of the next round after a re-solve (an active-set update): a scalar held on a bound whose descent
     direction −∂cost/∂p points into the box is released (its entry becomes NaN), a scalar the re-solve took to a
     bound is added (`_to_hold`), scalars held inside the box (a dead lobe's shape) stay. Empty when nothing
@@ -352,7 +347,7 @@ def _next_holds(problem: Problem, held: dict, params: dict, jtj, jtr) -> dict:
         inward = ((value == spec.lower) & (gradient < 0)) | ((value == spec.upper) & (gradient > 0))
         changed |= bool(inward.any())
         out[name] = np.where(inward, np.nan, value)
-    for name, value in _to_hold(problem, params, jtj, jtr).items():
+    for name, value in _to_hold(problem, params).items():
         before = np.broadcast_to(out.get(name, np.nan), np.shape(value))
         was_held = np.isfinite(np.broadcast_to(np.asarray(held.get(name, np.nan), dtype=float), np.shape(value)))
         added = np.isnan(before) & np.isfinite(value) & ~was_held  # a scalar just released stays free
@@ -586,8 +581,8 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
     normals = [_normal(problem, b, d) for b, d in zip(kept, solve_items)]
     statuses = [diagnose(problem, b["params"], b["cost"], b["max_steps"], b["nonfinite"], n.jtj, n.jtr)[0]
                 if problem.free else "converged" for b, n in zip(kept, normals)]
-    holds = [_to_hold(problem, b["params"], n.jtj, n.jtr) if st in ("max-steps", "stalled") else {}
-             for b, st, n in zip(kept, statuses, normals)]
+    holds = [_to_hold(problem, b["params"]) if st in ("max-steps", "stalled") else {}
+             for b, st in zip(kept, statuses)]
     for _ in range(HOLD_ROUNDS):
         if not any(holds):
             break
@@ -616,7 +611,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
                 kept[m], normals[m], statuses[m] = retry, retry_normal, retry_status
             # The active-set update: a held bound whose descent direction points into the box (Karush-Kuhn-Tucker)
             # is released, a scalar the re-solve took to a bound is added.
-            holds[m] = _next_holds(problem, held, retry["params"], retry_normal.jtj, retry_normal.jtr) \
+            holds[m] = _next_holds(problem, held, retry["params"], retry_normal.jtr) \
                 if statuses[m] in ("max-steps", "stalled") else {}
 
     problems = [problem] * len(items)
