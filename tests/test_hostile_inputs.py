@@ -166,7 +166,10 @@ def test_the_inspection_costs_milliseconds(tmp_path):
     for _ in range(5):
         hdf5.inspect_hdf5(path)
     per_file = (time.perf_counter() - start) / 5
-    assert per_file < 0.25, per_file  # measured 17-30 ms with JAX loaded (the fork copies the page tables)
+    # Measured 17-30 ms with JAX loaded on an idle host (the fork copies the page tables), 277 ms with the host's
+    # two cores busy. The bound guards the design (a fork, not a new interpreter that imports brdffit: >= 1 s),
+    # not a speed target (those live in scripts/bench_*.py), so it leaves room for a loaded CI machine.
+    assert per_file < 0.75, per_file
 
 
 def unknown_encoding_file(path) -> Path:
