@@ -39,6 +39,9 @@ class Export:
         source: the model that was exported (the fit's model; before the ``fit`` option).
         notes: the approximations made.
         deviation: `brdffit.export.terms.Deviation` of ``written`` from ``source``.
+        mapped: the model whose mapping was written: ``source``, or under the ``fit`` option the brdffit fit of the
+            renderer's own lobes that came closer (`brdffit.export.refit`).
+        fitted: the comment line naming that fit (None where ``source`` itself was mapped).
     """
 
     text: str
@@ -46,6 +49,15 @@ class Export:
     source: object
     notes: list
     deviation: object
+    mapped: object
+    fitted: str | None
+
+    @property
+    def exact(self) -> bool:
+        """Whether the comments call the export exact (`brdffit.export.terms.is_exact`)."""
+        from .terms import is_exact
+
+        return is_exact(self.deviation, self.notes)
 
     @property
     def pairs(self):
@@ -107,15 +119,16 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
 
         for spec in exportable_specs(model):
             fitted, line = fit_exportable(model, spec=spec)
-            candidates.append(_export(target, fitted, name, header + [line], model))
+            candidates.append(_export(target, fitted, name, header, model, line))
     return min(candidates, key=lambda c: c.deviation.rms)
 
 
-def _export(target: Target, model, name: str, header: list, source) -> Export:
+def _export(target: Target, model, name: str, header: list, source, fitted: str | None = None) -> Export:
     """One renderer export of ``model``; with ``source`` (the fit option) measured against and, where the target
-    refines its own parameters, refined to it."""
-    text, written, notes, deviation = target.load().write(model, name, header, source=source)
-    return Export(text, written, source if source is not None else model, notes, deviation)
+    refines its own parameters, refined to it; ``fitted`` is the comment line of the fit that ``model`` is."""
+    lines = header + ([fitted] if fitted else [])
+    text, written, notes, deviation = target.load().write(model, name, lines, source=source)
+    return Export(text, written, source if source is not None else model, notes, deviation, model, fitted)
 
 
 def export(model_or_result, to: str = "json", *, name: str = "material", fit: bool = False) -> str:

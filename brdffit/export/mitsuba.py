@@ -300,12 +300,8 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     deviation = tm.measure(reference, written, pairs=pairs)
     lines = [_comment(line) for line in header]
     lines += [_comment(f"approximation: {note}") for note in notes]
-    # "exact" only where nothing was approximated, even where the deviation is at rounding level (before the
-    # near-peak pairs, the 2,000 uniform pairs missed an RGL gloss film's m = 0.005 Beckmann peak and measured
-    # 1.7e-27 through three approximations).
-    exact = deviation.exact() and not notes
-    lines.append(_comment(("exact: " if exact else "measured deviation from the source model: ")
-                          + deviation.describe()))
+    verdict = "exact: " if tm.is_exact(deviation, notes) else "measured deviation from the source model: "
+    lines.append(_comment(verdict + deviation.describe()))
     head = f'version="3.0.0" id={quoteattr(name)} '
     lines += _tree(leaves, "", head)
     return "\n".join(lines) + "\n", written, notes, deviation

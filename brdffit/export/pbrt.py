@@ -252,7 +252,7 @@ def write(model, name: str, header: list[str], source=None):
     body, written = _evaluator(parts, name)
     deviation = tm.measure(reference, written, pairs=pairs)
     lines = [f"# {line}" for line in header] + [f"# approximation: {note}" for note in notes]
-    exact = deviation.exact() and not notes  # "exact" only where nothing was approximated (see mitsuba.write)
-    lines.append(("# exact: " if exact else "# measured deviation from the source model (pbrt-v4's "
-                  "formulas, brdffit.export.pbrt_reference): ") + deviation.describe())
+    verdict = "# exact: " if tm.is_exact(deviation, notes) else (
+        "# measured deviation from the source model (pbrt-v4's formulas, brdffit.export.pbrt_reference): ")
+    lines.append(verdict + deviation.describe())
     return "\n".join(lines) + "\n" + body, written, notes, deviation
