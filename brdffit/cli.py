@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from . import __version__
+from .export.records import EXPORTS_FILE
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command stopped by Ctrl-C
@@ -309,9 +310,10 @@ def _check_writable(out: Path) -> None:
                          "with --out")
 
 
-# What `brdffit fit` writes into its output folder (the report's figures are PNG files beside report.html).
+# What `brdffit fit` writes into its output folder (the report's figures are PNG files beside report.html), and
+# what `brdffit export --fit` records there (brdffit.export.records).
 OUTPUT_NAMES = ("result.h5", "result.json", "summary.txt", "posterior.json", "selection.json", "report.html",
-                "report.md")
+                "report.md", EXPORTS_FILE)
 STAGE_MARK = ".new-"  # a folder being written: .<out name>.new-<pid>-<random> beside the output folder
 
 
@@ -611,6 +613,11 @@ def _write_report(out: Path, measurements, result, post, selection, args) -> dic
     return write_report(out, measurements, result, posterior=post, selection=selection, run_info=run_info)
 
 
+def _warn(args, message: str) -> None:
+    """A problem that did not stop the command, on stderr (also under --quiet)."""
+    print(f"brdffit {args.command}: warning: {message}", file=sys.stderr)
+
+
 def _cmd_report(args) -> int:
     import h5py
 
@@ -699,9 +706,13 @@ def _cmd_convert(args) -> int:
 
 def _cmd_export(args) -> int:
     from . import FitResult
-    from .export import export
+    from .export import TARGETS, export, export_details
 
-    text = export(FitResult.load(args.result, args.name), to=args.to, name=args.material, fit=args.fit)
+    result = FitResult.load(args.result, args.name)
+    # The fit option's export to a renderer is recorded beside the result, for its report.
+    recorded = args.fit and TARGETS[args.to].renderer
+    details = export_details(result, args.to, name=args.material, fit=True) if recorded else None
+    text = details.text if recorded else export(result, to=args.to, name=args.material, fit=args.fit)
     if args.out:
         from .io._common import atomic_path
 
@@ -711,7 +722,25 @@ def _cmd_export(args) -> int:
             print(f"wrote {args.out}")
     else:
         print(text)
+    if recorded:
+        _record_export(args, details)
     return EXIT_OK
+
+
+def _record_export(args, details) -> None:
+    """Record a fit-option export in the exports.json of the result's output folder, if it has one; an existing
+    file that cannot be read (or a folder that cannot be written) is left as it is, with a warning."""
+    from .export import records
+    from .io import FormatError
+
+    try:
+        path = records.record(args.result, details, args.to, out=args.out)
+    except (FormatError, OSError) as exc:
+        _warn(args, f"{exc}; this export was not recorded (exports.json is left as it is)")
+        return
+    if path is not None and not args.quiet:
+        # stdout holds the material when no --out is given
+        print(f"recorded its achieved error in {path} (for the report)", file=sys.stdout if args.out else sys.stderr)
 
 
 def _render_source(path: Path, args):

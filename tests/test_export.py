@@ -478,3 +478,110 @@ def test_the_fit_option_falls_back_to_the_diffuse_part_where_ggx_lobes_cannot_fo
     ggx = brdffit.export.refit.fit_exportable(model, spec="lambert+ggx(fresnel=dielectric)")[0]
     assert result.deviation.uniform_rms < 0.5
     assert measure(model, ggx, pairs=result.pairs).uniform_rms > 100 * result.deviation.uniform_rms
+
+
+# ---------------------------------------------------------------------------------- the fit option's recorded exports
+@pytest.fixture(scope="module")
+def oren_nayar_folder(tmp_path_factory):
+    """A `brdffit fit` output folder of an Oren-Nayar fit (no equivalent in either renderer; its Mitsuba fit
+    option fits one lambert lobe, ~1.5 s), without the report."""
+    from brdffit.cli import main
+
+    tmp = tmp_path_factory.mktemp("oren-nayar")
+    data = tmp / "clay.h5"
+    brdffit.io.save(synth.generate(get("oren-nayar", rho_d=[0.6, 0.4, 0.3], sigma=0.4), "uniform", n=300, seed=2,
+                                   noise="relative:0.01"),
+                    data)
+    assert main(["fit", str(data), "--model", "oren-nayar", "--no-report", "--quiet"]) == 0
+    return tmp / "clay.brdffit"
+
+
+def _stated_rms(text: str) -> str:
+    """The cosine-weighted relative RMS error an export's comments state."""
+    return re.search(r"cosine-weighted relative RMS error ([0-9.e+-]+),", text).group(1)
+
+
+def test_cli_fit_option_records_its_achieved_error_for_the_report(mi, oren_nayar_folder, tmp_path, capsys):
+    from brdffit.cli import _earlier_result, main
+
+    result_h5, xml = oren_nayar_folder / "result.h5", tmp_path / "clay.xml"
+    assert main(["export", str(result_h5), "--to", "mitsuba", "--fit", "--out", str(xml)]) == 0
+    log = oren_nayar_folder / "exports.json"
+    assert capsys.readouterr().out.splitlines() == [f"wrote {xml}",
+                                                    f"recorded its achieved error in {log} (for the report)"]
+    text = xml.read_text()
+    mi.load_string(text)
+    stated = _stated_rms(text)
+    record = json.loads(log.read_text())["exports"][0]
+    assert record["target"] == "mitsuba" and record["written"] == "lambert" and record["out"] == str(xml)
+    assert record["fitted"].startswith("fit: lambert was fitted") and record["fitted"] in text
+    assert f"{record['rms']:.3g}" == stated and f"largest relative error {record['max_rel']:.3g} " in text
+    assert record["source"] == brdffit.models.model_to_dict(brdffit.FitResult.load(result_h5).model)
+    assert "exports.json" in _earlier_result(oren_nayar_folder)      # `brdffit fit --force` may replace it
+
+
+def test_a_later_export_replaces_the_record_of_the_same_target_and_model(oren_nayar_folder, capsys):
+    from brdffit.cli import main
+    from brdffit.export import records
+
+    result_h5 = oren_nayar_folder / "result.h5"
+    for _ in range(2):   # printed: stdout holds the material, the note goes to stderr
+        assert main(["export", str(result_h5), "--to", "pbrt", "--fit"]) == 0
+        printed = capsys.readouterr()
+        assert pr.parse(printed.out)["material"]["type"] in ("diffuse", "mix")
+        assert "recorded its achieved error" in printed.err
+    log = records.read(result_h5)
+    pbrt = [r for r in log.records if r.target == "pbrt"]
+    assert len(pbrt) == 1 and pbrt[0].out is None and f"{pbrt[0].rms:.3g}" == _stated_rms(printed.out)
+    model = brdffit.FitResult.load(result_h5).model
+    assert log.problem is None and log.for_model(model) == list(log.records)
+    assert log.for_model(model.replace(rho_d=[0.1, 0.1, 0.1])) == [] and log.for_model(None) == []
+
+
+def test_exports_are_recorded_only_in_an_output_folder(lambert_fit, tmp_path, capsys):
+    from brdffit.cli import main
+    from brdffit.export import records
+
+    path = tmp_path / "result.h5"     # saved by the API: no result.json beside it
+    lambert_fit.save(path)
+    assert records.exports_path(path) is None and records.read(path) == records.ExportLog(None)
+    assert main(["export", str(path), "--to", "mitsuba", "--fit", "--quiet"]) == 0
+    assert "<!-- exact:" in capsys.readouterr().out and sorted(p.name for p in tmp_path.iterdir()) == ["result.h5"]
+
+
+@pytest.mark.parametrize("content, problem", [
+    (b"{not json", "not valid JSON"),
+    (b"\xff\xfe binary", "not UTF-8"),
+    (b'{"format": "brdffit exports", "version": 2, "exports": []}', "version 2; this brdffit reads version 1"),
+    (b'[1, 2]', "not brdffit's record of exports"),
+    (b'{"format": "brdffit exports", "version": 1, "exports": [{"target": "mitsuba"}]}', "exports[0] has no 'source'"),
+    (b'{"format": "brdffit exports", "version": 1, "exports": [7]}', "exports[0] is not a JSON object"),
+])
+def test_an_unreadable_record_of_exports_is_a_value_naming_the_file(tmp_path, content, problem):
+    from brdffit.export import records
+
+    (tmp_path / "result.json").write_text("{}")
+    (tmp_path / "exports.json").write_bytes(content)
+    log = records.read(tmp_path / "result.h5")
+    assert log.records == () and log.problem.startswith(f"{tmp_path / 'exports.json'}: ") and problem in log.problem
+    with pytest.raises(brdffit.io.FormatError, match=re.escape(problem)):
+        records.record(tmp_path / "result.h5", None, "mitsuba")
+    assert (tmp_path / "exports.json").read_bytes() == content
+
+
+def test_the_cli_warns_of_an_unreadable_record_and_leaves_it_as_it_is(oren_nayar_folder, capsys):
+    from brdffit.cli import main
+
+    log, result_h5 = oren_nayar_folder / "exports.json", oren_nayar_folder / "result.h5"
+    kept = log.read_bytes() if log.exists() else None
+    try:
+        log.write_bytes(b"{not json")
+        # The export is written and not recorded.
+        assert main(["export", str(result_h5), "--to", "mitsuba", "--fit", "--quiet"]) == 0
+        err = capsys.readouterr().err
+        assert err.startswith(f"brdffit export: warning: {log}: ") and "not recorded" in err
+        assert log.read_bytes() == b"{not json"
+    finally:
+        log.unlink()
+        if kept is not None:
+            log.write_bytes(kept)

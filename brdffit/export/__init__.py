@@ -3,7 +3,8 @@ statements.
 
 One file per target, each with a ``write`` function; `TARGETS` is the registry that the CLI's ``--to`` choices
 and `EXPORT_FORMATS` come from. Shared pieces (the lobes as renderer terms, the measured deviation, the Schlick
--> index fit) are in `brdffit.export.terms`; the ``fit`` option is `brdffit.export.refit`. Every renderer output
+-> index fit) are in `brdffit.export.terms`; the ``fit`` option is `brdffit.export.refit`, and what it wrote for a
+result in a `brdffit fit` output folder is recorded beside it by `brdffit.export.records`. Every renderer output
 opens with comments naming the source spec and the brdffit version, one ``approximation:`` line per
 approximation made, and the deviation of the written material from the source measured at 2,000 uniform random
 direction pairs and pairs near each lobe's peak, combined by the balance heuristic (`brdffit.export.terms.measure`,
