@@ -605,12 +605,13 @@ def _cmd_fit(args) -> int:
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
 
 
-def _write_report(out: Path, measurements, result, post, selection, args) -> dict:
-    """The report (report.html, report.md and figures) of a fit in ``out``."""
+def _write_report(out: Path, measurements, result, post, selection, args, exports=None) -> dict:
+    """The report (report.html, report.md and figures) of a fit in ``out``, with the exports recorded for it."""
     from .report import write_report
 
     run_info = {"command": "brdffit " + " ".join(sys.argv[1:]) if sys.argv[1:] else "brdffit", "seed": args.seed}
-    return write_report(out, measurements, result, posterior=post, selection=selection, run_info=run_info)
+    return write_report(out, measurements, result, posterior=post, selection=selection, run_info=run_info,
+                        exports=exports)
 
 
 def _warn(args, message: str) -> None:
@@ -622,6 +623,7 @@ def _cmd_report(args) -> int:
     import h5py
 
     from . import FitResult, io
+    from .export import records
     from .posterior import load_posterior
 
     h5 = Path(args.result)
@@ -633,8 +635,11 @@ def _cmd_report(args) -> int:
         has_chain = chain_group in f
     if has_chain:
         post = load_posterior(result, measurements, h5, name=args.name)
+    exports = records.read(h5)
+    if exports.problem:
+        _warn(args, f"{exports.problem}; the report does not show the exports recorded there")
     out = Path(args.out) if args.out else h5.parent
-    written = _write_report(out, measurements, result, post, None, args)
+    written = _write_report(out, measurements, result, post, None, args, exports)
     if not args.quiet:
         print(f"wrote {written['html']}, {written['md']} and {len(written['figures'])} figures")
     return EXIT_OK

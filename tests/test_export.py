@@ -517,6 +517,14 @@ def test_cli_fit_option_records_its_achieved_error_for_the_report(mi, oren_nayar
     assert record["fitted"].startswith("fit: lambert was fitted") and record["fitted"] in text
     assert f"{record['rms']:.3g}" == stated and f"largest relative error {record['max_rel']:.3g} " in text
     assert record["source"] == brdffit.models.model_to_dict(brdffit.FitResult.load(result_h5).model)
+    # The report shows it beside the direct mapping, which has none; the folder stays brdffit's own.
+    assert main(["report", str(result_h5), "--quiet"]) == 0
+    md = (oren_nayar_folder / "report.md").read_text()
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in md.splitlines() if line.startswith("| mitsuba")]
+    assert [r[:3] for r in rows] == [["mitsuba", "direct", "no equivalent"],
+                                     ["mitsuba", f"--fit, {record['date']}", "fitted lambert"]]
+    assert rows[1][3] == stated and float(rows[1][3]) == pytest.approx(record["rms"], rel=5e-3)
+    assert "lobe 'oren-nayar'" in rows[0][5] and f"written to {xml}" in rows[1][5]
     assert "exports.json" in _earlier_result(oren_nayar_folder)      # `brdffit fit --force` may replace it
 
 
@@ -571,15 +579,20 @@ def test_an_unreadable_record_of_exports_is_a_value_naming_the_file(tmp_path, co
 
 def test_the_cli_warns_of_an_unreadable_record_and_leaves_it_as_it_is(oren_nayar_folder, capsys):
     from brdffit.cli import main
+    from brdffit.export import records
 
     log, result_h5 = oren_nayar_folder / "exports.json", oren_nayar_folder / "result.h5"
     kept = log.read_bytes() if log.exists() else None
     try:
         log.write_bytes(b"{not json")
-        # The export is written and not recorded.
+        # The export is written and not recorded; the report is written and names the file under Warnings.
         assert main(["export", str(result_h5), "--to", "mitsuba", "--fit", "--quiet"]) == 0
         err = capsys.readouterr().err
         assert err.startswith(f"brdffit export: warning: {log}: ") and "not recorded" in err
+        assert main(["report", str(result_h5), "--quiet"]) == 0
+        assert capsys.readouterr().err.startswith(f"brdffit report: warning: {log}: ")
+        md = (oren_nayar_folder / "report.md").read_text()
+        assert f"- {records.read(result_h5).problem}" in md and "could not be read and are not shown" in md
         assert log.read_bytes() == b"{not json"
     finally:
         log.unlink()

@@ -127,3 +127,47 @@ def test_format_value():
     assert format_value(0.123456789) == "0.123457"
     assert format_value(float("nan")) == "–" and format_value(None) == "–"
     assert format_value(float("inf")) == "inf"
+
+
+# ------------------------------------------------------------------------------------------------ renderer exports
+def _section_rows(md):
+    """The rows of the report's renderer-exports table, as lists of cells."""
+    section = md.split("## Renderer exports", 1)[1].split("\n## ", 1)[0]
+    return [[c.strip() for c in line.strip("|").split("|")] for line in section.splitlines()
+            if line.startswith("| ") and not line.startswith("| renderer |")]
+
+
+def test_report_says_which_renderers_have_no_equivalent(full_report):
+    # lambert+ward: neither renderer has a Ward lobe; the report says so with the export's own reason.
+    _, paths = full_report
+    rows = _section_rows(open(paths["md"], encoding="utf-8").read())
+    assert [(r[0], r[1], r[2], r[3], r[4]) for r in rows] == [
+        ("mitsuba", "direct", "no equivalent", "–", "–"), ("pbrt", "direct", "no equivalent", "–", "–")]
+    assert all("lobe 'ward'" in r[5] and "fit=True (--fit)" in r[5] for r in rows)
+    html = open(paths["html"], encoding="utf-8").read()
+    assert "<h2>Renderer exports</h2>" in html and "no equivalent" in html
+
+
+@pytest.mark.parametrize("spec, params, verdicts", [
+    ("lambert", {"rho_d": [0.5, 0.3, 0.2]}, {"mitsuba": "exact", "pbrt": "exact"}),
+    # docs/export.md: GGX with conductor Fresnel is Mitsuba's roughconductor exactly; pbrt-v4's conductor shadows
+    # with the height-correlated Smith term and has no amplitude, an approximation.
+    ("lambert+ggx(fresnel=conductor)", {"rho_d": 0.3, "ks": 0.5, "alpha": 0.2},
+     {"mitsuba": "exact", "pbrt": "approximate"}),
+])
+def test_report_states_the_direct_mappings_measured_deviation(spec, params, verdicts):
+    from brdffit.export import export_details
+    from brdffit.models import get
+    from brdffit.report.assemble import _renderer_table
+
+    model = get(spec, **params)
+    headers, rows = _renderer_table(model, [])
+    assert headers[3:5] == ["cosine-weighted relative RMS", "largest relative error"]
+    assert [(r[0], r[1], r[2]) for r in rows] == [(to, "direct", v) for to, v in verdicts.items()]
+    for row in rows:
+        details = export_details(model, row[0])
+        # the numbers the export's comments state, to their printed digits
+        assert row[3] == f"{details.deviation.rms:.3g}" and row[4] == f"{details.deviation.max_rel:.3g}"
+        assert f"relative RMS error {row[3]}, largest relative error {row[4]} " in details.text
+        assert row[5] == ("; ".join(details.notes) or "–")
+        assert (row[2] == "exact") == details.exact == (details.deviation.rms <= 1e-6 and not details.notes)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..export.records import ExportLog
 from ..io._common import atomic_path
 from . import figures as F
 
@@ -161,6 +162,54 @@ def _plausibility_blocks(fit_result) -> list:
     return [("h2", "Plausibility"), ("table", ["check", "verdict", "measured", "what to do"], rows)]
 
 
+def _renderer_table(fit_result, recorded):
+    """One row per renderer target for ``fit_result`` (or a `Model`): the direct mapping's verdict with its
+    measured deviation (3 significant digits, as the export's comments state it) or the reason it has none, then
+    the fit-option exports of this fit in ``recorded`` (`brdffit.export.records.ExportRecord`) with their achieved
+    error."""
+    from ..export import TARGETS, ExportError, export_details
+
+    rows = []
+    for target in (t for t in TARGETS.values() if t.renderer):
+        try:
+            direct = export_details(fit_result, target.name)
+        except ExportError as exc:
+            rows.append([target.name, "direct", "no equivalent", "–", "–", str(exc)])
+        else:
+            rows.append([target.name, "direct", "exact" if direct.exact else "approximate",
+                         format_value(direct.deviation.rms, 3), format_value(direct.deviation.max_rel, 3),
+                         "; ".join(direct.notes) or "–"])
+        for r in (r for r in recorded if r.target == target.name):
+            verdict = f"fitted {r.written}" if r.fitted else "exact" if r.exact else "approximate"
+            notes = [f"written to {r.out}" if r.out else "printed"] + ([r.fitted] if r.fitted else [])
+            rows.append([target.name, f"--fit, {r.date}", verdict, format_value(r.rms, 3), format_value(r.max_rel, 3),
+                         "; ".join(notes + list(r.approximations))])
+    return ["renderer", "export", "verdict", "cosine-weighted relative RMS", "largest relative error",
+            "approximations and notes"], rows
+
+
+def _renderer_blocks(fit_result, exports: ExportLog) -> list:
+    """The renderer-exports section (docs/report.md), with the exports recorded for this fit."""
+    recorded = exports.for_model(fit_result.model)
+    blocks = [("h2", "Renderer exports"),
+              ("p", "How this fit is written for each renderer `brdffit export RESULT.h5 --to T` writes to "
+                    "(docs/export.md). **direct**: the mapping onto the renderer's own plugins, exact or with the "
+                    "approximations it makes and the measured deviation of what it writes from the fit: the "
+                    "cosine-weighted relative RMS error over both hemispheres and the largest relative error, as "
+                    "the export's comments state them; a model with a lobe the renderer has no equivalent for has "
+                    "none, and `brdffit export RESULT.h5 --to T --fit` fits the renderer's own model to it. "
+                    "**--fit**: the fit option's exports of this fit recorded in exports.json beside result.h5, "
+                    "with their achieved error."),
+              ("table",) + _renderer_table(fit_result, recorded)]
+    others = len(exports.records) - len(recorded)
+    if others:
+        blocks.append(("p", f"{exports.path} also records {others} export{'s' if others > 1 else ''} of another "
+                            "fit (another model or other parameter values), not shown."))
+    if exports.problem:
+        blocks.append(("p", "The recorded exports could not be read and are not shown (see Warnings)."))
+    return blocks
+
+
 def _run_info(run_info) -> list[str]:
     import jax
 
@@ -174,7 +223,8 @@ def _run_info(run_info) -> list[str]:
     return [f"{k}: {v}" for k, v in info.items()]
 
 
-def _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths, report_warnings=()):
+def _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths, report_warnings=(),
+            exports=ExportLog(None)):
     b = [("h1", f"BRDF fit report: {fit_result.spec}")]
     b.append(("p", f"{measurements.n} samples × {measurements.n_channels} channels "
                    f"({', '.join(map(str, measurements.channels))}); loss {fit_result.loss}, solver "
@@ -210,6 +260,7 @@ def _blocks(measurements, fit_result, posterior, selection, run_info, figure_pat
         b.append(("h2", "Model selection"))
         b.append(("p", f"criterion {selection.criterion}; best {selection.best}; chosen **{selection.chosen}**."))
         b.append(("table",) + _selection_table(selection))
+    b.extend(_renderer_blocks(fit_result, exports))
     warnings = list(fit_result.warnings) + [f"posterior: {w}" for w in (posterior.warnings if posterior else [])] \
         + [f"selection: {w}" for w in (selection.warnings if selection else [])] + list(report_warnings)
     b.append(("h2", "Warnings"))
@@ -337,7 +388,8 @@ def _write_text(path: Path, text: str) -> None:
 
 
 # ------------------------------------------------------------------------------------------------- API
-def write_report(out_dir, measurements, fit_result, *, posterior=None, selection=None, run_info=None) -> dict:
+def write_report(out_dir, measurements, fit_result, *, posterior=None, selection=None, run_info=None,
+                 exports=None) -> dict:
     """Write a fit report into ``out_dir``: the figures (PNG), ``report.md`` and a self-contained ``report.html``.
 
     Arguments:
@@ -349,6 +401,10 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
         selection: an optional `Selection`: adds the model-selection table.
         run_info: optional dict of run information (``command``, ``seed``, ``date``, anything else); versions of
             brdffit, JAX, NumPy and Python, the date and the command line are filled in when not given.
+        exports: the `brdffit.export.records.ExportLog` of the results file the fit was read from
+            (`brdffit.export.records.read`): the renderer-exports section then also shows the fit option's
+            recorded exports of this fit with their achieved error, and a log that could not be read is named
+            under Warnings. Without it, the section shows the direct mappings only.
 
     Returns:
         ``{"html": path, "md": path, "figures": [paths]}`` (strings).
@@ -373,8 +429,10 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
         path = out / f"{name}.png"
         draw(path)
         figure_paths.append((str(path), captions[name]))
+    exports = exports if exports is not None else ExportLog(None)
+    problems = [exports.problem] if exports.problem else []
     blocks = _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths,
-                     _albedo_warnings(albedo, channels))
+                     _albedo_warnings(albedo, channels) + problems, exports)
     md_path, html_path = out / "report.md", out / "report.html"
     _write_text(md_path, _to_markdown(blocks, out))
     _write_text(html_path, _to_html(blocks))
