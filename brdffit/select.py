@@ -19,7 +19,6 @@ import numpy as np
 
 from .fitting.api import fit
 from .fitting.result import FitResult
-from .geometry import spherical_to_vector
 from .fitting.losses import loss_epsilon
 from .models.model import evaluate_dirs
 from .fitting.progressive import new_lobe_candidates
@@ -50,7 +49,9 @@ CRITERIA = ("aic", "bic", "cv")
 # ΔAIC or ΔBIC within which a simpler model counts as good as the best (Kass & Raftery 1995: < 2 is "not worth
 # more than a bare mention").
 DEFAULT_MARGIN = 2.0
-_COST_SAMPLES = 65_536
+# Timed evaluations of a candidate's residual program for its ``cost_ns`` (the best is kept: a shared host's load
+# only ever adds time).
+_COST_REPEATS = 5
 _CONVERGED = ("converged", "converged-at-bound")
 # Screening (AIC/BIC): every candidate is fitted to the training rows (a subsample of SCREEN_SAMPLES of them when
 # there are twice as many), and only those that can still be chosen are refitted to all the data. A subsample optimum costs the full data about
@@ -139,15 +140,35 @@ class Selection:
                 "warnings": list(self.warnings)}
 
 
-def _loss_residuals(result: FitResult, measurements) -> np.ndarray:
+def _loss_residuals(result: FitResult, measurements, timed: bool = False):
     """The fit's loss residuals on every sample ``(N, C)``, NaN where the data are missing (one compiled program
-    per model and data size serves the full-data cost and any rows' held-out error)."""
+    per model and data size serves the full-data cost and any rows' held-out error).
+
+    Arguments:
+        result: a fit with a model.
+        measurements: the samples to evaluate it at.
+        timed: also measure the evaluation cost (below).
+
+    Returns:
+        The residuals; with ``timed``, the pair ``(residuals, cost_ns)``: the best of `_COST_REPEATS` further
+        calls of the same compiled program, in nanoseconds per sample (the model's evaluation dominates it: a
+        selection's ``cost_ns``, measured without tracing and compiling another program for each candidate).
+    """
     model = result.model
     problem = Problem(lobes=model.lobes, channels=model.channels, free=(), loss=result.loss, robust=None,
                       solver=None, max_steps=0)
     data = make_fit_data(measurements, {}, loss_epsilon(result.loss, measurements.values), pad=True)
-    r = np.asarray(residuals_at(problem, dict(model.params), data))[:measurements.n]
-    return np.where(np.asarray(data.mask)[:measurements.n], r, np.nan)
+    params = dict(model.params)
+    r = np.asarray(residuals_at(problem, params, data))[:measurements.n]
+    r = np.where(np.asarray(data.mask)[:measurements.n], r, np.nan)
+    if not timed:
+        return r
+    best = math.inf
+    for _ in range(_COST_REPEATS):
+        t0 = time.perf_counter()
+        jax.block_until_ready(residuals_at(problem, params, data))
+        best = min(best, time.perf_counter() - t0)
+    return r, 1e9 * best / int(np.shape(data.values)[0])
 
 
 def _rms(r: np.ndarray) -> float:
@@ -161,21 +182,6 @@ def _masked(measurements, rows: np.ndarray):
     values = np.array(measurements.values, dtype=float)
     values[rows] = np.nan
     return measurements.replace(values=values)
-
-
-def _eval_cost_ns(result: FitResult, seed: int) -> float:
-    """Measured cost of evaluating the fitted model, nanoseconds per sample (jitted, 65,536 random pairs)."""
-    rng = np.random.default_rng(seed)
-    u = rng.random((4, _COST_SAMPLES))
-    wi = spherical_to_vector(np.arccos(u[0]), 2 * np.pi * u[1])
-    wo = spherical_to_vector(np.arccos(u[2]), 2 * np.pi * u[3])
-    jax.block_until_ready(evaluate_dirs(result.model, wi, wo))  # compiles (evaluate_dirs is jitted)
-    best = math.inf
-    for _ in range(5):
-        t0 = time.perf_counter()
-        jax.block_until_ready(evaluate_dirs(result.model, wi, wo))
-        best = min(best, time.perf_counter() - t0)
-    return 1e9 * best / _COST_SAMPLES
 
 
 def _smaller_lafortune(spec: str, done: dict):
@@ -263,7 +269,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
             CIE ΔE*ab; 3 channels) (`brdffit.scene.scene_error`).
         reference: what a candidate's scene radiance is compared with: ``"data"`` (the measurements interpolated
             at the scene's directions, `brdffit.scene.interpolate`) or ``"best"`` (the best-scoring candidate).
-        seed: seed of the held-out split, folds and cost measurement.
+        seed: seed of the held-out split, folds and fits.
         screen: with ``aic``/``bic``, fit every candidate to the training rows first (at most `SCREEN_SAMPLES` of
             them) and refit to all the data only the candidates that can still be chosen (docs/model-selection.md);
             False fits every candidate to all the data and again with the held-out rows masked.
@@ -302,10 +308,10 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
             screen_data = measurements.take(np.sort(rng.choice(train_rows, SCREEN_SAMPLES, replace=False)))
         else:  # all the training rows, the held-out ones masked: the refits reuse the screening's programs
             screen_data = _masked(measurements, fold_rows[0])
-        rows, screened = _screened_rows(candidates, measurements, screen_data, fold_rows[0], criterion, margin, seed,
+        rows, screened = _screened_rows(candidates, measurements, screen_data, fold_rows[0], criterion, margin,
                                         options, done, bar)
     else:
-        rows, screened = _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar), None
+        rows, screened = _fitted_rows(candidates, measurements, fold_rows, options, done, bar), None
     for row in rows:
         row["score"] = row["heldout_error"] if criterion == "cv" else row[criterion]
     finite = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r["score"])]
@@ -391,7 +397,7 @@ def _full_fit_fields(result: FitResult) -> dict:
             "bic": result.bic, "status": result.status, "samples": result.n_samples}
 
 
-def _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar):
+def _fitted_rows(candidates, measurements, fold_rows, options, done, bar):
     """The table of an unscreened selection: every candidate fitted to all the data, and refitted with each fold
     of ``fold_rows`` held out for its held-out error."""
     rows = []
@@ -399,25 +405,26 @@ def _fitted_rows(candidates, measurements, fold_rows, seed, options, done, bar):
         bar.update(i, f"fitting {spec}")
         result, init = _fit_candidate(spec, measurements, done, options)
         done[spec] = result
-        errors = []
+        errors, cost_ns = [], math.nan
         # The held-out fits start from the full-data optimum (same shapes, so the same compiled programs): the
         # training optimum lies within the held-out rows' influence of it, and the global search has been done.
         start = result.model if result.model is not None else init
         for held in fold_rows:
             train = fit(_masked(measurements, held), spec, init=start, **options)
-            errors.append(_rms(_loss_residuals(train, measurements)[held]))
+            r, cost_ns = _loss_residuals(train, measurements, timed=True)
+            errors.append(_rms(r[held]))
         rows.append({
             "spec": spec,
             "n_params": result.n_params,
             "heldout_error": float(np.mean(errors)),
             "heldout_se": float(np.std(errors, ddof=1) / np.sqrt(len(errors))) if len(errors) > 1 else math.nan,
-            "cost_ns": _eval_cost_ns(result, seed),
+            "cost_ns": cost_ns,
             **_full_fit_fields(result),
         })
     return rows
 
 
-def _screened_rows(candidates, measurements, screen_data, held, criterion, margin, seed, options, done, bar):
+def _screened_rows(candidates, measurements, screen_data, held, criterion, margin, options, done, bar):
     """The table of a screened selection: every candidate fitted to ``screen_data`` (training rows only: a
     subsample, or all the data with the held-out rows masked) and scored on all the data at that fit; those that
     can still be chosen refitted to all the data from there.
@@ -433,12 +440,12 @@ def _screened_rows(candidates, measurements, screen_data, held, criterion, margi
         bar.update(i, f"screening {spec} on {training} samples")
         result, _ = _fit_candidate(spec, screen_data, screened, options)
         screened[spec] = done[spec] = result
-        r = _loss_residuals(result, measurements)
+        r, cost_ns = _loss_residuals(result, measurements, timed=True)
         cost = float(np.nansum(r ** 2))
         aic, bic = information_criteria(result.loss, cost, n_values, result.n_params)
         rows.append({"spec": spec, "n_params": result.n_params, "train_error": float(np.sqrt(cost / max(n_values, 1))),
                      "heldout_error": _rms(r[held]), "heldout_se": math.nan, "aic": aic,
-                     "bic": bic, "cost_ns": _eval_cost_ns(result, seed), "status": result.status,
+                     "bic": bic, "cost_ns": cost_ns, "status": result.status,
                      "samples": result.n_samples})
     _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar)
     return rows, screened
