@@ -29,6 +29,7 @@ import numpy as np
 from ..metrics import metric_sums
 from ..models.model import evaluate_pair
 from .problem import BUCKET_CHUNK, FitData, Problem, chunk_data, physical_params, residuals_of
+from .programs import Program
 
 __all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "metric_sums_of", "meat_of",
            "CHUNK_SAMPLES"]
@@ -119,7 +120,7 @@ def pass_program(structure: Problem):
     ``(M, S, N, C)`` the model values. Its first call for a shape compiles; the seconds are added to
     `compile_seconds`."""
     per_point = jax.vmap(lambda tree, data: _tangents(structure, tree, data), in_axes=(0, None))
-    jitted = jax.jit(jax.vmap(per_point, in_axes=(0, 0)))
+    jitted = Program(jax.vmap(per_point, in_axes=(0, 0)), f"pass {structure!r}")
     seen = set()
 
     def fn(trees, data):
@@ -144,8 +145,7 @@ def compile_seconds() -> float:
     return _COMPILE_SECONDS[0]
 
 
-@jax.jit
-def _metric_program(f, values, mask, cos_i, sqrt_weight):
+def _metric_sums(f, values, mask, cos_i, sqrt_weight):
     """`brdffit.metrics.metric_sums` of model values ``f`` ``(M, S, N, C)`` against a piece's data:
     ``(M, S, R, C)``.
     It does not depend on the model, so one compiled program per data shape serves every model of a selection
@@ -155,6 +155,9 @@ def _metric_program(f, values, mask, cos_i, sqrt_weight):
 
     per_material = jax.vmap(one, in_axes=(0, None, None, None, None))
     return jax.vmap(per_material)(f, values, mask, cos_i, sqrt_weight)
+
+
+_metric_program = Program(_metric_sums, "metric sums")
 
 
 def metric_sums_of(values: list, pieces: list[FitData]) -> np.ndarray:

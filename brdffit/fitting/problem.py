@@ -7,7 +7,6 @@ amplitudes are projected out); `FitData` holds the arrays.
 from __future__ import annotations
 
 import dataclasses
-import functools
 from typing import Any, NamedTuple
 
 import jax
@@ -19,6 +18,7 @@ from ..models.layout import Layout, layout
 from ..models.model import Model, evaluate_pair
 from ..params import ParamTable
 from .losses import get_loss, robust_residuals
+from .programs import Program
 
 __all__ = ["Problem", "FitData", "make_fit_data", "bucket", "BUCKET_CHUNK", "physical_params", "residual_fn", "residuals_at", "stack_data",
            "chunk_data",
@@ -172,8 +172,7 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad
     )
 
 
-@jax.jit
-def _sample_arrays(values, theta_i, phi_i, theta_o, phi_o, weights, sigma):
+def _sample_fields(values, theta_i, phi_i, theta_o, phi_o, weights, sigma):
     """The per-sample fields of `FitData` in one compiled program: the `LocalPair`, the values with missing ones
     set to 0, the mask, cosθi clamped at 0, √weights (ones when None) and σ (ones where unknown or not positive)."""
     # The barrier makes XLA store the two direction arrays: without it the CPU compiler fused the sines and cosines
@@ -184,6 +183,9 @@ def _sample_arrays(values, theta_i, phi_i, theta_o, phi_o, weights, sigma):
     sqrt_weight = jnp.ones_like(theta_i) if weights is None else jnp.sqrt(weights)
     return (LocalPair.from_dirs(wi, wo), jnp.where(mask, values, 0.0), mask, jnp.maximum(wi[:, 2], 0.0),
             sqrt_weight, sigma)
+
+
+_sample_arrays = Program(_sample_fields, "sample arrays")
 
 
 def stack_data(items: list[FitData]) -> FitData:
@@ -202,8 +204,7 @@ def chunk_data(data: FitData, size: int):
     return [FitData(**piece) for piece in _split(data._asdict(), size)]
 
 
-@functools.partial(jax.jit, static_argnums=1)
-def _split(fields: dict, size: int) -> list:
+def _pieces(fields: dict, size: int) -> list:
     # One compiled program cuts and stacks every piece (eager slicing took 0.1 s on a MERL-size table, eager
     # stacking 0.4 s).
     n = fields["values"].shape[0]
@@ -218,6 +219,9 @@ def _split(fields: dict, size: int) -> list:
     width = min(size, n)
     return [dict(shared, **jax.tree_util.tree_map(lambda a, start=start: a[None, start:start + width], per_sample))
             for start in range(0, pieces * width, width)]
+
+
+_split = Program(_pieces, "data pieces", static_argnums=(1,))
 
 
 def flatten_free(problem: Problem, tree: dict, names=None):
@@ -258,7 +262,13 @@ def residual_fn(problem: Problem, params: dict, data: FitData):
 
 # `residual_fn` compiled (the problem is static): for evaluations outside a solve, which would otherwise run
 # operation by operation, each compiled on its own for every new model (seconds per selection candidate).
-residuals_at = jax.jit(residual_fn, static_argnums=0)
+_residuals = Program(residual_fn, "residuals", static_argnums=(0,))
+
+
+def residuals_at(problem: Problem, params: dict, data: FitData):
+    """`residual_fn` compiled, one program per problem structure (`Problem.structure`: every solver and stage
+    shares it) and data shape."""
+    return _residuals(problem.structure, params, data)
 
 
 def residuals_of(problem: Problem, f_model, data: FitData):

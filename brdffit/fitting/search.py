@@ -30,6 +30,7 @@ import numpy as np
 from ..params import bound_margin
 from .losses import get_loss
 from .problem import FitData, Problem, residual_fn
+from .programs import Program
 from .separable import amplitude_sums, solve_box
 
 __all__ = ["search", "grid", "interior", "canonical", "search_range", "SEARCH_SAMPLES", "MAX_CANDIDATES", "POLISH_STARTS"]
@@ -177,7 +178,7 @@ def _sums_fn(problem: Problem):
     def one(params, data: FitData):
         return amplitude_sums(problem, params, problem.linear, data)
 
-    return jax.jit(jax.vmap(jax.vmap(one, in_axes=(0, None)), in_axes=(None, 0)))
+    return Program(jax.vmap(jax.vmap(one, in_axes=(0, None)), in_axes=(None, 0)), f"search sums {problem!r}")
 
 
 @functools.lru_cache(maxsize=64)
@@ -188,7 +189,7 @@ def _cost_fn(problem: Problem):
         r = residual_fn(problem, params, data)
         return jnp.sum(r * r)
 
-    return jax.jit(jax.vmap(jax.vmap(one, in_axes=(0, None)), in_axes=(None, 0)))
+    return Program(jax.vmap(jax.vmap(one, in_axes=(0, None)), in_axes=(None, 0)), f"search costs {problem!r}")
 
 
 def score(problem: Problem, candidates: list[dict], data: FitData):

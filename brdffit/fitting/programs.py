@@ -1,0 +1,129 @@
+"""Compiled programs kept across processes, without tracing them again (issue 15).
+
+JAX's persistent compilation cache (which the CLI turns on, `brdffit.cli.enable_compilation_cache`) saves XLA's
+compilation in a new process, not the tracing and the lowering to StableHLO that it needs to compute its key: in a
+warm `brdffit fit FILE` those were most of the time left (about 2.5 s of tracing and lowering for the twelve
+candidates of a selection, against 2 s of fitting). A `Program` is a jitted function that also keeps each
+executable it compiles on disk, under a key that it can compute *before* tracing: the program's name, the values
+of its static arguments, the tree structure and the shapes and dtypes of its array arguments, and a stamp of
+everything that could change the program (brdffit's source files, the JAX and jaxlib versions, the backend and its
+device, float64 mode). A later process with the same key loads the executable
+(`jax.experimental.serialize_executable`, ~2 ms) and runs it.
+
+Persistence is on exactly when JAX's persistent cache directory is configured: the executables go to its
+``brdffit-programs`` folder. Otherwise, when called on tracers (inside another jitted function), or when a static
+argument has no stable text (its repr names a memory address), a `Program` is plain ``jax.jit``. A file that cannot
+be read back (damaged, or written by another version that happened to share the key) is compiled again and
+replaced; files are written to a temporary name and renamed, so a reader never sees half of one.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import pickle
+import tempfile
+from pathlib import Path
+
+import jax
+
+__all__ = ["Program", "program_directory"]
+
+_FOLDER = "brdffit-programs"
+
+
+def program_directory() -> Path | None:
+    """The folder of the kept executables: ``brdffit-programs`` in JAX's persistent cache directory, or None when
+    no such directory is configured (nothing is kept)."""
+    base = jax.config.jax_compilation_cache_dir
+    return Path(base) / _FOLDER if base else None
+
+
+@functools.lru_cache(maxsize=1)
+def _source_stamp() -> str:
+    """A digest of brdffit's Python source files: any edit gives every program a new key."""
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _stamp() -> str:
+    """What besides the key's own parts decides a compiled program: the source, JAX, the device, float64 mode."""
+    import jaxlib
+
+    device = jax.devices()[0]
+    return "|".join([_source_stamp(), jax.__version__, jaxlib.__version__, device.platform,
+                     getattr(device, "device_kind", ""), str(jax.config.jax_enable_x64)])
+
+
+class Program:
+    """A function compiled once per argument signature, in memory and, where JAX's persistent cache directory is
+    configured, on disk (module doc).
+
+    Arguments:
+        fn: the function to compile (pure, JAX-traceable).
+        name: the program's name in its keys; it must say everything ``fn`` captures from its closure (for example
+            the problem structure a pass was built for).
+        static_argnums: positions of arguments that are compile-time constants (hashable, with a stable repr).
+    """
+
+    def __init__(self, fn, name: str, static_argnums: tuple = ()):
+        self._jit = jax.jit(fn, static_argnums=static_argnums)
+        self._name = name
+        self._static = tuple(static_argnums)
+        self._compiled: dict = {}
+
+    def __call__(self, *args):
+        static = tuple(args[i] for i in self._static)
+        dynamic = tuple(a for i, a in enumerate(args) if i not in self._static)
+        leaves, tree = jax.tree_util.tree_flatten(dynamic)
+        if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
+            return self._jit(*args)
+        signature = (static, tree, tuple(jax.api_util.shaped_abstractify(leaf) for leaf in leaves))
+        compiled = self._compiled.get(signature)
+        if compiled is None:
+            compiled = self._compiled[signature] = self._load_or_compile(args, signature)
+        return compiled(*dynamic)
+
+    def _load_or_compile(self, args, signature):
+        """The executable of a new signature: read from disk when kept there, else compiled (and kept)."""
+        directory = program_directory()
+        statics = repr(signature[0])
+        if directory is None or " at 0x" in statics:
+            return self._jit.lower(*args).compile()
+        text = "\n".join([_stamp(), self._name, statics, str(signature[1]), str(signature[2])])
+        path = directory / (hashlib.sha256(text.encode()).hexdigest() + ".bin")
+        try:
+            with open(path, "rb") as f:
+                stored, blob, in_tree, out_tree = pickle.load(f)
+            if stored == text:
+                from jax.experimental.serialize_executable import deserialize_and_load
+
+                return deserialize_and_load(blob, in_tree, out_tree)
+        except Exception:  # noqa: BLE001 - absent, damaged or foreign: compile it again
+            pass
+        compiled = self._jit.lower(*args).compile()
+        _keep(path, text, compiled)
+        return compiled
+
+
+def _keep(path: Path, text: str, compiled) -> None:
+    """Write a compiled program atomically; a folder that cannot be written only costs the next process time."""
+    from jax.experimental.serialize_executable import serialize
+
+    try:
+        blob, in_tree, out_tree = serialize(compiled)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, temporary = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            pickle.dump((text, blob, in_tree, out_tree), f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(temporary, path)
+    except Exception:  # noqa: BLE001 - serialisation unsupported here, or the folder unwritable
+        try:
+            os.unlink(temporary)
+        except (NameError, OSError):
+            pass

@@ -1,0 +1,128 @@
+"""Compiled programs kept across processes (`brdffit.fitting.programs`): a new process loads what an earlier one
+compiled without tracing it, and a program whose key differs, whose file is damaged or that runs on tracers is
+compiled (or traced) as plain ``jax.jit`` would."""
+
+import json
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import brdffit  # noqa: F401  (float64)
+from brdffit.fitting import programs
+from brdffit.fitting.programs import Program
+
+TRACES = []
+
+
+def polynomial():
+    """A new function object each call (JAX keeps the traces of one function object in memory; a new process
+    has none), which records each time JAX traces it."""
+    def f(x, data):
+        TRACES.append(np.shape(x))
+        return jnp.sin(x) * data["a"] + data["b"] ** 2
+    return f
+
+
+def arguments(n: int):
+    x = jnp.linspace(0.0, 1.0, n)
+    return x, {"a": 2.0 * jnp.ones(n), "b": jnp.arange(n, dtype=float)}
+
+
+@pytest.fixture
+def kept_in(tmp_path):
+    """JAX's persistent cache directory set to a fresh folder for the test, restored afterwards."""
+    before = jax.config.jax_compilation_cache_dir
+    jax.config.update("jax_compilation_cache_dir", str(tmp_path))
+    TRACES.clear()
+    yield tmp_path / "brdffit-programs"
+    jax.config.update("jax_compilation_cache_dir", before)
+
+
+def test_a_kept_program_runs_in_a_new_process_without_being_traced(tmp_path):
+    script = f"""
+import json, sys
+import jax, jax.numpy as jnp, numpy as np
+import brdffit
+from brdffit.fitting.programs import Program
+jax.config.update("jax_compilation_cache_dir", {str(tmp_path)!r})
+traced = []
+def f(x, data):
+    traced.append(1)
+    return jnp.cos(x) * data["a"] + jnp.sum(data["b"])
+program = Program(f, "test program")
+x = jnp.linspace(0.0, 1.0, 9)
+out = program(x, {{"a": 3.0 * jnp.ones(9), "b": jnp.arange(9.0)}})
+print(json.dumps({{"traced": len(traced), "out": np.asarray(out).tolist()}}))
+"""
+    runs = [json.loads(subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True)
+                       .stdout.strip().splitlines()[-1]) for _ in range(2)]
+    assert runs[0]["traced"] == 1 and runs[1]["traced"] == 0, runs
+    x = np.linspace(0.0, 1.0, 9)
+    np.testing.assert_allclose(runs[1]["out"], np.cos(x) * 3.0 + 36.0, rtol=1e-15)
+    assert runs[1]["out"] == runs[0]["out"]
+
+
+def test_each_signature_is_compiled_once_and_kept(kept_in):
+    program = Program(polynomial(), "polynomial")
+    for n in (5, 7, 5, 7):
+        x, data = arguments(n)
+        np.testing.assert_allclose(program(x, data), np.sin(x) * 2.0 + np.arange(n) ** 2, rtol=1e-15)
+    assert TRACES == [(5,), (7,)]
+    assert len(list(kept_in.glob("*.bin"))) == 2
+    TRACES.clear()
+    again = Program(polynomial(), "polynomial")  # a new Program (as in a new process) loads both without tracing
+    for n in (5, 7):
+        x, data = arguments(n)
+        np.testing.assert_allclose(again(x, data), np.sin(x) * 2.0 + np.arange(n) ** 2, rtol=1e-15)
+    assert TRACES == []
+    # Another name is another program, even for the same function and shapes.
+    Program(polynomial(), "another")(*arguments(5))
+    assert TRACES == [(5,)] and len(list(kept_in.glob("*.bin"))) == 3
+
+
+def test_a_damaged_file_is_compiled_again_and_replaced(kept_in):
+    Program(polynomial(), "polynomial")(*arguments(6))
+    (path,) = kept_in.glob("*.bin")
+    path.write_bytes(b"not a program")
+    TRACES.clear()
+    x, data = arguments(6)
+    np.testing.assert_allclose(Program(polynomial(), "polynomial")(x, data), np.sin(x) * 2.0 + np.arange(6) ** 2)
+    assert TRACES == [(6,)]
+    TRACES.clear()
+    Program(polynomial(), "polynomial")(x, data)  # the replaced file loads
+    assert TRACES == [] and len(list(kept_in.glob("*"))) == 1  # and no temporary file was left
+
+
+def test_without_a_cache_directory_nothing_is_written(tmp_path):
+    before = jax.config.jax_compilation_cache_dir
+    jax.config.update("jax_compilation_cache_dir", None)
+    try:
+        assert programs.program_directory() is None
+        x, data = arguments(4)
+        np.testing.assert_allclose(Program(polynomial(), "polynomial")(x, data), np.sin(x) * 2.0 + np.arange(4) ** 2)
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)
+
+
+def test_on_tracers_a_program_is_part_of_the_outer_function(kept_in):
+    program = Program(polynomial(), "polynomial")
+    x, data = arguments(5)
+    gradient = jax.grad(lambda x: jnp.sum(program(x, data)))(x)  # traced: differentiable like jax.jit
+    np.testing.assert_allclose(gradient, np.cos(x) * 2.0, rtol=1e-15)
+    assert not kept_in.exists()  # nothing compiled on its own
+
+
+def test_static_arguments_key_the_program_and_addresses_are_not_kept(kept_in):
+    def scaled(k, x):
+        return x * (k if isinstance(k, float) else 1.0)
+
+    program = Program(scaled, "scaled", static_argnums=(0,))
+    np.testing.assert_allclose(program(2.0, jnp.ones(3)), 2.0)
+    np.testing.assert_allclose(program(3.0, jnp.ones(3)), 3.0)
+    assert len(list(kept_in.glob("*.bin"))) == 2
+    np.testing.assert_allclose(program(object(), jnp.ones(3)), 1.0)  # repr names an address: memory only
+    assert len(list(kept_in.glob("*.bin"))) == 2
