@@ -42,7 +42,7 @@ def kept_in(tmp_path):
     jax.config.update("jax_compilation_cache_dir", before)
 
 
-def test_a_kept_program_runs_in_a_new_process_without_being_traced(tmp_path):
+def test_a_kept_program_runs_in_a_new_process_without_being_traced_and_a_damaged_one_is_replaced(tmp_path):
     script = f"""
 import json, sys
 import jax, jax.numpy as jnp, numpy as np
@@ -58,12 +58,22 @@ x = jnp.linspace(0.0, 1.0, 9)
 out = program(x, {{"a": 3.0 * jnp.ones(9), "b": jnp.arange(9.0)}})
 print(json.dumps({{"traced": len(traced), "out": np.asarray(out).tolist()}}))
 """
-    runs = [json.loads(subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True)
-                       .stdout.strip().splitlines()[-1]) for _ in range(2)]
-    assert runs[0]["traced"] == 1 and runs[1]["traced"] == 0, runs
+
+    def run():
+        done = subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True)
+        return json.loads(done.stdout.strip().splitlines()[-1])
+
     x = np.linspace(0.0, 1.0, 9)
-    np.testing.assert_allclose(runs[1]["out"], np.cos(x) * 3.0 + 36.0, rtol=1e-15)
-    assert runs[1]["out"] == runs[0]["out"]
+    first, second = run(), run()
+    assert first["traced"] == 1 and second["traced"] == 0, (first, second)
+    np.testing.assert_allclose(second["out"], np.cos(x) * 3.0 + 36.0, rtol=1e-15)
+    assert second["out"] == first["out"]
+    (path,) = (tmp_path / "brdffit-programs").glob("*.bin")
+    path.write_bytes(b"not a program")
+    damaged, replaced = run(), run()  # compiled again and the file replaced; then loaded
+    assert damaged["traced"] == 1 and replaced["traced"] == 0, (damaged, replaced)
+    assert damaged["out"] == replaced["out"] == first["out"]
+    assert [p.name for p in (tmp_path / "brdffit-programs").iterdir()] == [path.name]  # no temporary file left
 
 
 def test_each_signature_is_compiled_once_and_kept(kept_in):
@@ -79,12 +89,15 @@ def test_each_signature_is_compiled_once_and_kept(kept_in):
         x, data = arguments(n)
         np.testing.assert_allclose(again(x, data), np.sin(x) * 2.0 + np.arange(n) ** 2, rtol=1e-15)
     assert TRACES == []
-    # Another name is another program, even for the same function and shapes.
-    Program(polynomial(), "another")(*arguments(5))
-    assert TRACES == [(5,)] and len(list(kept_in.glob("*.bin"))) == 3
+    # Another name is another program, even for the same function and shapes. (XLA's second compilation of the
+    # same module in one process does not serialise into a copy that runs, so that one is kept in memory only:
+    # `_keep` checks the copy.)
+    x, data = arguments(5)
+    np.testing.assert_allclose(Program(polynomial(), "another")(x, data), np.sin(x) * 2.0 + np.arange(5) ** 2)
+    assert TRACES == [(5,)]
 
 
-def test_a_damaged_file_is_compiled_again_and_replaced(kept_in):
+def test_a_damaged_file_is_compiled_again(kept_in):
     Program(polynomial(), "polynomial")(*arguments(6))
     (path,) = kept_in.glob("*.bin")
     path.write_bytes(b"not a program")
@@ -92,9 +105,6 @@ def test_a_damaged_file_is_compiled_again_and_replaced(kept_in):
     x, data = arguments(6)
     np.testing.assert_allclose(Program(polynomial(), "polynomial")(x, data), np.sin(x) * 2.0 + np.arange(6) ** 2)
     assert TRACES == [(6,)]
-    TRACES.clear()
-    Program(polynomial(), "polynomial")(x, data)  # the replaced file loads
-    assert TRACES == [] and len(list(kept_in.glob("*"))) == 1  # and no temporary file was left
 
 
 def test_without_a_cache_directory_nothing_is_written(tmp_path):

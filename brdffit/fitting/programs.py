@@ -13,8 +13,8 @@ device, float64 mode). A later process with the same key loads the executable
 Persistence is on exactly when JAX's persistent cache directory is configured: the executables go to its
 ``brdffit-programs`` folder. Otherwise, when called on tracers (inside another jitted function), or when a static
 argument has no stable text (its repr names a memory address), a `Program` is plain ``jax.jit``. A file that cannot
-be read back (damaged, or written by another version that happened to share the key) is compiled again and
-replaced; files are written to a temporary name and renamed, so a reader never sees half of one.
+be read back or does not run (damaged, or written by another version that happened to share the key) is compiled
+again and replaced; files are written to a temporary name and renamed, so a reader never sees half of one.
 """
 
 from __future__ import annotations
@@ -84,46 +84,87 @@ class Program:
         if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
             return self._jit(*args)
         signature = (static, tree, tuple(jax.api_util.shaped_abstractify(leaf) for leaf in leaves))
-        compiled = self._compiled.get(signature)
-        if compiled is None:
-            compiled = self._compiled[signature] = self._load_or_compile(args, signature)
-        return compiled(*dynamic)
+        executable = self._compiled.get(signature)
+        if executable is not None:
+            return executable(*dynamic)
+        path, text = self._path(signature)
+        executable = _load(path, text) if path is not None else None
+        out = _run(executable, dynamic)
+        if out is None:  # nothing kept, or a kept file that does not run: compile (and keep)
+            executable = self._compile(args, path, text, dynamic)
+            out = executable(*dynamic)
+        self._compiled[signature] = executable
+        return out
 
-    def _load_or_compile(self, args, signature):
-        """The executable of a new signature: read from disk when kept there, else compiled (and kept)."""
+    def _path(self, signature):
+        """The file and the full key text of a signature, or ``(None, None)`` where nothing is kept."""
         directory = program_directory()
         statics = repr(signature[0])
         if directory is None or " at 0x" in statics:
-            return self._jit.lower(*args).compile()
+            return None, None
         text = "\n".join([_stamp(), self._name, statics, str(signature[1]), str(signature[2])])
-        path = directory / (hashlib.sha256(text.encode()).hexdigest() + ".bin")
-        try:
-            with open(path, "rb") as f:
-                stored, blob, in_tree, out_tree = pickle.load(f)
-            if stored == text:
-                from jax.experimental.serialize_executable import deserialize_and_load
+        return directory / (hashlib.sha256(text.encode()).hexdigest() + ".bin"), text
 
-                return deserialize_and_load(blob, in_tree, out_tree)
-        except Exception:  # noqa: BLE001 - absent, damaged or foreign: compile it again
-            pass
-        compiled = self._jit.lower(*args).compile()
-        _keep(path, text, compiled)
+    def _compile(self, args, path, text, dynamic):
+        """Compile for a new signature and, with a ``path``, keep the executable there if a copy read back from
+        its serialised form runs on these arguments. XLA compiles it itself, not JAX's persistent cache: on the
+        CPU an executable that JAX's cache loaded (or the second compilation of a module in one process)
+        serialises without its compiled functions, and a copy read back fails when it runs ("Function ... not
+        found"); the check keeps such a copy from ever being written."""
+        if path is None:
+            return self._jit.lower(*args).compile()
+        before = jax.config.jax_enable_compilation_cache
+        jax.config.update("jax_enable_compilation_cache", False)
+        try:
+            compiled = self._jit.lower(*args).compile()
+        finally:
+            jax.config.update("jax_enable_compilation_cache", before)
+        _keep(path, text, compiled, dynamic)
         return compiled
 
 
-def _keep(path: Path, text: str, compiled) -> None:
-    """Write a compiled program atomically; a folder that cannot be written only costs the next process time."""
-    from jax.experimental.serialize_executable import serialize
+def _run(executable, dynamic):
+    """The output of a loaded executable on ``dynamic``, or None when there is none or it does not run."""
+    if executable is None:
+        return None
+    try:
+        return jax.block_until_ready(executable(*dynamic))
+    except Exception:  # noqa: BLE001 - compiled again by the caller, and the file replaced
+        return None
 
+
+def _load(path: Path, text: str):
+    """The executable kept under ``path`` for the key ``text``, or None (absent, damaged, another key)."""
+    try:
+        with open(path, "rb") as f:
+            stored, blob, in_tree, out_tree = pickle.load(f)
+        if stored != text:
+            return None
+        from jax.experimental.serialize_executable import deserialize_and_load
+
+        return deserialize_and_load(blob, in_tree, out_tree)
+    except Exception:  # noqa: BLE001 - any failure to read it back means: compile it again
+        return None
+
+
+def _keep(path: Path, text: str, compiled, dynamic) -> None:
+    """Write a compiled program atomically, if its serialised form read back runs on ``dynamic``; a folder that
+    cannot be written, or a backend that cannot serialise, only costs the next process its compilation."""
+    from jax.experimental.serialize_executable import deserialize_and_load, serialize
+
+    temporary = None
     try:
         blob, in_tree, out_tree = serialize(compiled)
+        if _run(deserialize_and_load(blob, in_tree, out_tree), dynamic) is None:
+            return
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, temporary = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
             pickle.dump((text, blob, in_tree, out_tree), f, protocol=pickle.HIGHEST_PROTOCOL)
         os.replace(temporary, path)
     except Exception:  # noqa: BLE001 - serialisation unsupported here, or the folder unwritable
-        try:
-            os.unlink(temporary)
-        except (NameError, OSError):
-            pass
+        if temporary is not None:
+            try:
+                os.unlink(temporary)
+            except OSError:
+                pass
