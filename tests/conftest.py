@@ -1,9 +1,37 @@
-"""Shared test set-up: importing brdffit turns on JAX's float64 mode before any test builds an array."""
+"""Shared test set-up: importing brdffit turns on JAX's float64 mode before any test builds an array, and the
+session shares one compilation cache.
+
+The cache: the controller makes one temporary folder for the session and names it in ``BRDFFIT_CACHE_DIR``, which
+the xdist workers and every ``brdffit`` process a test starts inherit; each process turns JAX's persistent cache on
+there (`brdffit.cli.enable_compilation_cache`, as the CLI does). A program that one worker compiled is then loaded
+by the other worker and by the tests' subprocesses without being traced again (`brdffit.fitting.programs`), and
+nothing is written into the user's own cache. Most of the suite's time is tracing and compiling (issue 15); the
+compiled programs change no result (`tests/test_programs.py`). The folder is removed when the session ends.
+"""
+
+import os
+import shutil
+import tempfile
 
 import numpy as np
 import pytest
 
 import brdffit  # noqa: F401  (enables jax_enable_x64)
+from brdffit.cli import enable_compilation_cache
+
+_OWNER = "BRDFFIT_TEST_CACHE_OWNER"
+
+
+def pytest_configure(config):
+    if not hasattr(config, "workerinput"):  # the controller, or a run without xdist: a fresh folder
+        os.environ["BRDFFIT_CACHE_DIR"] = tempfile.mkdtemp(prefix="brdffit-test-cache-")
+        os.environ[_OWNER] = str(os.getpid())
+    enable_compilation_cache()
+
+
+def pytest_unconfigure(config):
+    if os.environ.get(_OWNER) == str(os.getpid()):
+        shutil.rmtree(os.environ["BRDFFIT_CACHE_DIR"], ignore_errors=True)
 
 
 @pytest.fixture

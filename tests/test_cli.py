@@ -15,11 +15,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PLASTIC = ROOT / "data" / "synthetic" / "plastic.h5"
 
 
-@pytest.fixture(autouse=True)
-def private_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path / "jax-cache"))
-
-
 def test_quick_start_fit_recovers_the_shipped_plastic(tmp_path, capsys):
     out = tmp_path / "plastic"
     # The README's main job: with no options, model selection over the standard candidates picks the truth.

@@ -73,8 +73,7 @@ def test_fit_reports_its_stages_and_the_number_of_starts(capsys):
 
 
 @pytest.mark.parametrize("flag, shown", [([], True), (["--json"], False), (["--quiet"], False)])
-def test_cli_fit_shows_progress_unless_quiet_or_json(flag, shown, tmp_path, capsys, monkeypatch):
-    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path / "jax-cache"))
+def test_cli_fit_shows_progress_unless_quiet_or_json(flag, shown, tmp_path, capsys):
     code = main(["fit", str(CLAY), "--model", "lambert", "--no-report", "--out", str(tmp_path / "o"), *flag])
     assert code == EXIT_OK
     assert ("fit lambert" in capsys.readouterr().err) == shown

@@ -112,12 +112,11 @@ def test_a_stored_fits_mitsuba_export_loads_and_renders_within_its_stated_error(
     assert rms == pytest.approx(uniform, rel=1e-2, abs=1e-6)    # Mitsuba works in float32
 
 
-def test_the_default_fit_of_a_real_file_converges_through_the_cli(tmp_path, monkeypatch, capsys):
+def test_the_default_fit_of_a_real_file_converges_through_the_cli(tmp_path, capsys):
     # Issue 17 point 1 on the cheapest shared file (PTFE at 532 nm, 1,824 samples): `brdffit fit FILE` with no fit
     # options, only the table options that read the file. With an empty compilation cache and the report skipped
     # this took 46 s on the 2-core development machine at a load average of 3, 106 s at 10 (other jobs;
-    # docs/real-data.md has the gallery's times).
-    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path / "jax-cache"))
+    # docs/real-data.md has the gallery's times); here it shares the session's compilation cache (conftest.py).
     out = tmp_path / "ptfe"
     t0 = time.perf_counter()
     code = main(["fit", str(DATA / "nist-ptfe" / "PTFE.data.csv"), "--columns",
