@@ -15,6 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PLASTIC = ROOT / "data" / "synthetic" / "plastic.h5"
 
 
+@pytest.mark.slow
 def test_quick_start_fit_recovers_the_shipped_plastic(tmp_path, capsys):
     out = tmp_path / "plastic"
     # The README's main job: with no options, model selection over the standard candidates picks the truth.
@@ -44,6 +45,7 @@ def test_fit_default_output_goes_next_to_the_input(tmp_path, capsys):
         assert "fits/oren-nayar" in f and "measurements" in f
 
 
+@pytest.mark.slow
 def test_fit_with_fixed_parameter_and_solver(tmp_path, capsys):
     code = main(["fit", str(PLASTIC), "--model", "lambert+ggx", "--fixed", "f0=0.04", "--solver", "dogleg",
                  "--out", str(tmp_path / "o"), "--json"])
@@ -101,6 +103,7 @@ def test_models_and_version(capsys):
     assert "brdffit 0.1.0" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_fit_lafortune_with_automatic_lobe_count(tmp_path, capsys):
     data = ROOT / "data" / "synthetic" / "lafortune-retro.h5"
     # --max-lobes 2 keeps the test short; choosing among 1..3 lobes is tested in test_select.py.
@@ -125,6 +128,7 @@ def test_select_command_and_lobes_errors(tmp_path, capsys):
     assert "number of lobes" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_synth_convert_and_posterior_commands(tmp_path, capsys):
     data = tmp_path / "ward.h5"
     assert main(["synth", "lambert+ward", "--param", "alpha=0.2", "--param", "ks=0.5,0.4,0.3", "--pattern",
@@ -162,6 +166,7 @@ def test_fit_model_auto_selects_among_the_standard_candidates(tmp_path, capsys, 
     assert json.loads((tmp_path / "o" / "selection.json").read_text())["chosen"] == "oren-nayar"
 
 
+@pytest.mark.slow
 def test_export_command_writes_renderer_materials(tmp_path, capsys):
     out = tmp_path / "fit"
     assert main(["fit", str(PLASTIC), "--model", "lambert+ggx", "--out", str(out), "--quiet"]) == EXIT_OK
@@ -203,6 +208,7 @@ def test_render_command_previews_fit_and_data(tmp_path, capsys):
     assert main(["render", str(tmp_path / "missing.h5")]) == EXIT_BAD_INPUT
 
 
+@pytest.mark.slow
 def test_fit_writes_a_report_and_the_report_command_rebuilds_it(tmp_path, capsys):
     out = tmp_path / "fit"
     assert main(["fit", str(PLASTIC), "--model", "lambert+cook-torrance", "--posterior", "--walkers", "24",
@@ -295,6 +301,7 @@ def test_docs_list_the_table_options_as_declared():
     assert len(_doc_examples()) >= 4  # the PTFE examples are there to be run (next test)
 
 
+@pytest.mark.slow
 @needs_ptfe
 def test_docs_cli_ptfe_examples_run_as_written(tmp_path, monkeypatch, capsys):
     import shlex

@@ -110,6 +110,7 @@ def test_noise_variance_estimated_from_residuals_without_sigma():
     np.testing.assert_allclose(result.stderr["rho_d"], np.pi * 0.02 / np.sqrt(2000), rtol=0.05)
 
 
+@pytest.mark.slow
 def test_fit_many_matches_fits_one_by_one():
     truth = models.get("lambert+blinn-phong", rho_d=[0.3, 0.2, 0.1], ks=[0.5, 0.5, 0.5], n=50.0)
     sets = [synth.generate(truth.replace(n=30.0 + 20 * k), pattern="half-diff", n=1000, noise="relative:0.01",
@@ -148,6 +149,7 @@ def test_multistart_records_every_start_and_keeps_the_best(plastic):
 
 @pytest.mark.parametrize("solver", ["lm", "optx-lm", "gauss-newton", "dogleg", "indirect-lm", "bfgs",
                                     optx.LevenbergMarquardt(rtol=1e-8, atol=1e-10)])
+@pytest.mark.slow
 def test_every_solver_reaches_the_same_optimum(plastic, solver):
     truth, data = plastic
     reference = fit(data, "lambert+cook-torrance", fixed=["f0"], loss="sigma")
@@ -310,6 +312,7 @@ def test_coarse_stage_of_optimistix_lm_solves_normal_equations_in_float64_only()
     assert coarse_solver("lm", 1e-5, 1e-8) == Marquardt(rtol=1e-5, atol=1e-8)  # the engine's own: no linear solver
 
 
+@pytest.mark.slow
 def test_coarse_to_fine_gives_the_full_data_answer():
     # Above COARSE_SAMPLES samples a fit may solve on a subsample and refine on all data (brdffit.fitting.marquardt); the
     # optimum, its cost and its covariance must be those of the plain full-data solve.

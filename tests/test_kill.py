@@ -65,6 +65,7 @@ def result_in(out: Path) -> str:
     return tag
 
 
+@pytest.mark.slow
 def test_output_folder_survives_kills_at_many_points(tmp_path):
     out = tmp_path / "result"
     m = measurements()

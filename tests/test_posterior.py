@@ -48,6 +48,7 @@ def test_noise_scale_is_estimated_per_channel(ward_fit):
         assert s["median"] == pytest.approx(1.0, abs=0.1)
 
 
+@pytest.mark.slow
 def test_intervals_are_calibrated_over_repeated_data_sets():
     # Issue 5's calibration check, small version (scripts/posterior_calibration.py runs the larger study):
     # 68% intervals must cover the truth in 55-80% of cases and 95% intervals in 88-99%.

@@ -112,6 +112,7 @@ def test_a_stored_fits_mitsuba_export_loads_and_renders_within_its_stated_error(
     assert rms == pytest.approx(uniform, rel=1e-2, abs=1e-6)    # Mitsuba works in float32
 
 
+@pytest.mark.slow
 def test_the_default_fit_of_a_real_file_converges_through_the_cli(tmp_path, capsys):
     # Issue 17 point 1 on the cheapest shared file (PTFE at 532 nm, 1,824 samples): `brdffit fit FILE` with no fit
     # options, only the table options that read the file. With an empty compilation cache and the report skipped

@@ -14,6 +14,7 @@ from brdffit.select import select
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow
 def test_blinn_phong_data_select_blinn_phong_not_bigger_models():
     truth = models.get("lambert+blinn-phong", rho_d=[0.3, 0.2, 0.1], ks=[0.6, 0.5, 0.4], n=60.0)
     data = synth.generate(truth, pattern="half-diff", n=800, noise="relative:0.01", seed=0)
