@@ -7,7 +7,7 @@ candidates of a selection, against 2 s of fitting). A `Program` is a jitted func
 executable it compiles on disk, under a key that it can compute *before* tracing: the program's name, the values
 of its static arguments, the tree structure and the shapes and dtypes of its array arguments, and a stamp of
 everything that could change the program (brdffit's source files, the JAX and jaxlib versions, the backend and its
-device, float64 mode). A later process with the same key loads the executable
+device, float64 mode, ``XLA_FLAGS``). A later process with the same key loads the executable
 (`jax.experimental.serialize_executable`, ~2 ms) and runs it.
 
 Persistence is on exactly when JAX's persistent cache directory is configured: the executables go to its
@@ -52,12 +52,14 @@ def _source_stamp() -> str:
 
 
 def _stamp() -> str:
-    """What besides the key's own parts decides a compiled program: the source, JAX, the device, float64 mode."""
+    """What besides the key's own parts decides a compiled program: the source, JAX, the device, float64 mode and
+    XLA's flags."""
     import jaxlib
 
     device = jax.devices()[0]
     return "|".join([_source_stamp(), jax.__version__, jaxlib.__version__, device.platform,
-                     getattr(device, "device_kind", ""), str(jax.config.jax_enable_x64)])
+                     getattr(device, "device_kind", ""), str(jax.config.jax_enable_x64),
+                     os.environ.get("XLA_FLAGS", "")])
 
 
 class Program:
