@@ -48,12 +48,12 @@ def make_database(folder: Path, count: int, samples: int) -> list[str]:
 
 def run(paths: list[str], workers: int, batch: int, cache: str, out: Path) -> dict:
     """Fit the database on a fresh LocalCluster of ``workers`` processes, after a warm-up that compiles."""
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     from brdffit import fit_database
+    from brdffit.distributed.database import local_cluster
 
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster, Client(cluster) as client:
+    with local_cluster(workers) as cluster, Client(cluster) as client:
         start = time.perf_counter()
         fit_database(paths[:batch * workers], SPEC, client=client, batch=batch, cache_dir=cache)
         warm = time.perf_counter() - start
