@@ -93,8 +93,7 @@ class Program:
         executable = _load(path, text) if path is not None else None
         out = _run(executable, dynamic)
         if out is None:  # nothing kept, or a kept file that does not run: compile (and keep)
-            executable = self._compile(args, path, text, dynamic)
-            out = executable(*dynamic)
+            executable, out = self._compile(args, path, text, dynamic)
         self._compiled[signature] = executable
         return out
 
@@ -112,17 +111,23 @@ class Program:
         its serialised form runs on these arguments. XLA compiles it itself, not JAX's persistent cache: on the
         CPU an executable that JAX's cache loaded (or the second compilation of a module in one process)
         serialises without its compiled functions, and a copy read back fails when it runs ("Function ... not
-        found"); the check keeps such a copy from ever being written."""
+        found"); the check keeps such a copy from ever being written.
+
+        Returns:
+            ``(executable, output on dynamic)``: the output is the checked copy's where it ran (the program runs
+            once either way).
+        """
         if path is None:
-            return self._jit.lower(*args).compile()
+            compiled = self._jit.lower(*args).compile()
+            return compiled, compiled(*dynamic)
         before = jax.config.jax_enable_compilation_cache
         jax.config.update("jax_enable_compilation_cache", False)
         try:
             compiled = self._jit.lower(*args).compile()
         finally:
             jax.config.update("jax_enable_compilation_cache", before)
-        _keep(path, text, compiled, dynamic)
-        return compiled
+        out = _keep(path, text, compiled, dynamic)
+        return compiled, (compiled(*dynamic) if out is None else out)
 
 
 def _run(executable, dynamic):
@@ -149,16 +154,21 @@ def _load(path: Path, text: str):
         return None
 
 
-def _keep(path: Path, text: str, compiled, dynamic) -> None:
+def _keep(path: Path, text: str, compiled, dynamic):
     """Write a compiled program atomically, if its serialised form read back runs on ``dynamic``; a folder that
-    cannot be written, or a backend that cannot serialise, only costs the next process its compilation."""
+    cannot be written, or a backend that cannot serialise, only costs the next process its compilation.
+
+    Returns:
+        The read-back copy's output on ``dynamic``, or None where it did not run (or nothing could be serialised).
+    """
     from jax.experimental.serialize_executable import deserialize_and_load, serialize
 
-    temporary = None
+    temporary, out = None, None
     try:
         blob, in_tree, out_tree = serialize(compiled)
-        if _run(deserialize_and_load(blob, in_tree, out_tree), dynamic) is None:
-            return
+        out = _run(deserialize_and_load(blob, in_tree, out_tree), dynamic)
+        if out is None:
+            return None
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, temporary = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
@@ -170,3 +180,4 @@ def _keep(path: Path, text: str, compiled, dynamic) -> None:
                 os.unlink(temporary)
             except OSError:
                 pass
+    return out
