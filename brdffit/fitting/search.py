@@ -198,7 +198,9 @@ def score(problem: Problem, candidates: list[dict], data: FitData):
     The device forms each candidate's normal equations in its amplitudes; the host solves them within the bounds
     (`brdffit.fitting.separable.solve_box`) and, for a linear loss, reads the cost off the same sums:
     ‖w(f₀ + Ba − f_d)‖² = c₀ − 2aᵀb + aᵀGa. A nonlinear loss or a robust one is scored by its own residuals at
-    the solved amplitudes.
+    the solved amplitudes. The materials are scored one at a time, by a single fit's program: batched over them,
+    the (materials × candidates × samples) intermediates left the cache, and fit_many's search ran 1.3 times
+    slower a material on one core, 1.6 times beside another process (docs/benchmarks.md).
 
     Arguments:
         problem: the problem, with `separable` set for the scoring (amplitudes projected with the loss's
@@ -214,6 +216,7 @@ def score(problem: Problem, candidates: list[dict], data: FitData):
     sums = _sums_fn(problem.structure) if names else None
     specs = problem.specs
     lower, upper = [specs[a].lower for a in names], [specs[a].upper for a in names]
+    materials = [jax.tree_util.tree_map(lambda x, i=i: x[i:i + 1], data) for i in range(data.values.shape[0])]
     costs, amps = [], []
     for start in range(0, len(candidates), _CHUNK):
         chunk = candidates[start:start + _CHUNK]
@@ -222,19 +225,19 @@ def score(problem: Problem, candidates: list[dict], data: FitData):
         batch = {k: np.stack([np.asarray(d[k], dtype=float) for d in padded]) for k in padded[0]}
         solved = {}
         if names:
-            c0, gram, rhs = (np.asarray(x, dtype=float) for x in sums(jax.tree_util.tree_map(jnp.asarray, batch),
-                                                                       data))
+            device = jax.tree_util.tree_map(jnp.asarray, batch)
+            per_material = [sums(device, material) for material in materials]
+            c0, gram, rhs = (np.concatenate([np.asarray(out[j], dtype=float) for out in per_material])
+                             for j in range(3))
             a = solve_box(gram, rhs, lower, upper)  # (M, B, C, K)
             solved = {name: a[..., k] for k, name in enumerate(names)}
         if names and quadratic:
             cost = np.sum(c0 - 2.0 * np.sum(a * rhs, axis=-1) + np.einsum("...k,...kl,...l->...", a, gram, a),
                           axis=-1)
-        else:
-            m = data.values.shape[0]
-            # Each material's amplitudes differ: the candidates are scored material by material.
+        else:  # each material's amplitudes differ too
             cost = np.stack([np.asarray(_cost_fn(problem.structure)(
                 jax.tree_util.tree_map(jnp.asarray, dict(batch, **{k: v[i] for k, v in solved.items()})),
-                jax.tree_util.tree_map(lambda x, i=i: x[i:i + 1], data)))[0] for i in range(m)])
+                material))[0] for i, material in enumerate(materials)])
         costs.append(cost[:, :len(chunk)])
         amps.append({k: v[:, :len(chunk)] for k, v in solved.items()})
     joined = {k: np.concatenate([a[k] for a in amps], axis=1) for k in amps[0]}
@@ -277,13 +280,7 @@ def search(problem: Problem, base: dict, data: FitData, seed: int, candidates: l
         full.append(params)
     # Equivalent settings (Lafortune lobes in another order) are one candidate: put each in canonical order.
     full = [canonical(problem, p) for p in full]
-    # Material by material: the scoring program of one material (a single fit's) over the candidates, whose
-    # arrays stay in the cache; batched over 8 materials it ran 1.3 times slower a material on one core and 1.6
-    # times with another process on the other core (memory traffic of the (M, B, N) intermediates).
-    scored = [score(scoring, full, jax.tree_util.tree_map(lambda a, m=m: a[m:m + 1], data))
-              for m in range(int(np.shape(data.values)[0]))]
-    costs = np.concatenate([c for c, _ in scored])
-    amplitudes = {k: np.concatenate([a[k] for _, a in scored]) for k in scored[0][1]}
+    costs, amplitudes = score(scoring, full, data)
     costs = np.where(np.isfinite(costs), costs, np.inf)
     units = np.array([[_to_unit(p[s.name], s) for s in outer] for p in full]).reshape(len(full), len(outer))
     chosen = []
