@@ -38,7 +38,8 @@ from . import marquardt, noise
 from .normal_equations import chunks, compile_seconds
 from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data
 from .result import FitResult
-from .search import POLISH_STARTS, SEARCH_SAMPLES, canonical, grid, interior, quasi_random_starts, score, search
+from .search import (POLISH_STARTS, SCREEN_SAMPLES, SEARCH_SAMPLES, canonical, grid, interior, quasi_random_starts,
+                     score, search)
 from .solvers import coarse_solver, compiled_solve, make_solver, no_pins, solver_name, working_tolerances
 from .status import diagnose, information_criteria, warnings_of
 from .uncertainty import Uncertainty, normal_equations_at
@@ -58,8 +59,6 @@ HOLD_FRACTION = 1e-3
 # The step limit of a revived lobe's polish (`_revive`): the polishes it follows converge in 20-60 steps from the
 # search's starts, and a revival that does not converge is discarded (its steps are lost time).
 REVIVE_STEPS = 64
-# A start that converged within this fraction of the lowest cost of a polish wins over one that hit max-steps.
-BEST_TIE = 1e-6
 # A lobe is pruned only if zeroing it raises the cost by at most this fraction (and by AIC's price,
 # `_dead_amplitudes`): the tolerance within which issue 14 asks fits to reach the optimum.
 PRUNE_COST_FRACTION = 1e-3
@@ -150,8 +149,9 @@ def _json_params(params: dict) -> dict:
 
 # -------------------------------------------------------------------------------------------------------- search
 def _starts(problem: Problem, model: Model, fixed_values: dict, init, multistart: int, seed: int,
-            data: FitData) -> list[list[dict]]:
-    """The starts of every material (physical values of every parameter, amplitudes solved), equally many."""
+            data: FitData, screen: FitData | None) -> list[list[dict]]:
+    """The starts of every material (physical values of every parameter, amplitudes solved), equally many
+    (``screen``: the search's screening subsample, `brdffit.fitting.search.search`)."""
     base = dict(model.params, **fixed_values)
     materials = int(np.shape(data.values)[0])
     extra = quasi_random_starts(problem, multistart, seed)
@@ -160,9 +160,9 @@ def _starts(problem: Problem, model: Model, fixed_values: dict, init, multistart
         return search(problem, base, data, seed, candidates=settings, starts=len(settings) + 1, separation=-1.0)
 
     if isinstance(init, str) and init == "auto":
-        starts = search(problem, base, data, seed)
+        starts = search(problem, base, data, seed, screen=screen)
     elif isinstance(init, list):
-        starts = search(problem, base, data, seed, candidates=init)
+        starts = search(problem, base, data, seed, candidates=init, screen=screen)
     elif isinstance(init, str) and init == "model" or isinstance(init, (dict, Model)):
         if isinstance(init, (dict, Model)):
             given = init.params if isinstance(init, Model) else model.replace(**init).params
@@ -291,15 +291,10 @@ def _start_status(outcome: dict) -> str:
 
 
 def _best(outcomes: list[dict]) -> dict:
-    """The outcome of lowest cost, or a start that converged within `BEST_TIE` of it rather than one that ran out
-    of steps: to the solver's tolerance the two are the same optimum, and only the converged one shows it."""
-    costs = np.array([o["cost"] if not o["nonfinite"] else np.inf for o in outcomes])
-    if not np.isfinite(costs).any():
-        return outcomes[0]
-    lowest = int(np.argmin(costs))
-    tied = [i for i, o in enumerate(outcomes)
-            if not o["max_steps"] and costs[i] <= costs[lowest] + BEST_TIE * abs(costs[lowest])]
-    return outcomes[min(tied, key=lambda i: costs[i])] if tied else outcomes[lowest]
+    """The outcome the polish answers with (`brdffit.fitting.marquardt.answer`: the lowest cost, or a start that
+    converged within `BEST_TIE` of it rather than one that ran out of steps)."""
+    costs = np.array([np.inf if o["nonfinite"] else o["cost"] for o in outcomes])
+    return outcomes[marquardt.answer(costs, np.array([o["max_steps"] for o in outcomes]))]
 
 
 # ---------------------------------------------------------------------------------------------------------- hold
@@ -542,9 +537,14 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
 
     bar.update(0, "search")
     t0 = time.perf_counter()
-    search_data = stack_data([make_fit_data(_subsample(m, SEARCH_SAMPLES, seed), fixed_values, e, 1.0, pad=True)
-                              for m, e in zip(items, eps)])
-    starts = _starts(problem, base_model, fixed_values, init, multistart, seed, search_data)
+    def subsampled(limit):
+        return stack_data([make_fit_data(_subsample(m, limit, seed), fixed_values, e, 1.0, pad=True)
+                           for m, e in zip(items, eps)])
+
+    search_data = subsampled(SEARCH_SAMPLES)
+    # The screen pays where it scores on at most half of the search's samples.
+    screen_data = subsampled(SCREEN_SAMPLES) if items[0].n > 2 * SCREEN_SAMPLES else None
+    starts = _starts(problem, base_model, fixed_values, init, multistart, seed, search_data, screen_data)
     if problem.robust is not None and robust_scale is None:
         scales = [_robust_scale(problem, s[0], jax.tree_util.tree_map(lambda a, m=m: a[m], search_data))
                   for m, s in enumerate(starts)]
@@ -569,6 +569,8 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
                 for s, o in zip(starts[m], outcomes[m])] for m in range(len(items))]
     kept = [dict(_best(o), notes=[]) for o in outcomes]
     for m in range(len(items)):
+        if not _dead_shapes(problem, kept[m]["params"]):  # nothing to revive (and no material to slice out)
+            continue
         revived, c_time, r_time = _revive(problem, solve_problem, kept[m],
                                           jax.tree_util.tree_map(lambda a, m=m: a[m], search_data), solve_items[m],
                                           seed, len(starts[0]), not two_stage)
