@@ -39,7 +39,7 @@ from .normal_equations import chunks, compile_seconds
 from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data
 from .result import FitResult
 from .search import (POLISH_STARTS, SCREEN_SAMPLES, SEARCH_SAMPLES, canonical, grid, interior, quasi_random_starts,
-                     score, search)
+                     score, search, search_range)
 from .solvers import coarse_solver, compiled_solve, make_solver, no_pins, solver_name, working_tolerances
 from .status import diagnose, information_criteria, warnings_of
 from .uncertainty import Uncertainty, normal_equations_at
@@ -299,14 +299,22 @@ def _best(outcomes: list[dict]) -> dict:
 
 # ---------------------------------------------------------------------------------------------------------- hold
 def _to_hold(problem: Problem, params: dict) -> dict:
-    """Outer parameters to hold for a re-solve: scalars within `HOLD_FRACTION` of a bound (snapped onto it), and
-    the shape of lobes whose amplitudes are all 0 (held where they are). NaN marks a scalar left free."""
+    """Outer parameters to hold for a re-solve: scalars within `HOLD_FRACTION` of a bound (snapped onto it), an
+    exponent below its search range (held on its bound 0), and the shape of lobes whose amplitudes are all 0 (held
+    where they are). NaN marks a scalar left free."""
     layout = problem.layout
     held = {}
     for name in problem.outer:
         spec = layout[name].spec
         value = np.array(params[name], dtype=float)
         near = np.asarray(at_bound(value, spec, HOLD_FRACTION))
+        if spec.scale and spec.lower == 0.0:
+            # A cosine power max(0, d)^n with n below its search range (1/100 of its default) is, for the data, a
+            # step function of its half-space: its direction (Lafortune's cxy) has a tangent n·d^(n−1) only on the
+            # few samples at the edge, and none at n = 0. The solver stalls there (three Lafortune lobes on
+            # Blinn-Phong data at n = 0.045, the Gauss-Newton step pointing along cxy); on the bound the lobe is
+            # the step function itself, and the status names n.
+            near |= value < search_range(spec)[0]
         if near.any():
             nearest = np.where(np.abs(value - spec.lower) <= np.abs(value - spec.upper), spec.lower, spec.upper)
             held[name] = np.where(near, nearest, np.nan)

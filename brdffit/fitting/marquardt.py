@@ -16,7 +16,8 @@ Levenberg-Marquardt step
 
 over the outer parameters, in their unconstrained variables (`brdffit.params`; the chain rule maps their
 columns), and the amplitudes off their bounds: Kaufman's joint step (BIT 15, 1975). A step is accepted only if
-the projected cost does not increase; λ then shrinks tenfold, else it grows tenfold (Marquardt's schedule). A
+the projected cost does not increase; λ then shrinks tenfold if the step achieved at least `GAIN_RATIO` of the
+decrease its model predicted and stays otherwise (Moré 1978), and a rejected step grows it tenfold. A
 point has converged when its next step and its amplitude change are below ``rtol·|x| + atol`` (optimistix's
 Cauchy test on the variables) with λ ≤ 1, so that damping cannot fake a small step, or with its last trial
 changing the cost by at most ``rtol·cost + atol`` (the Cauchy test on the cost: at the optimum, rounding rejects
@@ -47,7 +48,7 @@ from .problem import FitData, Problem
 from .programs import Program
 from .separable import solve_box
 
-__all__ = ["Marquardt", "solve", "answer", "MAX_DAMPING", "RELATIVE_OFFSET", "EXACT_MOVE", "BEST_TIE"]
+__all__ = ["Marquardt", "solve", "answer", "MAX_DAMPING", "RELATIVE_OFFSET", "EXACT_MOVE", "BEST_TIE", "GAIN_RATIO"]
 
 # A start that converged within this fraction of the lowest cost of its material's polish is as good an answer
 # as the lowest (the pipeline keeps it rather than one that ran out of steps, `brdffit.fitting.api._best`).
@@ -56,6 +57,12 @@ BEST_TIE = 1e-6
 # of a loose problem); it ends there and the diagnosis decides between stalled and converged.
 MAX_DAMPING = 1e12
 _MIN_DAMPING = 1e-12
+# A kept step that achieved less than this fraction of the decrease its Gauss-Newton model predicted keeps λ
+# instead of shrinking it (Moré 1978's gain ratio; Nielsen 1999 and MINPACK's lmder use 1/4 too): where the
+# model overshoots (the true Hessian along a direction twice JᵀJ, as between two near-identical Lafortune lobes),
+# shrinking λ after every step that does not raise the cost made the steps alternate in sign for a thousand
+# steps.
+GAIN_RATIO = 0.25
 # A projection that jumps an amplitude (off a bound, or by more than its value) by more than this fraction of the
 # new value is followed by a pass at the moved point (`_Batch.evaluate`).
 _REPASS = 1e-3
@@ -370,7 +377,11 @@ def _step(batch: _Batch, state: _State, damping, held):
         p = np.sum(moving, axis=-1)
         offset = np.sqrt(decrement / np.maximum(p, 1)) / np.sqrt(state.sums.cost
                                                                   / np.maximum(batch.n_values[:, None] - p, 1))
-    return np.where(moving, step, 0.0), u, np.where(finite & (p > 0), offset, np.inf)
+        # The cost change the undamped model predicts for this step: 2 gᵀδ + δᵀ JᵀJ δ (the gain ratio's
+        # denominator), in the scaled variables z = δ·scale where rhs = −g/scale.
+        z = np.where(moving, step * scale, 0.0)
+        predicted = -2.0 * np.sum(rhs * z, axis=-1) + np.einsum("...i,...ij,...j->...", z, gauss, z)
+    return np.where(moving, step, 0.0), u, np.where(finite & (p > 0), offset, np.inf), predicted
 
 
 def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, rtol: float, atol: float,
@@ -422,7 +433,7 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         active = ~done & (steps < max_steps)
         if not active.any():
             break
-        step, u, relative_offset = _step(batch, state, lam, hold)
+        step, u, relative_offset, predicted = _step(batch, state, lam, hold)
         outer = batch.is_outer
         small = (np.linalg.norm(np.where(outer, step, 0.0), axis=-1)
                  <= rtol * np.linalg.norm(np.where(outer, u, 0.0), axis=-1) + atol)
@@ -443,8 +454,11 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         change = np.where(active, np.abs(candidate.sums.cost - state.sums.cost), change)
         steps += active
         better = active & np.isfinite(candidate.sums.cost) & (candidate.sums.cost <= state.sums.cost)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            poor = (candidate.sums.cost - state.sums.cost) / predicted < GAIN_RATIO
         state = candidate.where(better, state)
-        lam = np.where(better, np.maximum(lam / 10.0, _MIN_DAMPING), np.where(active, lam * 10.0, lam))
+        lam = np.where(better, np.where(poor, lam, np.maximum(lam / 10.0, _MIN_DAMPING)),
+                       np.where(active, lam * 10.0, lam))
         done |= active & (lam > MAX_DAMPING)
     answers = np.ones(x.shape[:2], bool)
     if compact:
