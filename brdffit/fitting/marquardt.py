@@ -39,13 +39,11 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of
-from .problem import FitData, Problem
-from .programs import Program
+from .problem import FitData, Problem, take_materials
 from .separable import solve_box
 
 __all__ = ["Marquardt", "solve", "answer", "MAX_DAMPING", "RELATIVE_OFFSET", "EXACT_MOVE", "BEST_TIE", "GAIN_RATIO"]
@@ -153,14 +151,6 @@ def _scatter(sums: NormalEquations, chosen, shape: tuple, base: NormalEquations 
         out[chosen] = part
         fields.append(out.reshape(tuple(shape) + tail))
     return NormalEquations(*fields)
-
-
-def _gather_fn(piece: FitData, materials):
-    return jax.tree_util.tree_map(lambda a: a[materials], piece)
-
-
-# One compiled gather per data shape and width: point i of a compact pass gets material ``materials[i]``'s data.
-_gather = Program(_gather_fn, "gather materials")
 
 
 class _State:
@@ -292,8 +282,7 @@ class _Batch:
         kept for the repeated pass of the same points)."""
         key = materials.tobytes()
         if key not in self._gathered:
-            index = jnp.asarray(materials)
-            self._gathered = {key: [_gather(piece, index) for piece in self.pieces]}
+            self._gathered = {key: [take_materials(piece, materials) for piece in self.pieces]}
         return self._gathered[key]
 
     def _projected(self, x, sums: NormalEquations, values) -> _State:
