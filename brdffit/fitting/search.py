@@ -265,11 +265,31 @@ def score(problem: Problem, candidates: list, data: FitData, width: int = _CHUNK
     return np.concatenate(costs, axis=1), {k: np.concatenate(v, axis=1) for k, v in amplitudes.items()}
 
 
-def _screened(problem: Problem, candidates: list[dict], data: FitData, screen: FitData):
-    """`score` of all ``candidates`` on ``screen`` and of each material's `SCREEN_KEEP` best of them on ``data``;
-    the others cost infinity (their amplitudes 0)."""
+def _separated(costs, units, count: int, separation: float) -> list[int]:
+    """Up to ``count`` finite candidates in order of cost, each farther than ``separation`` (in the unit cube of
+    the search ranges, largest coordinate difference) from those picked before it."""
+    picks: list[int] = []
+    for index in np.argsort(costs, kind="stable"):
+        if len(picks) == count or not np.isfinite(costs[index]):
+            break
+        if all(np.max(np.abs(units[index] - units[p]), initial=0.0) > separation for p in picks):
+            picks.append(int(index))
+    return picks
+
+
+def _screened(problem: Problem, candidates: list[dict], data: FitData, screen: FitData, units, starts: int,
+              separation: float):
+    """`score` of all ``candidates`` on ``screen`` and of `SCREEN_KEEP` of them on ``data`` for each material:
+    the best ``starts`` separated ones on the screen (`_separated`, so that the starts stay apart however the
+    best candidates cluster), then the best of the rest; the others cost infinity (their amplitudes 0)."""
     rough, _ = score(problem, candidates, screen)
-    best = np.argsort(np.where(np.isfinite(rough), rough, np.inf), axis=1, kind="stable")[:, :SCREEN_KEEP]
+    rough = np.where(np.isfinite(rough), rough, np.inf)
+    best = []
+    for row in rough:
+        keep = _separated(row, units, starts, separation)
+        rest = [int(i) for i in np.argsort(row, kind="stable") if i not in keep]
+        best.append(keep + rest[:SCREEN_KEEP - len(keep)])
+    best = np.array(best)
     chosen, chosen_amplitudes = score(problem, [[candidates[i] for i in row] for row in best], data,
                                       width=SCREEN_KEEP)
     rows = np.arange(rough.shape[0])[:, None]
@@ -322,21 +342,15 @@ def search(problem: Problem, base: dict, data: FitData, seed: int, candidates: l
         full.append(params)
     # Equivalent settings (Lafortune lobes in another order) are one candidate: put each in canonical order.
     full = [canonical(problem, p) for p in full]
+    units = np.array([[_to_unit(p[s.name], s) for s in outer] for p in full]).reshape(len(full), len(outer))
     if screen is not None and len(full) > _CHUNK:
-        costs, amplitudes = _screened(scoring, full, data, screen)
+        costs, amplitudes = _screened(scoring, full, data, screen, units, starts, separation)
     else:
         costs, amplitudes = score(scoring, full, data)
     costs = np.where(np.isfinite(costs), costs, np.inf)
-    units = np.array([[_to_unit(p[s.name], s) for s in outer] for p in full]).reshape(len(full), len(outer))
     chosen = []
     for m in range(costs.shape[0]):
-        picks: list[int] = []
-        for index in np.argsort(costs[m], kind="stable"):
-            if len(picks) == starts or not np.isfinite(costs[m, index]):
-                break
-            if all(np.max(np.abs(units[index] - units[p]), initial=0.0) > separation for p in picks):
-                picks.append(int(index))
-        picks = picks or [0]
+        picks = _separated(costs[m], units, starts, separation) or [0]
         material = []
         for index in picks:
             params = dict(full[index], **{a: amplitudes[a][m, index] for a in amplitudes})
