@@ -545,6 +545,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
 
     bar.update(0, "search")
     t0 = time.perf_counter()
+
     def subsampled(limit):
         return stack_data([make_fit_data(_subsample(m, limit, seed), fixed_values, e, 1.0, pad=True)
                            for m, e in zip(items, eps)])
