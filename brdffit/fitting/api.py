@@ -36,7 +36,7 @@ from ..progress import Progress
 from .losses import ROBUST, get_loss, loss_epsilon
 from . import marquardt, noise
 from .normal_equations import chunks, compile_seconds
-from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data
+from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data, take_materials
 from .result import FitResult
 from .search import (POLISH_STARTS, SCREEN_SAMPLES, SEARCH_SAMPLES, canonical, grid, interior, quasi_random_starts,
                      score, search, search_range)
@@ -370,8 +370,8 @@ def _held_start(problem: Problem, params: dict, held: dict) -> dict:
 
 
 # -------------------------------------------------------------------------------------------------------- revive
-def _revive(problem: Problem, solve_problem: Problem, kept: dict, search_data: FitData, data: FitData, seed: int,
-            starts: int, metrics: bool) -> tuple[dict | None, float, float]:
+def _revive(problem: Problem, solve_problem: Problem, kept: dict, search_data: FitData, material: int,
+            data: FitData, seed: int, starts: int, metrics: bool) -> tuple[dict | None, float, float]:
     """Search a lobe whose amplitudes all went to 0 again, the rest of one material's answer held: a grid over
     the lobe's own shape parameters (`search.grid`), every amplitude re-solved at each setting, the best separated
     settings polished with everything free. This is the nested search of Lafortune et al. (1997) and Ngan et
@@ -381,7 +381,9 @@ def _revive(problem: Problem, solve_problem: Problem, kept: dict, search_data: F
     Arguments:
         problem, solve_problem: the `Problem` and the one that polishes (a looser solver on a coarse stage).
         kept: the material's best outcome so far.
-        search_data, data: that material's search subsample and polish data (no material axis).
+        search_data: the search subsamples of every material (material axis).
+        material: the material's index in ``search_data``.
+        data: the material's polish data (no material axis).
         seed: the fit's seed.
         starts: the polish's number of starts.
         metrics: ``data`` is the whole data (`_polish`).
@@ -395,7 +397,7 @@ def _revive(problem: Problem, solve_problem: Problem, kept: dict, search_data: F
         return None, 0.0, 0.0
     specs = problem.specs
     candidates = [setting for names in groups for setting in grid([specs[n] for n in names], seed)]
-    single = jax.tree_util.tree_map(lambda a: a[None], search_data)
+    single = take_materials(search_data, [material])
     found = search(problem, kept["params"], single, seed, candidates=candidates, starts=starts)
     polish_data = jax.tree_util.tree_map(lambda a: a[None], data)
     outcomes, compile_time, run_time = _polish(solve_problem, found, polish_data, metrics=metrics,
@@ -551,8 +553,9 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
                            for m, e in zip(items, eps)])
 
     search_data = subsampled(SEARCH_SAMPLES)
-    # The screen pays where it scores on at most half of the search's samples.
-    screen_data = subsampled(SCREEN_SAMPLES) if items[0].n > 2 * SCREEN_SAMPLES else None
+    # The screen pays where it scores on at most half of the search's samples (and only a search uses it).
+    searching = isinstance(init, list) or isinstance(init, str) and init == "auto"
+    screen_data = subsampled(SCREEN_SAMPLES) if searching and items[0].n > 2 * SCREEN_SAMPLES else None
     starts = _starts(problem, base_model, fixed_values, init, multistart, seed, search_data, screen_data)
     if problem.robust is not None and robust_scale is None:
         scales = [_robust_scale(problem, s[0], jax.tree_util.tree_map(lambda a, m=m: a[m], search_data))
@@ -578,10 +581,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
                 for s, o in zip(starts[m], outcomes[m])] for m in range(len(items))]
     kept = [dict(_best(o), notes=[]) for o in outcomes]
     for m in range(len(items)):
-        if not _dead_shapes(problem, kept[m]["params"]):  # nothing to revive (and no material to slice out)
-            continue
-        revived, c_time, r_time = _revive(problem, solve_problem, kept[m],
-                                          jax.tree_util.tree_map(lambda a, m=m: a[m], search_data), solve_items[m],
+        revived, c_time, r_time = _revive(problem, solve_problem, kept[m], search_data, m, solve_items[m],
                                           seed, len(starts[0]), not two_stage)
         compile_time += c_time
         run_time += r_time
