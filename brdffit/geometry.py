@@ -69,19 +69,20 @@ def logistic(u):
     return jax.nn.sigmoid(u)
 
 
-def spherical_to_vector(theta, phi):
+def spherical_to_vector(theta, phi, xp=jnp):
     """Unit vector(s) of polar angle θ and azimuth φ.
 
     Arguments:
         theta: polar angle from the normal (radians), any shape.
         phi: azimuth from the tangent x (radians), broadcastable with ``theta``.
+        xp: the array module (``jax.numpy``, or ``numpy`` on the host).
 
     Returns:
         Array of shape ``broadcast(theta, phi).shape + (3,)``.
     """
-    theta, phi = jnp.broadcast_arrays(jnp.asarray(theta, dtype=float), jnp.asarray(phi, dtype=float))
-    s = jnp.sin(theta)
-    return jnp.stack([s * jnp.cos(phi), s * jnp.sin(phi), jnp.cos(theta)], axis=-1)
+    theta, phi = xp.broadcast_arrays(xp.asarray(theta, dtype=float), xp.asarray(phi, dtype=float))
+    s = xp.sin(theta)
+    return xp.stack([s * xp.cos(phi), s * xp.sin(phi), xp.cos(theta)], axis=-1)
 
 
 def vector_to_spherical(w):

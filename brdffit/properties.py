@@ -94,39 +94,35 @@ def _albedo_chunk(model: Model, theta_i, phi_i, t, wt, u, wu, centre):
     return jnp.where((jnp.cos(theta_i) > 1e-12)[:, None], albedo, 0.0)
 
 
-def _albedo_nodes(theta_i, phi_i, t, wt, u, wu, centre):
-    """The quadrature of `_albedo_chunk` (arguments the same): ``(wi (B, 1, 1, 3), wo (B, S, T, 3), weight
-    (B, S, T))`` with a(ωi) = Σ weight · f_r(ωi, wo)."""
+def _albedo_nodes(theta_i, phi_i, t, wt, u, wu, centre, xp=jnp):
+    """The quadrature of `_albedo_chunk` (arguments the same; ``xp`` the array module): ``(wi (B, 1, 1, 3), wo
+    (B, S, T, 3), weight (B, S, T))`` with a(ωi) = Σ weight · f_r(ωi, wo)."""
     ti = theta_i[:, None, None]  # (B, 1, 1): chunk × azimuth node × θh node
-    cos_i, sin_i = jnp.cos(ti), jnp.sin(ti)
-    sigma = jnp.clip(cos_i / jnp.maximum(sin_i, _SIGMA_MIN), _SIGMA_MIN, _SIGMA_MAX)
-    a = jnp.arcsinh(0.5 * jnp.pi / sigma)
+    cos_i, sin_i = xp.cos(ti), xp.sin(ti)
+    sigma = xp.clip(cos_i / xp.maximum(sin_i, _SIGMA_MIN), _SIGMA_MIN, _SIGMA_MAX)
+    a = xp.arcsinh(0.5 * math.pi / sigma)
 
     # Azimuth of h relative to φi, φ = centre + σ sinh(A u), with weights dφ/du · w_u: (B, S, 1).
     uu = u[None, :, None]
-    phi = centre[None, :, None] + sigma * jnp.sinh(a * uu)
-    w_phi = wu[None, :, None] * sigma * a * jnp.cosh(a * uu)
+    phi = centre[None, :, None] + sigma * xp.sinh(a * uu)
+    w_phi = wu[None, :, None] * sigma * a * xp.cosh(a * uu)
 
     # θh in [0, θmax(φ)] through θh = θmax t², weights dθh/dt · w_t.
-    psi = jnp.arctan2(sin_i * jnp.cos(phi), cos_i)
-    theta_max = 0.25 * jnp.pi + 0.5 * psi  # (B, S, 1)
+    psi = xp.arctan2(sin_i * xp.cos(phi), cos_i)
+    theta_max = 0.25 * math.pi + 0.5 * psi  # (B, S, 1)
     tt = t[None, None, :]
     theta_h = theta_max * tt * tt  # (B, S, T)
     w_theta = wt[None, None, :] * 2.0 * theta_max * tt
 
-    h = spherical_to_vector(theta_h, phi + phi_i[:, None, None])  # (B, S, T, 3)
-    wi = spherical_to_vector(theta_i, phi_i)[:, None, None, :]  # (B, 1, 1, 3)
-    i_dot_h = jnp.sum(wi * h, axis=-1)
+    h = spherical_to_vector(theta_h, phi + phi_i[:, None, None], xp=xp)  # (B, S, T, 3)
+    wi = spherical_to_vector(theta_i, phi_i, xp=xp)[:, None, None, :]  # (B, 1, 1, 3)
+    i_dot_h = xp.sum(wi * h, axis=-1)
     wo = 2.0 * i_dot_h[..., None] * h - wi  # the reflection of ωi about h
     cos_o = wo[..., 2]
 
     # dωo = 4 (ωi·h) sinθh dθh dφ, times the cosine cosθo of the albedo integrand.
-    weight = w_phi * w_theta * jnp.sin(theta_h) * 4.0 * jnp.maximum(i_dot_h, 0.0) * jnp.maximum(cos_o, 0.0)
+    weight = w_phi * w_theta * xp.sin(theta_h) * 4.0 * xp.maximum(i_dot_h, 0.0) * xp.maximum(cos_o, 0.0)
     return wi, wo, weight
-
-
-# The nodes alone, compiled once per shape for every model (`scan_albedo`).
-_albedo_nodes_jit = jax.jit(_albedo_nodes)
 
 
 def _gauss_legendre(n: int, lower: float, upper: float):
@@ -539,18 +535,19 @@ def scan_albedo(model: Model, theta_i=PLAUSIBILITY_THETA_I, phi_i=PLAUSIBILITY_P
                 resolution: int = PLAUSIBILITY_RESOLUTION) -> np.ndarray:
     """The directional albedo on a grid of incidence directions, quickly: ``(len(theta_i), len(phi_i), C)``.
 
-    The quadrature of `directional_albedo`, with its nodes compiled once for every model and the model evaluated
-    by `brdffit.evaluate_dirs` (compiled once per model structure; the whole quadrature compiled per model took
-    4-8 s on the project's CPU, this 1 s). Summaries and reports use it (`plausibility`).
+    The quadrature of `directional_albedo`, with its nodes computed on the host in NumPy (~20 ms; compiled, 0.3 s
+    in a first fit's summary) and the model evaluated by `brdffit.evaluate_dirs` (compiled once per model
+    structure; the whole quadrature compiled per model took 4-8 s on the project's CPU, this 1 s). Summaries and
+    reports use it (`plausibility`).
     """
     theta, phi = (np.asarray(x, dtype=float).reshape(-1) for x in np.meshgrid(theta_i, phi_i, indexing="ij"))
     t, wt = _gauss_legendre(resolution, 0.0, 1.0)
     u_half, wu_half = _gauss_legendre(resolution, -1.0, 1.0)
     u, wu = np.concatenate([u_half, u_half]), np.concatenate([wu_half, wu_half])
     centre = np.repeat([0.5 * math.pi, 1.5 * math.pi], resolution)
-    wi, wo, weight = _albedo_nodes_jit(*(jnp.asarray(x) for x in (theta, phi, t, wt, u, wu, centre)))
-    f = np.asarray(evaluate_dirs(model, jnp.broadcast_to(wi, wo.shape), wo))
-    albedo = np.einsum("bst,bstc->bc", np.asarray(weight), f)
+    wi, wo, weight = _albedo_nodes(theta, phi, t, wt, u, wu, centre, xp=np)
+    f = np.asarray(evaluate_dirs(model, np.broadcast_to(wi, wo.shape), wo))
+    albedo = np.einsum("bst,bstc->bc", weight, f)
     albedo[np.cos(theta) <= 1e-12] = 0.0
     return albedo.reshape(np.size(theta_i), np.size(phi_i), model.channels)
 
