@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import re
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import jax
 import numpy as np
@@ -52,6 +54,9 @@ DEFAULT_MARGIN = 2.0
 # Timed evaluations of a candidate's residual program for its ``cost_ns`` (the best is kept: a shared host's load
 # only ever adds time).
 _COST_REPEATS = 5
+# Candidates fitted at a time, each in a thread of its own: a first selection is mostly XLA compiling every
+# candidate's programs, one core a compilation, while the GIL is free (issue 15). Every fit is the same as alone.
+SELECT_THREADS = min(4, os.cpu_count() or 1)
 _CONVERGED = ("converged", "converged-at-bound")
 # Screening (AIC/BIC): every candidate is fitted to the training rows (a subsample of SCREEN_SAMPLES of them when
 # there are twice as many), and only those that can still be chosen are refitted to all the data. A subsample optimum costs the full data about
@@ -140,19 +145,16 @@ class Selection:
                 "warnings": list(self.warnings)}
 
 
-def _loss_residuals(result: FitResult, measurements, timed: bool = False):
+def _loss_residuals(result: FitResult, measurements):
     """The fit's loss residuals on every sample ``(N, C)``, NaN where the data are missing (one compiled program
     per model and data size serves the full-data cost and any rows' held-out error).
 
     Arguments:
         result: a fit with a model.
         measurements: the samples to evaluate it at.
-        timed: also measure the evaluation cost (below).
 
     Returns:
-        The residuals; with ``timed``, the pair ``(residuals, cost_ns)``: the best of `_COST_REPEATS` further
-        calls of the same compiled program, in nanoseconds per sample (the model's evaluation dominates it: a
-        selection's ``cost_ns``, measured without tracing and compiling another program for each candidate).
+        ``(residuals, evaluation)``: ``evaluation`` is what `_cost_ns` times.
     """
     model = result.model
     problem = Problem(lobes=model.lobes, channels=model.channels, free=(), loss=result.loss, robust=None,
@@ -160,15 +162,21 @@ def _loss_residuals(result: FitResult, measurements, timed: bool = False):
     data = make_fit_data(measurements, {}, loss_epsilon(result.loss, measurements.values), pad=True)
     params = dict(model.params)
     r = np.asarray(residuals_at(problem, params, data))[:measurements.n]
-    r = np.where(np.asarray(data.mask)[:measurements.n], r, np.nan)
-    if not timed:
-        return r
+    return np.where(np.asarray(data.mask)[:measurements.n], r, np.nan), (problem, params, data)
+
+
+def _cost_ns(evaluation) -> float:
+    """The evaluation cost of a `_loss_residuals` ``evaluation`` in nanoseconds per sample: the best of
+    `_COST_REPEATS` further calls of its compiled program (the model's evaluation dominates it: a selection's
+    ``cost_ns``, measured without tracing and compiling another program for each candidate). Called while no other
+    candidate is being fitted."""
+    problem, params, data = evaluation
     best = math.inf
     for _ in range(_COST_REPEATS):
         t0 = time.perf_counter()
         jax.block_until_ready(residuals_at(problem, params, data))
         best = min(best, time.perf_counter() - t0)
-    return r, 1e9 * best / int(np.shape(data.values)[0])
+    return 1e9 * best / int(np.shape(data.values)[0])
 
 
 def _rms(r: np.ndarray) -> float:
@@ -184,8 +192,9 @@ def _masked(measurements, rows: np.ndarray):
     return measurements.replace(values=values)
 
 
-def _smaller_lafortune(spec: str, done: dict):
-    """The fit of the same base with one Lafortune lobe fewer, if it was already fitted (progressive start)."""
+def _smaller_lafortune(spec: str):
+    """The spec of the same base with one Lafortune lobe fewer and this spec's lobe count ``(smaller, k)``, or
+    ``(None, None)`` for a spec that is not a Lafortune sum of two or more lobes (progressive start)."""
     match = _LAFORTUNE.match(spec)
     if not match:
         return None, None
@@ -198,17 +207,37 @@ def _smaller_lafortune(spec: str, done: dict):
     smaller_options = ", ".join(x for x in ([f"lobes={k - 1}"] if k - 1 > 1 else []) + ([rest] if rest else []))
     lobe = "lafortune" + (f"({smaller_options})" if smaller_options else "")
     base = match.group("base")
-    smaller = f"{base}+{lobe}" if base else lobe
-    return done.get(smaller), k
+    return (f"{base}+{lobe}" if base else lobe), k
 
 
-def _fit_candidate(spec, measurements, done, fit_options):
-    previous, k = _smaller_lafortune(spec, done)
-    init = "auto"
-    if previous is not None and previous.model is not None:
-        anisotropic = "anisotropic=true" in spec.replace(" ", "").lower()
-        init = new_lobe_candidates(previous, k, anisotropic)
-    return fit(measurements, spec, init=init, **fit_options), init
+def _each_candidate(candidates, work, bar, message):
+    """``work(spec, init)`` for every candidate, `SELECT_THREADS` at a time, where ``init`` is ``"auto"`` or, for
+    a Lafortune sum whose one-lobe-smaller spec is also a candidate, the new-lobe starts from that one's fit
+    (`brdffit.fitting.progressive`; that candidate's work is waited for first). ``work`` returns a pair whose
+    first element is the candidate's `FitResult`.
+
+    Returns:
+        The ``work`` outputs in the order of ``candidates``.
+    """
+    futures = {}
+
+    def run(spec):
+        init = "auto"
+        smaller, k = _smaller_lafortune(spec)
+        if smaller in futures:  # submitted before this one, so running or done: no pool slot waits on a queue
+            previous = futures[smaller].result()[0]
+            if previous.model is not None:
+                init = new_lobe_candidates(previous, k, "anisotropic=true" in spec.replace(" ", "").lower())
+        return work(spec, init)
+
+    with ThreadPoolExecutor(max_workers=SELECT_THREADS) as pool:
+        for spec in candidates:
+            futures[spec] = pool.submit(run, spec)
+        out = []
+        for i, spec in enumerate(candidates):
+            bar.update(i, message(spec))
+            out.append(futures[spec].result())
+    return out
 
 
 def _verdict(row: dict, chosen: dict, best: dict, threshold: float, criterion: str, usable: list,
@@ -400,28 +429,29 @@ def _full_fit_fields(result: FitResult) -> dict:
 def _fitted_rows(candidates, measurements, fold_rows, options, done, bar):
     """The table of an unscreened selection: every candidate fitted to all the data, and refitted with each fold
     of ``fold_rows`` held out for its held-out error."""
-    rows = []
-    for i, spec in enumerate(candidates):
-        bar.update(i, f"fitting {spec}")
-        result, init = _fit_candidate(spec, measurements, done, options)
-        done[spec] = result
-        errors = []
+    def work(spec, init):
+        result = fit(measurements, spec, init=init, **options)
         # The held-out fits start from the full-data optimum (same shapes, so the same compiled programs): the
         # training optimum lies within the held-out rows' influence of it, and the global search has been done.
         start = result.model if result.model is not None else init
+        errors, timed = [], None
         for k, held in enumerate(fold_rows):
-            train = fit(_masked(measurements, held), spec, init=start, **options)
-            if k == 0:  # the evaluation is timed once, on the first fold's program
-                r, cost_ns = _loss_residuals(train, measurements, timed=True)
-            else:
-                r = _loss_residuals(train, measurements)
+            r, evaluation = _loss_residuals(fit(_masked(measurements, held), spec, init=start, **options),
+                                            measurements)
+            timed = timed or evaluation  # the evaluation is timed once, on the first fold's program
             errors.append(_rms(r[held]))
+        return result, errors, timed
+
+    rows = []
+    for spec, (result, errors, timed) in zip(candidates, _each_candidate(candidates, work, bar,
+                                                                         lambda spec: f"fitting {spec}")):
+        done[spec] = result
         rows.append({
             "spec": spec,
             "n_params": result.n_params,
             "heldout_error": float(np.mean(errors)),
             "heldout_se": float(np.std(errors, ddof=1) / np.sqrt(len(errors))) if len(errors) > 1 else math.nan,
-            "cost_ns": cost_ns,
+            "cost_ns": _cost_ns(timed),
             **_full_fit_fields(result),
         })
     return rows
@@ -439,11 +469,14 @@ def _screened_rows(candidates, measurements, screen_data, held, criterion, margi
     rows = []
     n_values = int(np.isfinite(measurements.values).sum())
     training = int(np.any(np.isfinite(screen_data.values), axis=1).sum())
-    for i, spec in enumerate(candidates):
-        bar.update(i, f"screening {spec} on {training} samples")
-        result, _ = _fit_candidate(spec, screen_data, screened, options)
+    def work(spec, init):
+        result = fit(screen_data, spec, init=init, **options)
+        return (result,) + _loss_residuals(result, measurements)
+
+    for spec, (result, r, evaluation) in zip(candidates, _each_candidate(
+            candidates, work, bar, lambda spec: f"screening {spec} on {training} samples")):
         screened[spec] = done[spec] = result
-        r, cost_ns = _loss_residuals(result, measurements, timed=True)
+        cost_ns = _cost_ns(evaluation)
         cost = float(np.nansum(r ** 2))
         aic, bic = information_criteria(result.loss, cost, n_values, result.n_params)
         rows.append({"spec": spec, "n_params": result.n_params, "train_error": float(np.sqrt(cost / max(n_values, 1))),
@@ -471,9 +504,12 @@ def _refit_contenders(rows, measurements, screened, criterion, margin, options, 
                 / max(screened[row["spec"]].n_samples, 1) <= best + margin]
         if not todo:  # the others cannot come within the margin of the best, even fitted to all the data
             return
-        for row in todo:
-            bar.update(len(rows) - 1, f"fitting {row['spec']} to all {measurements.n} samples")
-            result = fit(measurements, row["spec"], init=screened[row["spec"]].model, **options)
+        bar.update(len(rows) - 1, f"fitting {', '.join(row['spec'] for row in todo)} to all {measurements.n} "
+                                  f"samples")
+        with ThreadPoolExecutor(max_workers=SELECT_THREADS) as pool:
+            results = list(pool.map(lambda row: fit(measurements, row["spec"], init=screened[row["spec"]].model,
+                                                    **options), todo))
+        for row, result in zip(todo, results):
             done[row["spec"]] = result
             row.update(_full_fit_fields(result))
 

@@ -19,6 +19,7 @@ lobe.
 from __future__ import annotations
 
 import functools
+import threading
 import time
 from typing import NamedTuple
 
@@ -109,7 +110,7 @@ def _tangents(problem: Problem, tree: dict, data: FitData):
     return jnp.transpose(jnp.concatenate([tangents, residuals[None]]), (2, 0, 1)), f
 
 
-_COMPILE_SECONDS = [0.0]
+_COMPILE_SECONDS = threading.local()  # per thread: `brdffit.select` fits candidates concurrently
 
 
 @functools.lru_cache(maxsize=64)
@@ -133,16 +134,16 @@ def pass_program(structure: Problem):
         start = time.perf_counter()
         out = jax.block_until_ready(jitted(trees, data))
         seen.add(key)
-        _COMPILE_SECONDS[0] += time.perf_counter() - start
+        _COMPILE_SECONDS.value = compile_seconds() + time.perf_counter() - start
         return out
 
     return fn
 
 
 def compile_seconds() -> float:
-    """Seconds this process has spent in the first calls of passes (compilation, or loading it from JAX's
+    """Seconds this thread has spent in the first calls of passes (compilation, or loading it from JAX's
     persistent cache, and the call itself); the pipeline reports the difference over a fit."""
-    return _COMPILE_SECONDS[0]
+    return getattr(_COMPILE_SECONDS, "value", 0.0)
 
 
 def _metric_sums(f, values, mask, cos_i, sqrt_weight):

@@ -15,6 +15,9 @@ Persistence is on exactly when JAX's persistent cache directory is configured: t
 argument has no stable text (its repr names a memory address), a `Program` is plain ``jax.jit``. A file that cannot
 be read back or does not run (damaged, or written by another version that happened to share the key) is compiled
 again and replaced; files are written to a temporary name and renamed, so a reader never sees half of one.
+
+A `Program` may be called from several threads (`brdffit.select` fits candidates concurrently): the first call of
+a signature compiles it while later callers of that signature wait for it, and other signatures compile beside it.
 """
 
 from __future__ import annotations
@@ -24,9 +27,11 @@ import hashlib
 import os
 import pickle
 import tempfile
+import threading
 from pathlib import Path
 
 import jax
+from jax._src import config as _jax_config  # its options as thread-local context managers
 
 __all__ = ["Program", "program_directory"]
 
@@ -78,6 +83,7 @@ class Program:
         self._name = name
         self._static = tuple(static_argnums)
         self._compiled: dict = {}
+        self._locks: dict = {}
 
     def __call__(self, *args):
         static = tuple(args[i] for i in self._static)
@@ -89,12 +95,16 @@ class Program:
         executable = self._compiled.get(signature)
         if executable is not None:
             return executable(*dynamic)
-        path, text = self._path(signature)
-        executable = _load(path, text) if path is not None else None
-        out = _run(executable, dynamic)
-        if out is None:  # nothing kept, or a kept file that does not run: compile (and keep)
-            executable, out = self._compile(args, path, text, dynamic)
-        self._compiled[signature] = executable
+        with self._locks.setdefault(signature, threading.Lock()):  # one thread compiles a signature
+            executable = self._compiled.get(signature)
+            if executable is not None:
+                return executable(*dynamic)
+            path, text = self._path(signature)
+            executable = _load(path, text) if path is not None else None
+            out = _run(executable, dynamic)
+            if out is None:  # nothing kept, or a kept file that does not run: compile (and keep)
+                executable, out = self._compile(args, path, text, dynamic)
+            self._compiled[signature] = executable
         return out
 
     def _path(self, signature):
@@ -120,12 +130,8 @@ class Program:
         if path is None:
             compiled = self._jit.lower(*args).compile()
             return compiled, compiled(*dynamic)
-        before = jax.config.jax_enable_compilation_cache
-        jax.config.update("jax_enable_compilation_cache", False)
-        try:
+        with _jax_config.enable_compilation_cache(False):  # in this thread only
             compiled = self._jit.lower(*args).compile()
-        finally:
-            jax.config.update("jax_enable_compilation_cache", before)
         out = _keep(path, text, compiled, dynamic)
         return compiled, (compiled(*dynamic) if out is None else out)
 
