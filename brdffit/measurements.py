@@ -413,14 +413,19 @@ class Measurements:
                 incidence angle of a gonio scan keeps its share. The strata are the distinct θi values (or 8
                 equal-count θi bins when there are more than 32 distinct values) crossed with 4 equal-count θo bins.
         """
+        rows = self.subsample_rows(n, seed, stratified)
+        return self if rows is None else self.take(rows)
+
+    def subsample_rows(self, n: int, seed: int = 0, stratified: bool = False) -> np.ndarray | None:
+        """The sorted rows that `subsample` keeps (same arguments), or None where it keeps every sample."""
         n = int(n)
         if n < 1:
             raise ValueError(f"subsample needs n >= 1, got {n}")
         if n >= self.n:
-            return self
+            return None
         rng = np.random.default_rng(seed)
         if not stratified:
-            return self.take(np.sort(rng.choice(self.n, size=n, replace=False)))
+            return np.sort(rng.choice(self.n, size=n, replace=False))
         strata = _strata(self.theta_i, self.theta_o)
         labels, counts = np.unique(strata, return_counts=True)
         quota = counts * (n / self.n)
@@ -430,7 +435,7 @@ class Measurements:
             take[np.argsort(-(quota - take), kind="stable")[:remainder]] += 1
         rows = [rng.choice(np.flatnonzero(strata == label), size=k, replace=False)
                 for label, k in zip(labels, take) if k]
-        return self.take(np.sort(np.concatenate(rows)))
+        return np.sort(np.concatenate(rows))
 
     def split(self, test_fraction: float = 0.2, seed: int = 0) -> tuple["Measurements", "Measurements"]:
         """A random train / held-out split, reproducible for a seed; each part keeps the original order.

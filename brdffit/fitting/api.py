@@ -36,7 +36,7 @@ from ..progress import Progress
 from .losses import ROBUST, get_loss, loss_epsilon
 from . import marquardt, noise
 from .normal_equations import chunks, compile_seconds
-from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data, take_materials
+from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data, take_materials, take_samples
 from .result import FitResult
 from .search import (POLISH_STARTS, SCREEN_SAMPLES, SEARCH_SAMPLES, canonical, grid, interior, quasi_random_starts,
                      score, search, search_range)
@@ -139,10 +139,6 @@ def _use_coarse(coarse, measurements) -> bool:
     return bool(coarse) and measurements.n > COARSE_SAMPLES
 
 
-def _subsample(measurements, limit: int, seed: int):
-    return measurements if measurements.n <= limit else measurements.subsample(limit, seed=seed)
-
-
 def _json_params(params: dict) -> dict:
     return {k: np.asarray(v, dtype=float).tolist() for k, v in params.items()}
 
@@ -215,7 +211,8 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
     specs = problem.specs
     if not problem.outer:  # nothing nonlinear is free: the projection is the whole solve
         t0 = time.perf_counter()
-        costs, amplitudes = score(problem, [starts[0][0]], data)  # the fixed values are the same for every material
+        # The fixed values are the same for every material; one candidate on all the samples at once.
+        costs, amplitudes = score(problem, [starts[0][0]], data, width=1, piece=None)
         out = []
         for m, material in enumerate(starts):
             params = dict(material[0], **{a: amplitudes[a][m, 0] for a in amplitudes})
@@ -548,9 +545,15 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
     bar.update(0, "search")
     t0 = time.perf_counter()
 
+    # Every subsample is gathered from the whole data's fields (one compiled program of the fields per file size).
+    full = [make_fit_data(m, fixed_values, e, 1.0, pad=True) for m, e in zip(items, eps)]
+
+    def subsample(m, limit):
+        rows = items[m].subsample_rows(limit, seed=seed)
+        return full[m] if rows is None else take_samples(full[m], rows)
+
     def subsampled(limit):
-        return stack_data([make_fit_data(_subsample(m, limit, seed), fixed_values, e, 1.0, pad=True)
-                           for m, e in zip(items, eps)])
+        return stack_data([subsample(m, limit) for m in range(len(items))])
 
     search_data = subsampled(SEARCH_SAMPLES)
     # The screen pays where it scores on at most half of the search's samples (and only a search uses it).
@@ -564,10 +567,9 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         scales = [robust_scale if robust_scale is not None else 1.0] * len(items)
     init_time = time.perf_counter() - t0
 
-    full = [make_fit_data(m, fixed_values, e, s, pad=True) for m, e, s in zip(items, eps, scales)]
+    full = [d._replace(robust_scale=jnp.asarray(s, dtype=float)) for d, s in zip(full, scales)]
     if two_stage:
-        solve_items = [make_fit_data(m.subsample(COARSE_SAMPLES, seed=seed), fixed_values, e, s, pad=True)
-                       for m, e, s in zip(items, eps, scales)]
+        solve_items = [subsample(m, COARSE_SAMPLES) for m in range(len(items))]
         loose = coarse_solver(solver, max(COARSE_RTOL, rtol), max(COARSE_ATOL, atol)) \
             if isinstance(solver, str) else problem.solver
         solve_problem = dataclasses.replace(problem, solver=loose)

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..params import bound_margin
 from .losses import get_loss
-from .problem import FitData, Problem, residual_fn, split_materials
+from .problem import FitData, Problem, material_pieces, residual_fn
 from .programs import Program
 from .separable import amplitude_sums, solve_box
 
@@ -37,18 +37,20 @@ __all__ = ["search", "grid", "interior", "canonical", "search_range", "SEARCH_SA
            "MAX_CANDIDATES", "POLISH_STARTS"]
 
 SEARCH_SAMPLES = 4000
-# With more candidates than one scoring chunk and more than twice SCREEN_SAMPLES samples, every candidate is first
+# With more than SCREEN_ABOVE candidates and more than twice SCREEN_SAMPLES samples, every candidate is first
 # scored on a seeded subsample of SCREEN_SAMPLES samples (a screen), and only the SCREEN_KEEP best of each material
 # are scored again on the search's subsample, which chooses the starts from them as before: a fit_many material of
 # Lambert + GGX on 2,000 samples scored its ~320 candidates on all of them, half of its time after compilation
 # (issue 19).
 SCREEN_SAMPLES = 512
 SCREEN_KEEP = 16
+# Candidates of one scoring call; with SCREEN_SAMPLES samples a call, the one compiled shape of a search.
+SCORE_WIDTH = SCREEN_KEEP
 MAX_CANDIDATES = 256
 POLISH_STARTS = 4
 # Candidates closer than this in the unit cube of the search ranges count as the same basin.
 _MIN_SEPARATION = 0.12
-_CHUNK = 64
+SCREEN_ABOVE = 64
 
 
 def interior(value, spec):
@@ -212,15 +214,19 @@ def _batches(candidates: list[dict], width: int) -> list[tuple]:
     return out
 
 
-def score(problem: Problem, candidates: list, data: FitData, width: int = _CHUNK):
+def score(problem: Problem, candidates: list, data: FitData, width: int = SCORE_WIDTH,
+          piece: int | None = SCREEN_SAMPLES):
     """Costs of full-parameter candidates with their amplitudes solved, for each material.
 
-    The device forms each candidate's normal equations in its amplitudes; the host solves them within the bounds
-    (`brdffit.fitting.separable.solve_box`) and, for a linear loss, reads the cost off the same sums:
-    ‖w(f₀ + Ba − f_d)‖² = c₀ − 2aᵀb + aᵀGa. A nonlinear loss or a robust one is scored by its own residuals at
-    the solved amplitudes. The materials are scored one at a time, by a single fit's program: batched over them,
-    the (materials × candidates × samples) intermediates left the cache, and fit_many's search ran 1.3 times
-    slower a material on one core, 1.6 times beside another process (docs/benchmarks.md).
+    The device forms each candidate's normal equations in its amplitudes, piece by piece of the samples (the sums
+    add); the host solves them within the bounds (`brdffit.fitting.separable.solve_box`) and, for a linear loss,
+    reads the cost off the same sums: ‖w(f₀ + Ba − f_d)‖² = c₀ − 2aᵀb + aᵀGa. A nonlinear loss or a robust one is
+    scored by its own residuals at the solved amplitudes. The materials are scored one at a time, by a single
+    fit's program: batched over them, the (materials × candidates × samples) intermediates left the cache, and
+    fit_many's search ran 1.3 times slower a material on one core, 1.6 times beside another process
+    (docs/benchmarks.md). One compiled shape, ``width`` candidates on ``piece`` samples, serves every subsample
+    of a search: the screen, the rescoring and an unscreened search (issue 15: each size compiled its own, 0.3 s
+    a candidate model in a first selection).
 
     Arguments:
         problem: the problem, with `separable` set for the scoring (amplitudes projected with the loss's
@@ -228,7 +234,8 @@ def score(problem: Problem, candidates: list, data: FitData, width: int = _CHUNK
         candidates: dicts of physical values of every parameter, the same for every material; or, for each
             material, its own list of such dicts (equally many).
         data: `FitData` with a leading material axis.
-        width: the candidates scored by one call of the compiled program (its shape).
+        width: the candidates scored by one call of the compiled program.
+        piece: the samples of one call (the last piece padded with masked samples); None: all of them at once.
 
     Returns:
         ``(costs (M, B), amplitudes)``: amplitudes name -> ``(M, B, C)``.
@@ -238,31 +245,42 @@ def score(problem: Problem, candidates: list, data: FitData, width: int = _CHUNK
     sums = _sums_fn(problem.structure) if names else None
     specs = problem.specs
     lower, upper = [specs[a].lower for a in names], [specs[a].upper for a in names]
-    materials = split_materials(data)
+    materials = material_pieces(data, int(np.shape(data.values)[1]) if piece is None else piece)
     if isinstance(candidates[0], list):
         batches = [_batches(listed, width) for listed in candidates]
     else:  # stacked and sent once for every material
         batches = [_batches(candidates, width)] * len(materials)
-    costs, amplitudes = [], {}
-    for b, (count, _, _) in enumerate(batches[0]):
-        # Each material's sums on the device, then one bounded solve of every material's on the host.
-        if names:
-            per_material = [sums(chunks[b][2], material) for chunks, material in zip(batches, materials)]
-            c0, gram, rhs = (np.concatenate([np.asarray(out[j], dtype=float) for out in per_material])
-                             for j in range(3))
-            a = solve_box(gram, rhs, lower, upper)  # (M, B, C, K)
-            for k, name in enumerate(names):
-                amplitudes.setdefault(name, []).append(a[:, :count, :, k])
-        if names and quadratic:
-            cost = np.sum(c0 - 2.0 * np.sum(a * rhs, axis=-1) + np.einsum("...k,...kl,...l->...", a, gram, a),
-                          axis=-1)
-        else:  # scored by the loss itself at the solved amplitudes
-            solved = [{name: a[m, ..., k] for k, name in enumerate(names)} for m in range(len(materials))]
-            cost = np.concatenate([np.asarray(_cost_fn(problem.structure)(
-                jax.tree_util.tree_map(jnp.asarray, dict(chunks[b][1], **amps)), material))
-                for chunks, material, amps in zip(batches, materials, solved)])
-        costs.append(cost[:, :count])
-    return np.concatenate(costs, axis=1), {k: np.concatenate(v, axis=1) for k, v in amplitudes.items()}
+    counts = [count for count, _, _ in batches[0]]
+
+    def added(outputs):  # the sums of a call's pieces, on the host
+        return [sum(np.asarray(out[j], dtype=float) for out in outputs) for j in range(len(outputs[0]))]
+
+    amplitudes = {}
+    if names:
+        # Every candidate's sums on the device, material by material, then one bounded solve of them all.
+        per_material = [[added([sums(batch[2], p) for p in pieces]) for batch in chunks]
+                        for chunks, pieces in zip(batches, materials)]
+        c0, gram, rhs = (np.concatenate([np.concatenate([out[j][:, :count] for out, count in zip(material, counts)],
+                                                        axis=1) for material in per_material]) for j in range(3))
+        a = solve_box(gram, rhs, lower, upper)  # (M, B, C, K)
+        amplitudes = {name: a[..., k] for k, name in enumerate(names)}
+    if names and quadratic:
+        costs = np.sum(c0 - 2.0 * np.sum(a * rhs, axis=-1) + np.einsum("...k,...kl,...l->...", a, gram, a), axis=-1)
+    else:  # scored by the loss itself at the solved amplitudes
+        costs, start = np.zeros((len(materials), sum(counts))), 0
+        for b, count in enumerate(counts):
+            for m, (chunks, pieces) in enumerate(zip(batches, materials)):
+                solved = {name: _padded(value[m, start:start + count], width) for name, value in amplitudes.items()}
+                params = jax.tree_util.tree_map(jnp.asarray, dict(chunks[b][1], **solved))
+                costs[m, start:start + count] = added([(_cost_fn(problem.structure)(params, p),)
+                                                       for p in pieces])[0][0, :count]
+            start += count
+    return costs, amplitudes
+
+
+def _padded(values: np.ndarray, width: int) -> np.ndarray:
+    """``values`` ``(B, ...)`` padded to ``width`` rows by repeating the last (as `_batches` pads candidates)."""
+    return np.concatenate([values, np.repeat(values[-1:], width - len(values), axis=0)])
 
 
 def _separated(costs, units, count: int, separation: float) -> list[int]:
@@ -290,8 +308,7 @@ def _screened(problem: Problem, candidates: list[dict], data: FitData, screen: F
         rest = [int(i) for i in np.argsort(row, kind="stable") if i not in keep]
         best.append(keep + rest[:SCREEN_KEEP - len(keep)])
     best = np.array(best)
-    chosen, chosen_amplitudes = score(problem, [[candidates[i] for i in row] for row in best], data,
-                                      width=SCREEN_KEEP)
+    chosen, chosen_amplitudes = score(problem, [[candidates[i] for i in row] for row in best], data)
     rows = np.arange(rough.shape[0])[:, None]
     costs = np.full(rough.shape, np.inf)
     costs[rows, best] = chosen
@@ -318,7 +335,7 @@ def search(problem: Problem, base: dict, data: FitData, seed: int, candidates: l
         separation: the least distance between two starts in the unit cube of the search ranges (negative:
             keep every candidate).
         screen: `FitData` of a smaller subsample (`SCREEN_SAMPLES`, same material axis), or None: with more
-            candidates than one scoring chunk, each material's candidates are first scored on it, and the
+            than `SCREEN_ABOVE` candidates, each material's candidates are first scored on it, and the
             `SCREEN_KEEP` best are scored on ``data``; the others are not starts.
 
     Returns:
@@ -343,7 +360,7 @@ def search(problem: Problem, base: dict, data: FitData, seed: int, candidates: l
     # Equivalent settings (Lafortune lobes in another order) are one candidate: put each in canonical order.
     full = [canonical(problem, p) for p in full]
     units = np.array([[_to_unit(p[s.name], s) for s in outer] for p in full]).reshape(len(full), len(outer))
-    if screen is not None and len(full) > _CHUNK:
+    if screen is not None and len(full) > SCREEN_ABOVE:
         costs, amplitudes = _screened(scoring, full, data, screen, units, starts, separation)
     else:
         costs, amplitudes = score(scoring, full, data)
