@@ -504,14 +504,13 @@ def _refit_contenders(rows, measurements, screened, criterion, margin, options, 
                 / max(screened[row["spec"]].n_samples, 1) <= best + margin]
         if not todo:  # the others cannot come within the margin of the best, even fitted to all the data
             return
-        bar.update(len(rows) - 1, f"fitting {', '.join(row['spec'] for row in todo)} to all {measurements.n} "
-                                  f"samples")
         with ThreadPoolExecutor(max_workers=SELECT_THREADS) as pool:
-            results = list(pool.map(lambda row: fit(measurements, row["spec"], init=screened[row["spec"]].model,
-                                                    **options), todo))
-        for row, result in zip(todo, results):
-            done[row["spec"]] = result
-            row.update(_full_fit_fields(result))
+            futures = [pool.submit(fit, measurements, row["spec"], init=screened[row["spec"]].model, **options)
+                       for row in todo]
+            for row, future in zip(todo, futures):
+                bar.update(len(rows) - 1, f"fitting {row['spec']} to all {measurements.n} samples")
+                done[row["spec"]] = future.result()
+                row.update(_full_fit_fields(done[row["spec"]]))
 
 
 def _scene_measurements(scene, values, channels):
