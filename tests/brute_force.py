@@ -525,11 +525,14 @@ def _final(problem: _Problem, shape_values):
 
 
 _CACHE: dict = {}
-# Optima computed earlier, read instead of searching again (58 s of the suite's time for the 50 pairs of
-# tests/test_misspecification.py). An entry is used only under the same key: the data's fingerprint, the spec and
-# the search's settings, and a digest of this file and of the brdffit code it evaluates (models, geometry,
-# params), so any change to those searches again. Its cost is not stored but recomputed from its parameters
-# (`cost_of`), so what a test compares with is always what that point costs now. Written only on request:
+# Optima computed earlier, read instead of searching again (58-110 s of the suite's time for the 50 pairs of
+# tests/test_misspecification.py). An entry is keyed by the data's fingerprint, the spec, the search's settings, a
+# digest of this file and the spec's parameter declarations (names, defaults, bounds, roles: what the search
+# spans); it stores the parameters and the cost they had when found. It is used only where the model code still
+# gives those parameters that cost (relative 1e-12, `_read_stored`): an edit to the models' maths changes it and
+# searches again, while an edit elsewhere in brdffit (geometry helpers, other modules) keeps the entries (a digest
+# of the model code's source invalidated all 60 at every refactor, and CI searched them again every run). The
+# cost a test compares with is always recomputed from the parameters (`cost_of`). Written only on request:
 # ``BRDFFIT_WRITE_OPTIMA=1 python -m pytest -n 0 tests/test_misspecification.py`` (a test run never writes
 # into the repository).
 STORE = Path(__file__).resolve().parent / "data" / "brute_force_optima.json"
@@ -538,13 +541,8 @@ _WRITE = os.environ.get("BRDFFIT_WRITE_OPTIMA") == "1"
 
 @functools.lru_cache(maxsize=1)
 def _code_digest() -> str:
-    """A digest of this reference's source and of the brdffit code it evaluates the models with."""
-    root = Path(brdffit.__file__).resolve().parent
-    paths = [Path(__file__).resolve(), root / "geometry.py", root / "params.py"] + sorted((root / "models").glob("*.py"))
-    digest = hashlib.sha256()
-    for path in paths:
-        digest.update(path.read_bytes())
-    return digest.hexdigest()
+    """A digest of this reference's own source (its search and its settings)."""
+    return hashlib.sha256(Path(__file__).resolve().read_bytes()).hexdigest()
 
 
 @functools.lru_cache(maxsize=1)
@@ -553,14 +551,29 @@ def _stored() -> dict:
 
 
 def _store_key(key: tuple) -> str:
-    return hashlib.sha256(repr(key + (_code_digest(),)).encode()).hexdigest()
+    spec = key[1]
+    declared = tuple((s.name, s.default, s.lower, s.upper, s.colour, s.scale, s.fixed, s.linear)
+                     for s in models.get(spec).param_specs)
+    return hashlib.sha256(repr(key + (declared, _code_digest())).encode()).hexdigest()
 
 
-def _remember(key: tuple, spec: str, params: dict) -> None:
+def _read_stored(key: tuple, measurements):
+    """The stored ``(cost, params)`` under ``key``, or None where there is none or the model code no longer gives
+    its parameters the cost they had when found (comment above `STORE`)."""
+    entry = _stored().get(_store_key(key))
+    if entry is None or "cost" not in entry:
+        return None
+    params = {k: np.asarray(v) if isinstance(v, list) else float(v) for k, v in entry["params"].items()}
+    channels = np.shape(measurements.values)[1]
+    cost = cost_of(measurements, models.get(key[1], channels=channels, **params))
+    return (cost, params) if math.isclose(cost, entry["cost"], rel_tol=1e-12, abs_tol=1e-300) else None
+
+
+def _remember(key: tuple, spec: str, cost: float, params: dict) -> None:
     """Add an optimum to the store (`_WRITE` only), written atomically."""
     stored = dict(_stored())
-    stored[_store_key(key)] = {"spec": spec, "params": {k: np.asarray(v, dtype=float).tolist()
-                                                        for k, v in params.items()}}
+    stored[_store_key(key)] = {"spec": spec, "cost": float(cost),
+                               "params": {k: np.asarray(v, dtype=float).tolist() for k, v in params.items()}}
     STORE.parent.mkdir(parents=True, exist_ok=True)
     temporary = STORE.with_suffix(".tmp")
     temporary.write_text(json.dumps(stored, indent=1, sort_keys=True) + "\n")
@@ -599,11 +612,8 @@ def brute_force_optimum(measurements, spec: str, *, grid: int | None = None, pol
         Results are cached by (data, spec, grid, polish, seed), in memory and in `STORE`.
     """
     key = (_fingerprint(measurements), spec, grid, polish, seed)
-    if key not in _CACHE and _store_key(key) in _stored():
-        entry = _stored()[_store_key(key)]
-        params = {k: np.asarray(v) if isinstance(v, list) else float(v) for k, v in entry["params"].items()}
-        channels = np.shape(measurements.values)[1]
-        _CACHE[key] = (cost_of(measurements, models.get(spec, channels=channels, **params)), params)
+    if key not in _CACHE and (stored := _read_stored(key, measurements)) is not None:
+        _CACHE[key] = stored
     if key in _CACHE:
         cost, params = _CACHE[key]
         return cost, {k: np.copy(v) if isinstance(v, np.ndarray) else v for k, v in params.items()}
@@ -646,5 +656,5 @@ def brute_force_optimum(measurements, spec: str, *, grid: int | None = None, pol
     result = (cost_of(measurements, model), params)
     _CACHE[key] = result
     if _WRITE:
-        _remember(key, spec, params)
+        _remember(key, spec, result[0], params)
     return result[0], {k: np.copy(v) if isinstance(v, np.ndarray) else v for k, v in params.items()}
