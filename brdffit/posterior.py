@@ -456,8 +456,8 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
     log_prob = _log_prob_fn(problem, estimate, likelihood, float(nu), tuple(sorted(priors.items())))
     lowers, uppers = context["lowers"], context["uppers"]
 
-    def log_prob_numpy(thetas):
-        return np.asarray(log_prob(np.asarray(thetas, dtype=float), context))  # NumPy in: jit transfers it (jnp.asarray was 1/4 of a step)
+    def log_prob_numpy(thetas):  # NumPy in, transferred by jit: jnp.asarray's dispatch was 1/4 of an emcee step
+        return np.asarray(log_prob(np.asarray(thetas, dtype=float), context))
 
     run_name = (name or model.spec).replace("/", "_")
     backend = None
