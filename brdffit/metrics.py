@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .arrays import to_device
 from .geometry import LocalPair
 from .models.model import Model, evaluate_pair
 
@@ -132,7 +133,7 @@ def fit_sums(model: Model, measurements, pair: LocalPair | None = None) -> np.nd
     """The `metric_sums` ``(15, C)`` of ``model`` on the valid samples of ``measurements`` (arguments as
     `fit_metrics`): the metrics and the noise models' sums in one evaluation of the model."""
     if pair is None:
-        pair = LocalPair.from_dirs(jnp.asarray(measurements.wi()), jnp.asarray(measurements.wo()))
+        pair = LocalPair.from_dirs(to_device(measurements.wi()), to_device(measurements.wo()))
     extra = pair.wi.shape[0] - measurements.n
     weights = np.ones(measurements.n) if measurements.weights is None else measurements.weights
     values, cos_i = np.asarray(measurements.values, dtype=float), np.cos(np.asarray(measurements.theta_i, float))
@@ -140,5 +141,4 @@ def fit_sums(model: Model, measurements, pair: LocalPair | None = None) -> np.nd
         values = np.concatenate([values, np.full((extra, values.shape[1]), np.nan)])
         cos_i = np.concatenate([cos_i, np.ones(extra)])
         weights = np.concatenate([np.asarray(weights, dtype=float), np.ones(extra)])
-    return np.asarray(_metrics(model, pair, jnp.asarray(values), jnp.asarray(cos_i),
-                               jnp.asarray(weights, dtype=float)))
+    return np.asarray(_metrics(model, pair, to_device(values), to_device(cos_i), to_device(weights, dtype=float)))

@@ -30,6 +30,7 @@ from ._lazy import module
 # Loaded on first use: the registry (`brdffit models`) needs neither.
 np = module("numpy")
 jnp = module("jax.numpy")
+arrays = module("brdffit.arrays")
 
 __all__ = ["ParamSpec", "ParamTable", "to_unconstrained", "from_unconstrained", "transform_slope", "at_bound",
            "bound_margin"]
@@ -93,9 +94,7 @@ class ParamSpec:
 
     def initial(self, channels: int):
         """The default value with the parameter's shape: ``(channels,)`` for colour, scalar for shape."""
-        if self.colour:
-            return jnp.full((channels,), self.default, dtype=float)
-        return jnp.asarray(self.default, dtype=float)
+        return arrays.to_device(np.full((channels,) if self.colour else (), self.default, dtype=float))
 
     def to_unconstrained(self, value, xp=jnp):
         """Map a value within the bounds to the unconstrained fitting variable (inverse of `from_unconstrained`);

@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..arrays import to_device
 from ..metrics import fit_sums, metrics_from_sums
 from ..models.model import Model
 from ..models.registry import get as get_model
@@ -178,7 +179,7 @@ def _starts(problem: Problem, model: Model, fixed_values: dict, init, multistart
 def _robust_scale(problem: Problem, start: dict, data: FitData) -> float:
     """1.4826 times the median absolute residual at the start (the robust loss's default scale)."""
     plain = dataclasses.replace(problem, robust=None)
-    r = np.asarray(residuals_at(plain, {k: jnp.asarray(v) for k, v in start.items()}, data))
+    r = np.asarray(residuals_at(plain, {k: to_device(v) for k, v in start.items()}, data))
     mask = np.asarray(data.mask)
     return float(max(1.4826 * np.median(np.abs(r[mask])), 1e-12)) if mask.any() else 1.0
 
@@ -219,7 +220,7 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
             out.append([{"params": params, "cost": float(costs[m, 0]), "steps": 0, "max_steps": False,
                          "nonfinite": not np.isfinite(costs[m, 0])}])
         return out, 0.0, time.perf_counter() - t0
-    solve_data = data._replace(fixed={k: jnp.asarray(np.stack([np.asarray(material[0][k], dtype=float)
+    solve_data = data._replace(fixed={k: to_device(np.stack([np.asarray(material[0][k], dtype=float)
                                                                for material in starts]))
                                       for k in problem.layout.names if k not in problem.free})
     if isinstance(problem.solver, marquardt.Marquardt):
@@ -234,7 +235,7 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
             offset=problem.solver.offset, held=held,
             metrics=metrics))
         return [material[:count] for material in out], compile_time, run_time
-    y0 = {name: jnp.asarray(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
+    y0 = {name: to_device(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
                                                 for s in material]) for material in starts]))
           for name in problem.outer}
     executable, compile_time = compiled_solve(problem, y0, solve_data)
@@ -243,7 +244,7 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
         for name in problem.outer:
             value = np.stack([np.broadcast_to(np.asarray(h.get(name, np.nan), dtype=float), np.shape(y0[name])[1:])
                               for h in held])
-            pins[name] = (jnp.asarray(np.isfinite(value)), jnp.asarray(np.nan_to_num(value)))
+            pins[name] = (to_device(np.isfinite(value)), to_device(np.nan_to_num(value)))
     t0 = time.perf_counter()
     out = jax.tree_util.tree_map(np.asarray, jax.block_until_ready(executable(y0, solve_data, pins)))
     run_time = time.perf_counter() - t0
@@ -396,7 +397,7 @@ def _revive(problem: Problem, solve_problem: Problem, kept: dict, search_data: F
     candidates = [setting for names in groups for setting in grid([specs[n] for n in names], seed)]
     single = take_materials(search_data, [material])
     found = search(problem, kept["params"], single, seed, candidates=candidates, starts=starts)
-    polish_data = jax.tree_util.tree_map(lambda a: a[None], data)
+    polish_data = stack_data([data])
     outcomes, compile_time, run_time = _polish(solve_problem, found, polish_data, metrics=metrics,
                                                max_steps=min(solve_problem.max_steps, REVIVE_STEPS))
     revived = dict(_best(outcomes[0]))
@@ -433,8 +434,8 @@ def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData)
             partners = layout.partners(j, slot.local)
             size = layout[slot.name].size + layout.size([n for n in partners if n in problem.outer])
             trial = dict(params, **{slot.name: np.zeros(layout[slot.name].shape)})
-            r = residuals_at(problem, {k_: jnp.asarray(v) for k_, v in trial.items()}, data)
-            increase = float(jnp.sum(r * r)) - cost
+            r = np.asarray(residuals_at(problem, {k_: to_device(v) for k_, v in trial.items()}, data))
+            increase = float(np.sum(r * r)) - cost
             if increase <= min(2.0 * size * variance, PRUNE_COST_FRACTION * cost):
                 increases[slot.name] = float(increase)
     # One lobe at a time, the one that matters least: two copies of a lobe each look dispensable while the other
@@ -458,8 +459,8 @@ def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, dat
     reduced = dataclasses.replace(problem, free=free)
     start = dict(kept["params"], **held)
     start = {k: (interior(v, problem.specs[k]) if k in reduced.outer else v) for k, v in start.items()}
-    single = jax.tree_util.tree_map(lambda a: a[None], data)
-    single = single._replace(fixed={k: jnp.asarray(v)[None] for k, v in start.items() if k not in free})
+    single = stack_data([data])
+    single = single._replace(fixed={k: to_device(np.asarray(v)[None]) for k, v in start.items() if k not in free})
     outcomes, compile_time, run_time = _polish(dataclasses.replace(solve_problem, free=free), [[start] * starts],
                                                single, metrics=metrics)
     pruned = dict(_best(outcomes[0]))
@@ -567,7 +568,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         scales = [robust_scale if robust_scale is not None else 1.0] * len(items)
     init_time = time.perf_counter() - t0
 
-    full = [d._replace(robust_scale=jnp.asarray(s, dtype=float)) for d, s in zip(full, scales)]
+    full = [d._replace(robust_scale=to_device(s, dtype=float)) for d, s in zip(full, scales)]
     if two_stage:
         solve_items = [subsample(m, COARSE_SAMPLES) for m in range(len(items))]
         loose = coarse_solver(solver, max(COARSE_RTOL, rtol), max(COARSE_ATOL, atol)) \
@@ -650,7 +651,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         params = canonical(problem, best["params"])
         if two_stage:
             bar.update(3, f"refining on all {measurements.n} samples")
-            data = full[m]._replace(fixed={k: jnp.asarray(v) for k, v in params.items() if k not in problem.free})
+            data = full[m]._replace(fixed={k: to_device(v) for k, v in params.items() if k not in problem.free})
             # The full-data refinement: the default solver's steps from next to the optimum (small initial λ),
             # whatever solver polished.
             refined, c_time, r_time = _timed(lambda: marquardt.solve(
@@ -663,8 +664,8 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
                         exact=refined["exact"])
             params = canonical(problem, refined["params"])
         if not problem.free:
-            r = residuals_at(problem, {k: jnp.asarray(v) for k, v in params.items()}, full[m])
-            best = dict(best, cost=float(jnp.sum(r * r)))
+            r = np.asarray(residuals_at(problem, {k: to_device(v) for k, v in params.items()}, full[m]))
+            best = dict(best, cost=float(np.sum(r * r)))
         elif _answered(best, params):
             normal = best["normal"]
         else:

@@ -42,8 +42,10 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
+from ..arrays import to_device
 from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of
 from .problem import FitData, Problem, take_materials
+from .programs import Program
 from .separable import solve_box
 
 __all__ = ["Marquardt", "solve", "answer", "MAX_DAMPING", "RELATIVE_OFFSET", "EXACT_MOVE", "BEST_TIE", "GAIN_RATIO"]
@@ -153,6 +155,20 @@ def _scatter(sums: NormalEquations, chosen, shape: tuple, base: NormalEquations 
     return NormalEquations(*fields)
 
 
+def _chosen(take, a, b):
+    return jnp.where(take[..., None, None], a, b)
+
+
+def _counts(masks: list):
+    return sum(jnp.sum(mask, axis=(1, 2)) for mask in masks)
+
+
+# Small compiled programs for what ran as eager operations, each compiled on its own in a first fit
+# (`brdffit.arrays`): a pick between two states' per-sample values, and the valid residuals of a batch's pieces.
+_choose = Program(_chosen, "choose values")
+_valid_counts = Program(_counts, "valid counts")
+
+
 class _State:
     """The batch's current points: physical values ``x (M, S, P)`` with their amplitudes projected, the pass's
     sums moved with them (see the module doc), and, when the solve keeps them, the pass's arrays of each piece
@@ -174,8 +190,8 @@ class _State:
         elif not take.any():
             values = other.values
         else:  # only where the points of a batch disagree does it cost a device operation
-            host, device = np.reshape(take, take.shape + (1, 1, 1)), jnp.asarray(take)[..., None, None]
-            values = [(np.where(host, a, c), jnp.where(device, f, g))
+            host, device = np.reshape(take, take.shape + (1, 1, 1)), to_device(take)
+            values = [(np.where(host, a, c), _choose(device, f, g))
                       for (a, f), (c, g) in zip(self.values, other.values)]
         return _State(pick(self.x, other.x), NormalEquations(*(pick(a, b) for a, b in zip(self.sums, other.sums))),
                       pick(self.delta, other.delta), pick(self.evaluated, other.evaluated), values)
@@ -202,7 +218,7 @@ class _Batch:
         self.is_amplitude = np.zeros(self.size, bool)
         self.is_amplitude[self.amplitudes.ravel()] = True
         # (M,) valid residuals, counted on the device (a MERL-size mask copied to the host chunk by chunk: 0.1 s)
-        self.n_values = np.asarray(sum(jnp.sum(piece.mask, axis=(1, 2)) for piece in pieces))
+        self.n_values = np.asarray(_valid_counts([piece.mask for piece in pieces]))
         self.compact = compact
         self._gathered: dict = {}
 

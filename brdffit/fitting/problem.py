@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..arrays import to_device
 from ..geometry import LocalPair, spherical_to_vector
 from ..models.layout import Layout, layout
 from ..models.model import Model, evaluate_pair
@@ -165,7 +166,7 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad
         host(measurements.values, np.nan), *(host(getattr(measurements, k))
                                              for k in ("theta_i", "phi_i", "theta_o", "phi_o")),
         host(measurements.weights, 1.0), host(measurements.sigma, 1.0))
-    as_array = lambda a: jnp.asarray(a, dtype=float)  # noqa: E731
+    as_array = lambda a: to_device(a, dtype=float)  # noqa: E731
     return FitData(
         pair=pair, values=values, mask=mask, cos_i=cos_i, sqrt_weight=sqrt_weight, sigma=sigma, eps=as_array(eps),
         robust_scale=as_array(robust_scale), fixed={k: as_array(v) for k, v in fixed.items()},
@@ -196,7 +197,7 @@ def _per_sample(data: FitData) -> dict:
 
 def _shared(data: FitData, index) -> dict:
     """The other fields (ε, the robust scale, the fixed values: a few numbers a material) indexed on the host."""
-    return {k: jax.tree_util.tree_map(lambda a: jnp.asarray(np.asarray(a)[index]), getattr(data, k))
+    return {k: jax.tree_util.tree_map(lambda a: to_device(np.asarray(a)[index]), getattr(data, k))
             for k in data._fields if k not in _PER_SAMPLE}
 
 
@@ -225,13 +226,23 @@ def take_samples(data: FitData, rows) -> FitData:
     rows = np.asarray(rows, dtype=np.int32)
     size = bucket(rows.size)
     valid = np.arange(size) < rows.size
-    return data._replace(**_take_samples(_per_sample(data), jnp.asarray(
-        np.concatenate([rows, np.zeros(size - rows.size, np.int32)])), jnp.asarray(valid)))
+    return data._replace(**_take_samples(_per_sample(data), to_device(
+        np.concatenate([rows, np.zeros(size - rows.size, np.int32)])), to_device(valid)))
+
+
+def _stacked(items: list):
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
+
+
+# One compiled program per count and shapes: stacked eagerly, each field compiled a program of its own (fourteen in
+# a first fit, 0.3 s; see `brdffit.arrays`).
+_stack = Program(_stacked, "stack data")
 
 
 def stack_data(items: list[FitData]) -> FitData:
-    """Stack equally shaped `FitData` along a new leading axis (for the vmapped `fit_many`)."""
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
+    """Stack equally shaped `FitData` along a new leading axis (for the vmapped `fit_many`; one item: an axis of
+    1)."""
+    return _stack(list(items))
 
 
 def _take(fields: dict, materials):
@@ -248,7 +259,7 @@ def take_materials(data: FitData, materials) -> FitData:
     """The materials ``materials`` (integer indices, repeats allowed) of stacked ``data`` (`stack_data`), stacked
     in that order."""
     materials = np.asarray(materials, dtype=np.int32)
-    return FitData(**_take_materials(_per_sample(data), jnp.asarray(materials)), **_shared(data, materials))
+    return FitData(**_take_materials(_per_sample(data), to_device(materials)), **_shared(data, materials))
 
 
 def _piece(fields: dict, material, start, size: int) -> dict:
@@ -276,8 +287,8 @@ def material_pieces(data: FitData, size: int) -> list[list[FitData]]:
     size, fields = min(size, n), _per_sample(data)
     out = []
     for m in range(materials):
-        shared, material = _shared(data, [m]), jnp.asarray(m, dtype=jnp.int32)
-        out.append([FitData(**_take_piece(fields, material, jnp.asarray(start, dtype=jnp.int32), size), **shared)
+        shared, material = _shared(data, [m]), to_device(np.int32(m))
+        out.append([FitData(**_take_piece(fields, material, to_device(np.int32(start)), size), **shared)
                     for start in range(0, n, size)])
     return out
 

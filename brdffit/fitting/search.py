@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..arrays import to_device
 from ..params import bound_margin
 from .losses import get_loss
 from .problem import FitData, Problem, material_pieces, residual_fn
@@ -210,7 +211,7 @@ def _batches(candidates: list[dict], width: int) -> list[tuple]:
         chunk = candidates[start:start + width]
         padded = chunk + [chunk[-1]] * (width - len(chunk))
         batch = {k: np.stack([np.asarray(d[k], dtype=float) for d in padded]) for k in padded[0]}
-        out.append((len(chunk), batch, jax.tree_util.tree_map(jnp.asarray, batch)))
+        out.append((len(chunk), batch, jax.tree_util.tree_map(to_device, batch)))
     return out
 
 
@@ -271,7 +272,7 @@ def score(problem: Problem, candidates: list, data: FitData, width: int = SCORE_
         for b, count in enumerate(counts):
             for m, (chunks, pieces) in enumerate(zip(batches, materials)):
                 solved = {name: _padded(value[m, start:start + count], width) for name, value in amplitudes.items()}
-                params = jax.tree_util.tree_map(jnp.asarray, dict(chunks[b][1], **solved))
+                params = jax.tree_util.tree_map(to_device, dict(chunks[b][1], **solved))
                 costs[m, start:start + count] = added([(_cost_fn(problem.structure)(params, p),)
                                                        for p in pieces])[0][0, :count]
             start += count

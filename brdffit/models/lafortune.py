@@ -12,6 +12,7 @@ from .lobe import Lobe
 from .specs import KS, exponent
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
+np = module("numpy")
 
 __all__ = ["Lafortune"]
 
@@ -99,7 +100,7 @@ class Lafortune(Lobe):
 
     def canonical(self, params):
         """Lobes sorted by exponent, n_1 <= n_2 <= ... (the sum does not depend on their order)."""
-        order = sorted(range(1, self.lobes + 1), key=lambda j: float(jnp.asarray(params[f"n_{j}"])))
+        order = sorted(range(1, self.lobes + 1), key=lambda j: float(np.asarray(params[f"n_{j}"])))
         out = dict(params)
         for new, old in enumerate(order, start=1):
             for new_name, old_name in zip(self._lobe_names(new), self._lobe_names(old)):

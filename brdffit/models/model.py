@@ -9,7 +9,9 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from ..arrays import to_device
 from ..geometry import LocalPair, spherical_to_vector
 from ..params import ParamSpec, ParamTable
 from .layout import Layout, layout
@@ -81,20 +83,23 @@ class Model(eqx.Module):
 
 
 def coerce_value(spec: ParamSpec, value, channels: int):
-    """Turn a user-given value into the stored shape of ``spec``, or raise a ValueError that names it."""
-    value = jnp.asarray(value, dtype=float)
+    """Turn a user-given value into the stored shape of ``spec``, or raise a ValueError that names it. A host value
+    is shaped in NumPy and moved to the device once (`brdffit.arrays`: no compiled program); a traced one stays
+    traced."""
+    traced = isinstance(value, jax.core.Tracer)
+    xp = jnp if traced else np
+    value = xp.asarray(value, dtype=float)
     if spec.colour:
         if value.ndim == 0:
-            return jnp.full((channels,), value)
-        if value.shape != (channels,):
+            value = xp.full((channels,), value)
+        elif value.shape != (channels,):
             raise ValueError(
                 f"colour parameter {spec.name!r} needs a scalar or shape ({channels},), got shape {value.shape}"
             )
-        return value
-    if value.ndim != 0:
+    elif value.ndim != 0:
         raise ValueError(f"shape parameter {spec.name!r} is shared by all channels and needs a scalar, "
                          f"got shape {value.shape}")
-    return value
+    return value if traced else to_device(value)
 
 
 # `evaluate_dirs` and `evaluate` are jitted: one compilation per model structure and input shape, instead of one
