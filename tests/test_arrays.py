@@ -1,0 +1,75 @@
+"""Host values onto the device (`brdffit.arrays.to_device`), and a fit that runs no eager JAX operation: every
+program a fit compiles is one of brdffit's own (issue 15: each eager operation compiled a program of its own)."""
+
+import json
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import brdffit  # noqa: F401  (float64)
+from brdffit.arrays import to_device
+
+
+@pytest.mark.parametrize("value, dtype", [(np.arange(5.0), None), (np.arange(4), None), (np.arange(4), float),
+                                          (0.5, None), (3, float), ([[1.0, 2.0]], None), (np.array([True]), None),
+                                          (np.int32(7), None)])
+def test_to_device_gives_what_jnp_asarray_gives(value, dtype):
+    got, want = to_device(value, dtype), jnp.asarray(value, dtype=dtype)
+    assert isinstance(got, jax.Array) and got.dtype == want.dtype and got.shape == want.shape
+    np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+
+
+def test_to_device_keeps_a_device_array_and_converts_one_of_another_dtype():
+    a = jnp.arange(3.0)
+    assert to_device(a) is a and to_device(a, float) is a
+    converted = to_device(jnp.arange(3), float)
+    assert converted.dtype == jnp.float64
+    np.testing.assert_array_equal(np.asarray(converted), [0.0, 1.0, 2.0])
+
+
+def test_to_device_inside_a_traced_function_stays_traced():
+    gradient = jax.grad(lambda x: jnp.sum(to_device(x, float) ** 2))(jnp.arange(3.0))
+    np.testing.assert_array_equal(np.asarray(gradient), [0.0, 2.0, 4.0])
+
+
+def test_to_device_in_float32_mode_gives_float32():
+    with jax.enable_x64(False):
+        assert to_device(np.arange(3.0)).dtype == jnp.float32 == jnp.asarray(np.arange(3.0)).dtype
+
+
+def test_a_fit_in_a_new_process_compiles_only_brdffit_programs(tmp_path):
+    # A new process (JAX's in-memory caches empty), no persistent cache, the data read from a file (nothing of JAX
+    # ran before the fit): every compilation is logged. An eager jax.numpy or lax operation compiles under its own
+    # name (jnp.asarray of a NumPy array as "stage").
+    path = tmp_path / "ggx.csv"
+    brdffit.io.save(brdffit.synth.generate("lambert+ggx", n=1500, noise="relative:0.01", seed=3), path)
+    script = f"""
+import json, logging
+import jax, jax.numpy as jnp
+names = []
+class Names(logging.Handler):
+    def emit(self, record):
+        message = record.getMessage()
+        if message.startswith("Finished XLA compilation of jit("):
+            names.append(message.split("jit(", 1)[1].split(")", 1)[0])
+handler = Names(level=logging.DEBUG)
+for logger in ("jax._src.dispatch", "jax._src.interpreters.pxla", "jax._src.compiler"):
+    logging.getLogger(logger).addHandler(handler)
+    logging.getLogger(logger).setLevel(logging.DEBUG)
+jax.config.update("jax_log_compiles", True)
+import brdffit
+result = brdffit.fit(brdffit.io.load({str(path)!r}), "lambert+ggx")
+eager = set(dir(jnp)) | set(dir(jax.lax)) | {{"stage", "_where", "_reduce_sum", "_reduce_max", "_reduce_min"}}
+print(json.dumps({{"status": result.status, "names": sorted(set(names)), "eager": sorted(set(names) & eager)}}))
+"""
+    env = {"PATH": "/usr/bin:/bin", "JAX_PLATFORMS": "cpu", "HOME": str(tmp_path)}
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, done.stderr[-2000:]
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    assert report["status"] == "converged"
+    assert len(report["names"]) >= 5  # the pipeline's own programs were seen compiling
+    assert report["eager"] == []
