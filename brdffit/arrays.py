@@ -1,4 +1,4 @@
-"""Host values onto the device without compiling anything (issue 15).
+"""Host values onto the device without compiling anything, and host columns through compiled functions (issue 15).
 
 ``jnp.asarray`` of a NumPy array or a Python number runs a small compiled program (``jit(stage)``, or
 ``jit(convert_element_type)`` when it changes the dtype), and ``jnp.stack``, ``jnp.full`` and the like one each:
@@ -6,15 +6,25 @@ one compilation per shape and dtype, 10–40 ms each in a new process (lowering 
 a cache lookup each in a warm one. A first fit made about thirty of them: 0.5–0.9 s of a 5–7 s single fit, 0.45 s
 of a warm one (docs/benchmarks.md). ``jax.device_put`` of a NumPy array compiles nothing, so the fitting pipeline
 builds small host-side arrays in NumPy and moves them with `to_device`; work on device arrays stays in compiled
-programs (`brdffit.fitting.programs.Program`).
+programs (`brdffit.fitting.programs.Program`). Host-side maths on columns of samples in JAX functions (the readers'
+and the report's angle conversions, the synthesised data) goes through `padded_columns`: a jitted function called on
+lengths padded to a power of two, so that files of any length share a few compilations.
 """
 
 from __future__ import annotations
 
-import jax
+import functools
+
 import numpy as np
 
-__all__ = ["to_device"]
+from ._lazy import module
+
+jax = module("jax")  # loaded on first use: the readers import this module, and `brdffit info` loads no JAX
+
+__all__ = ["to_device", "jitted", "padded_columns", "COLUMN_CHUNK"]
+
+# The most samples of one call of `padded_columns` (bounds the memory of a MERL-size table's intermediates).
+COLUMN_CHUNK = 1 << 18
 
 
 def to_device(value, dtype=None):
@@ -38,3 +48,34 @@ def to_device(value, dtype=None):
             return jnp.asarray(value, dtype=dtype)
     array = np.asarray(value, dtype=dtype)
     return jax.device_put(array.astype(jax.dtypes.canonicalize_dtype(array.dtype), copy=False))
+
+
+@functools.lru_cache(maxsize=None)
+def jitted(fn):
+    """``jax.jit(fn)``, made once per function so that its compilations are reused across calls."""
+    return jax.jit(fn)
+
+
+def padded_columns(fn, *columns, chunk: int = COLUMN_CHUNK) -> tuple:
+    """``fn(*columns)`` on 1-d columns of one length, called on lengths padded with zeros to a power of two (at
+    least 256) and in pieces of at most ``chunk`` samples, so that a compiled ``fn`` serves every length with a few
+    compilations (called per length, or eagerly, it compiled anew for each file: seconds each).
+
+    Arguments:
+        fn: a compiled (jitted) function of the columns, returning an array or a tuple of arrays of their length.
+        columns: 1-d arrays of one length (converted to float64).
+        chunk: the most samples of one call (a power of two).
+
+    Returns:
+        The outputs as float64 NumPy arrays cut back to the columns' length, a tuple.
+    """
+    columns = [np.asarray(c, dtype=float) for c in columns]
+    n = columns[0].shape[0]
+    pieces = []
+    for start in range(0, max(n, 1), chunk):
+        part = [c[start:start + chunk] for c in columns]
+        size = part[0].shape[0]
+        padded = max(256, 1 << max(size - 1, 0).bit_length())
+        out = fn(*(np.pad(c, (0, padded - size)) for c in part))
+        pieces.append([np.asarray(o, dtype=np.float64)[:size] for o in (out if isinstance(out, tuple) else (out,))])
+    return tuple(np.concatenate(column, axis=0) for column in zip(*pieces))

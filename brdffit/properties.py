@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .arrays import to_device
 from .geometry import spherical_to_vector
 from .models import Model, evaluate_dirs
 
@@ -131,12 +132,14 @@ def _gauss_legendre(n: int, lower: float, upper: float):
     return lower + half * (x + 1.0), half * w
 
 
+def _traced(model: Model) -> bool:
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(model))
+
+
 def _anisotropic(model: Model) -> bool:
     # Measured rather than declared: an anisotropic lobe at equal widths is isotropic. Traced parameters cannot be
     # measured; the finer azimuth rule is then the safe choice.
-    if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(model)):
-        return True
-    return isotropy_error(model, n=3000) > ISOTROPY_TOL
+    return _traced(model) or isotropy_error(model, n=3000) > ISOTROPY_TOL
 
 
 def _resolution_pair(resolution) -> tuple[int, int]:
@@ -194,7 +197,7 @@ def directional_albedo(model: Model, theta_i, phi_i=0.0, *, resolution: int | tu
     if resolution is None:
         resolution = (DEFAULT_RESOLUTION, ANISOTROPIC_AZIMUTH_RESOLUTION if _anisotropic(model) else DEFAULT_RESOLUTION)
     n_theta, n_phi = _resolution_pair(resolution)
-    t, wt = (jnp.asarray(x) for x in _gauss_legendre(n_theta, 0.0, 1.0))
+    t, wt = (to_device(x) for x in _gauss_legendre(n_theta, 0.0, 1.0))
     u_half, wu_half = _gauss_legendre(n_phi, -1.0, 1.0)
     # The azimuth nodes of both half circles, split into slabs of `slab` nodes (zero-weight padding), and the θi
     # into chunks of `chunk`, so that one call evaluates at most about _CHUNK_VALUES values.
@@ -213,15 +216,16 @@ def directional_albedo(model: Model, theta_i, phi_i=0.0, *, resolution: int | tu
     theta_pad = np.zeros(padded)
     phi_pad = np.zeros(padded)
     theta_pad[:count], phi_pad[:count] = theta_flat, phi_flat
-    pieces = []
+    # The chunks' sums on the host unless the model is traced (eager device additions compiled a program each).
+    xp, pieces = (jnp if _traced(model) else np), []
     for start in range(0, padded, chunk):
-        theta_chunk, phi_chunk = jnp.asarray(theta_pad[start:start + chunk]), jnp.asarray(phi_pad[start:start + chunk])
+        theta_chunk, phi_chunk = to_device(theta_pad[start:start + chunk]), to_device(phi_pad[start:start + chunk])
         total = 0.0
         for k in range(0, n_slabs * slab, slab):
-            nodes = (jnp.asarray(x[k:k + slab]) for x in (u, wu, centre))
-            total = total + _albedo_chunk(model, theta_chunk, phi_chunk, t, wt, *nodes)
+            nodes = (to_device(x[k:k + slab]) for x in (u, wu, centre))
+            total = total + xp.asarray(_albedo_chunk(model, theta_chunk, phi_chunk, t, wt, *nodes))
         pieces.append(total)
-    albedo = jnp.concatenate(pieces, axis=0)[:count]
+    albedo = xp.concatenate(pieces, axis=0)[:count]
     return albedo.reshape(shape + (model.channels,))
 
 
@@ -406,8 +410,8 @@ def isotropy_error(model: Model, n: int = DEFAULT_PAIRS, seed: int = 0) -> float
     """
     wi, wo = direction_pairs(n, seed)
     angle = np.random.default_rng([seed, 1]).uniform(0.0, 2.0 * np.pi, len(wi))
-    f = evaluate_dirs(model, jnp.asarray(wi), jnp.asarray(wo))
-    f_rot = evaluate_dirs(model, jnp.asarray(_rotate_z(wi, angle)), jnp.asarray(_rotate_z(wo, angle)))
+    f = evaluate_dirs(model, to_device(wi), to_device(wo))
+    f_rot = evaluate_dirs(model, to_device(_rotate_z(wi, angle)), to_device(_rotate_z(wo, angle)))
     return _relative_difference(f, f_rot)
 
 

@@ -27,10 +27,10 @@ import dataclasses
 import math
 from collections.abc import Sequence
 
-import jax
 import numpy as np
 
 from . import geometry
+from .arrays import jitted, padded_columns
 from .measurements import Measurements
 from .models import Model, evaluate, get, model_from_dict, model_to_dict
 
@@ -61,9 +61,6 @@ _TWO_PI = 2.0 * math.pi
 
 # MERL table resolution (Matusik et al. 2003): θh, θd, φd bins.
 _MERL_BINS = (90, 90, 180)
-
-# Evaluate in chunks of at most this many samples (bounds memory on the all-cells MERL pattern).
-_CHUNK = 1 << 18
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -368,31 +365,9 @@ def _half_diff(rng, n, max_theta, options):
     return tuple(angles), None, {}
 
 
-def _padded_call(fn, arrays):
-    """``fn(*arrays)`` on 1-d float64 arrays of one length, run jitted on lengths padded to a power of two (at
-    least 256) and in chunks of `_CHUNK`, so that calls with new sample counts reuse compiled code. Returns the
-    outputs as NumPy arrays cut back to the true length."""
-    arrays = [np.asarray(a, dtype=float) for a in arrays]
-    n = arrays[0].shape[0]
-    pieces = []
-    for start in range(0, n, _CHUNK):
-        part = [a[start:start + _CHUNK] for a in arrays]
-        size = part[0].shape[0]
-        padded = max(256, 1 << (size - 1).bit_length())
-        out = fn(*(np.pad(a, (0, padded - size)) for a in part))
-        out = out if isinstance(out, tuple) else (out,)
-        pieces.append([np.asarray(o, dtype=float)[:size] for o in out])
-    if not pieces:
-        return None
-    return tuple(np.concatenate(column, axis=0) for column in zip(*pieces))
-
-
-_from_half_diff_jit = jax.jit(geometry.from_half_diff)
-
-
 def _from_half_diff(theta_h, phi_h, theta_d, phi_d):
     arrays = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (theta_h, phi_h, theta_d, phi_d)))
-    return _padded_call(_from_half_diff_jit, arrays)
+    return padded_columns(jitted(geometry.from_half_diff), *arrays)
 
 
 def _within(theta_i, theta_o, max_theta):
@@ -543,7 +518,7 @@ PATTERNS = {
 def _evaluate(model: Model, angles) -> np.ndarray:
     if angles[0].shape[0] == 0:
         return np.zeros((0, model.channels))
-    return _padded_call(lambda *a: evaluate(model, *a), angles)[0]
+    return padded_columns(lambda *a: evaluate(model, *a), *angles)[0]
 
 
 def _default_channels(count: int) -> tuple[str, ...]:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import brdffit  # noqa: F401  (float64)
-from brdffit.arrays import to_device
+from brdffit.arrays import jitted, padded_columns, to_device
 
 
 @pytest.mark.parametrize("value, dtype", [(np.arange(5.0), None), (np.arange(4), None), (np.arange(4), float),
@@ -73,3 +73,29 @@ print(json.dumps({{"status": result.status, "names": sorted(set(names)), "eager"
     assert report["status"] == "converged"
     assert len(report["names"]) >= 5  # the pipeline's own programs were seen compiling
     assert report["eager"] == []
+
+
+TRACED = []
+
+
+def _angles(theta, phi):
+    TRACED.append(theta.shape)
+    return jnp.sin(theta) * jnp.cos(phi), theta + phi
+
+
+@pytest.mark.parametrize("n, chunk", [(1, 1 << 18), (300, 1 << 18), (700, 256), (0, 1 << 18)])
+def test_padded_columns_gives_the_function_on_the_columns(n, chunk, rng):
+    theta, phi = rng.uniform(0.0, 1.5, n), rng.uniform(0.0, 6.0, n)
+    a, b = padded_columns(jitted(_angles), theta, phi, chunk=chunk)
+    assert a.dtype == np.float64 and a.shape == b.shape == (n,)
+    np.testing.assert_allclose(a, np.sin(theta) * np.cos(phi), rtol=1e-15)
+    np.testing.assert_allclose(b, theta + phi, rtol=1e-15)
+
+
+def test_padded_columns_compiles_once_for_lengths_within_a_power_of_two(rng):
+    fn = jitted(lambda theta, phi: _angles(theta, phi)[0])  # a function of its own: a fresh trace count
+    TRACED.clear()
+    for n in (520, 700, 1024):
+        (out,) = padded_columns(fn, np.ones(n), np.zeros(n))
+        np.testing.assert_allclose(out, np.sin(1.0))
+    assert TRACED == [(1024,)]

@@ -53,9 +53,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..arrays import jitted, padded_columns
 from ..measurements import THETA_TOLERANCE, MeasurementError, Measurements, _default_channels
 from ._common import FormatError, atomic_path, decode_text, read_file_bytes
-from .merl import _jit
 
 __all__ = ["read_alta", "write_alta", "looks_like_alta", "PARAM_IN", "PARAM_OUT"]
 
@@ -109,27 +109,20 @@ def _projected_out(m: Measurements):
     return np.stack([m.theta_i, m.theta_o * np.cos(dphi), m.theta_o * np.sin(dphi)], axis=1)
 
 
-def _compiled(fn, *columns: np.ndarray) -> list[np.ndarray]:
-    """``jax.jit(fn)`` over NumPy columns padded to a power of two (>= 256), so that files of any length share a few
-    compilations (an eager call compiles every operation anew for each length: seconds per file)."""
-    n = len(columns[0])
-    size = max(256, 1 << max(n - 1, 0).bit_length())
-    padded = [np.pad(c, (0, size - n)) for c in columns]
-    return [np.asarray(a, dtype=np.float64)[:n] for a in _jit(fn)(*padded)]
-
-
 def _rusin_in(x):
     from ..geometry import from_half_diff
 
     # params.h, half_to_cartesian(θh, φh = 0, θd, φd): the rotated difference vector is V, its mirror about h is L.
-    theta_o, phi_o, theta_i, phi_i = _compiled(from_half_diff, x[:, 0], np.zeros(len(x)), x[:, 1], x[:, 2])
+    theta_o, phi_o, theta_i, phi_i = padded_columns(jitted(from_half_diff), x[:, 0], np.zeros(len(x)), x[:, 1],
+                                                    x[:, 2])
     return theta_i, phi_i, theta_o, phi_o
 
 
 def _rusin_out(m: Measurements):
     from ..geometry import to_half_diff
 
-    theta_h, _, theta_d, phi_d = _compiled(to_half_diff, m.theta_o, m.phi_o, m.theta_i, m.phi_i)  # d from V, as ALTA
+    # d from V, as ALTA
+    theta_h, _, theta_d, phi_d = padded_columns(jitted(to_half_diff), m.theta_o, m.phi_o, m.theta_i, m.phi_i)
     return np.stack([theta_h, theta_d, phi_d], axis=1)
 
 

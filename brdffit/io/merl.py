@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..arrays import jitted
 from ..measurements import MeasurementError, Measurements
 from ._common import FormatError, atomic_path, read_file_bytes
 
@@ -112,18 +113,10 @@ def cell_angles(phi_h: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray,
 
     th, td, pd = np.meshgrid(theta_h_centre(np.arange(DIMS[0])), theta_d_centre(np.arange(DIMS[1])),
                              phi_d_centre(np.arange(DIMS[2])), indexing="ij")
-    out = tuple(np.asarray(a, dtype=np.float64) for a in _jit(from_half_diff)(th, np.full_like(th, phi_h), td, pd))
+    out = tuple(np.asarray(a, dtype=np.float64) for a in jitted(from_half_diff)(th, np.full_like(th, phi_h), td, pd))
     for a in out:
         a.flags.writeable = False
     return out
-
-
-@functools.lru_cache(maxsize=None)
-def _jit(fn):
-    """``jax.jit(fn)``, made once per function so that its compilations are reused."""
-    import jax
-
-    return jax.jit(fn)
 
 
 def _above_horizon(theta_i, theta_o) -> np.ndarray:
@@ -204,7 +197,7 @@ class MerlTable:
 
         theta_i, phi_i, theta_o, phi_o = np.broadcast_arrays(*(np.asarray(a, dtype=float)
                                                                for a in (theta_i, phi_i, theta_o, phi_o)))
-        th, _, td, pd = (np.asarray(a, dtype=float) for a in _jit(to_half_diff)(theta_i, phi_i, theta_o, phi_o))
+        th, _, td, pd = (np.asarray(a, dtype=float) for a in jitted(to_half_diff)(theta_i, phi_i, theta_o, phi_o))
         i, j, k = theta_h_index(th), theta_d_index(td), phi_d_index(pd)
         out = np.moveaxis(self.data[:, i, j, k], 0, -1)
         below = ~((np.cos(theta_i) > 0) & (np.cos(theta_o) > 0))

@@ -15,6 +15,7 @@ import numpy as np
 from matplotlib.colors import LogNorm, TwoSlopeNorm
 from matplotlib.figure import Figure
 
+from ..arrays import jitted, padded_columns
 from ..geometry import to_half_diff
 from ..io._common import atomic_path
 from ..properties import directional_albedo
@@ -287,8 +288,8 @@ def residual_map(measurements, fit_result, bins: int = 18):
         ``(edges_h, edges_d, mean, count)``: bin edges in degrees (0-90), ``mean`` ``(C, bins, bins)`` indexed
         [channel, θd bin, θh bin] (NaN where a bin has no positive data), ``count`` of the same shape.
     """
-    th, _, td, _ = (np.asarray(a) for a in to_half_diff(measurements.theta_i, measurements.phi_i,
-                                                         measurements.theta_o, measurements.phi_o))
+    th, _, td, _ = padded_columns(jitted(to_half_diff), measurements.theta_i, measurements.phi_i,
+                                  measurements.theta_o, measurements.phi_o)
     data = np.asarray(measurements.values)
     model = fit_result.predict(measurements.theta_i, measurements.phi_i, measurements.theta_o, measurements.phi_o)
     edges = np.linspace(0.0, 90.0, bins + 1)
