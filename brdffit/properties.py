@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .arrays import to_device
+from .fitting.programs import Program
 from .geometry import spherical_to_vector
 from .models import Model, evaluate_dirs
 
@@ -81,7 +82,7 @@ _CHUNK_VALUES = 2**21
 _SIGMA_MIN, _SIGMA_MAX = 1e-9, 1e6
 
 
-@jax.jit
+@Program  # kept on disk like the fit's programs: a warm report loads it without tracing
 def _albedo_chunk(model: Model, theta_i, phi_i, t, wt, u, wu, centre):
     """Albedo contribution of some azimuth nodes for a chunk of incidence directions.
 

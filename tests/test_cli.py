@@ -48,13 +48,13 @@ def test_fit_default_output_goes_next_to_the_input(tmp_path, capsys):
 @pytest.mark.slow
 def test_fit_with_fixed_parameter_and_solver(tmp_path, capsys):
     code = main(["fit", str(PLASTIC), "--model", "lambert+ggx", "--fixed", "f0=0.04", "--solver", "dogleg",
-                 "--out", str(tmp_path / "o"), "--json"])
+                 "--no-report", "--out", str(tmp_path / "o"), "--json"])
     printed = json.loads(capsys.readouterr().out)
     assert code == EXIT_OK and printed["params"]["f0"] == 0.04 and printed["stderr"]["f0"] == 0.0
 
 
 def test_not_converged_fit_exits_1(tmp_path, capsys):
-    code = main(["fit", str(PLASTIC), "--model", "lambert+cook-torrance", "--max-steps", "1", "--out",
+    code = main(["fit", str(PLASTIC), "--model", "lambert+cook-torrance", "--max-steps", "1", "--no-report", "--out",
                  str(tmp_path / "o"), "--json"])
     assert code == EXIT_NOT_CONVERGED
     assert json.loads(capsys.readouterr().out)["status"] == "max-steps"
@@ -108,7 +108,7 @@ def test_fit_lafortune_with_automatic_lobe_count(tmp_path, capsys):
     data = ROOT / "data" / "synthetic" / "lafortune-retro.h5"
     # --max-lobes 2 keeps the test short; choosing among 1..3 lobes is tested in test_select.py.
     code = main(["fit", str(data), "--model", "lambert+lafortune", "--lobes", "auto", "--max-lobes", "2",
-                 "--loss", "sigma", "--out", str(tmp_path / "o"), "--json"])
+                 "--loss", "sigma", "--no-report", "--out", str(tmp_path / "o"), "--json"])
     printed = json.loads(capsys.readouterr().out)
     assert code == EXIT_OK
     assert printed["model"] == "lambert+lafortune(lobes=2)"
@@ -142,7 +142,7 @@ def test_synth_convert_and_posterior_commands(tmp_path, capsys):
     # Fit with a posterior stored in result.h5, then continue the chain with the posterior command.
     out = tmp_path / "fit"
     code = main(["fit", str(data), "--model", "lambert+ward", "--loss", "sigma", "--posterior", "--walkers", "24",
-                 "--steps", "150", "--out", str(out), "--json"])
+                 "--steps", "150", "--no-report", "--out", str(out), "--json"])
     printed = json.loads(capsys.readouterr().out)
     assert code == EXIT_OK and printed["posterior"]["diagnostics"]["steps"] == 150
     assert printed["posterior"]["params"]["alpha"]["median"] == pytest.approx(0.2, rel=0.02)
@@ -161,7 +161,7 @@ def test_fit_model_auto_selects_among_the_standard_candidates(tmp_path, capsys, 
     # (brdffit.select is the function; the module is reached through sys.modules.)
     monkeypatch.setattr(sys.modules["brdffit.select"], "DEFAULT_CANDIDATES", ("lambert", "oren-nayar", "lambert+ward"))
     clay = ROOT / "data" / "synthetic" / "clay.h5"  # Oren-Nayar truth
-    assert main(["fit", str(clay), "--model", "auto", "--out", str(tmp_path / "o"), "--json"]) == EXIT_OK
+    assert main(["fit", str(clay), "--model", "auto", "--no-report", "--out", str(tmp_path / "o"), "--json"]) == EXIT_OK
     assert json.loads(capsys.readouterr().out)["model"] == "oren-nayar"
     assert json.loads((tmp_path / "o" / "selection.json").read_text())["chosen"] == "oren-nayar"
 
@@ -169,7 +169,8 @@ def test_fit_model_auto_selects_among_the_standard_candidates(tmp_path, capsys, 
 @pytest.mark.slow
 def test_export_command_writes_renderer_materials(tmp_path, capsys):
     out = tmp_path / "fit"
-    assert main(["fit", str(PLASTIC), "--model", "lambert+ggx", "--out", str(out), "--quiet"]) == EXIT_OK
+    assert main(["fit", str(PLASTIC), "--model", "lambert+ggx", "--no-report", "--out", str(out),
+                 "--quiet"]) == EXIT_OK
     xml_path = tmp_path / "plastic.xml"
     assert main(["export", str(out / "result.h5"), "--to", "mitsuba", "--out", str(xml_path), "--quiet"]) == EXIT_OK
     import xml.etree.ElementTree as ET
@@ -182,7 +183,8 @@ def test_export_command_writes_renderer_materials(tmp_path, capsys):
     assert main(["export", str(out / "result.h5"), "--to", "pbrt"]) == EXIT_OK
     assert "\"mix\"" in capsys.readouterr().out
     ward = tmp_path / "ward"
-    assert main(["fit", str(PLASTIC), "--model", "lambert+ward", "--out", str(ward), "--quiet"]) == EXIT_OK
+    assert main(["fit", str(PLASTIC), "--model", "lambert+ward", "--no-report", "--out", str(ward),
+                 "--quiet"]) == EXIT_OK
     assert main(["export", str(ward / "result.h5"), "--to", "mitsuba"]) == EXIT_BAD_INPUT
     assert "ward" in capsys.readouterr().err
 
@@ -193,7 +195,8 @@ def test_render_command_previews_fit_and_data(tmp_path, capsys):
     from brdffit import render
 
     out = tmp_path / "fit"
-    assert main(["fit", str(PLASTIC), "--model", "lambert+cook-torrance", "--out", str(out), "--quiet"]) == EXIT_OK
+    assert main(["fit", str(PLASTIC), "--model", "lambert+cook-torrance", "--no-report", "--out", str(out),
+                 "--quiet"]) == EXIT_OK
     fit_png, data_png = tmp_path / "fit.png", tmp_path / "data.png"
     assert main(["render", str(out / "result.h5"), "--resolution", "48", "--out", str(fit_png), "--npy",
                  "--quiet"]) == EXIT_OK

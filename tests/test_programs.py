@@ -50,12 +50,15 @@ import brdffit
 from brdffit.fitting.programs import Program
 jax.config.update("jax_compilation_cache_dir", {str(tmp_path)!r})
 traced = []
-def f(x, data):
+def f(model, x, data):
     traced.append(1)
-    return jnp.cos(x) * data["a"] + jnp.sum(data["b"])
+    return jnp.cos(x) * data["a"] + jnp.sum(data["b"]) + model.params["rho_d"][0]
 program = Program(f, "test program")
 x = jnp.linspace(0.0, 1.0, 9)
-out = program(x, {{"a": 3.0 * jnp.ones(9), "b": jnp.arange(9.0)}})
+# A Model among the arguments: a pytree with custom nodes (equinox's), whose pickled tree does not unflatten in
+# another process; the kept executable takes the arguments' leaves.
+model = brdffit.models.get("lambert", rho_d=0.0)
+out = program(model, x, {{"a": 3.0 * jnp.ones(9), "b": jnp.arange(9.0)}})
 print(json.dumps({{"traced": len(traced), "out": np.asarray(out).tolist()}}))
 """
 

@@ -72,15 +72,19 @@ class Program:
     configured, on disk (module doc).
 
     Arguments:
-        fn: the function to compile (pure, JAX-traceable).
+        fn: the function to compile (pure, JAX-traceable); its name and docstring become the program's, so that
+            ``Program`` also serves as a decorator of a module-level function.
         name: the program's name in its keys; it must say everything ``fn`` captures from its closure (for example
-            the problem structure a pass was built for).
+            the problem structure a pass was built for). Default: ``fn``'s module and qualified name (enough for a
+            module-level function, which captures nothing).
         static_argnums: positions of arguments that are compile-time constants (hashable, with a stable repr).
     """
 
-    def __init__(self, fn, name: str, static_argnums: tuple = ()):
+    def __init__(self, fn, name: str | None = None, static_argnums: tuple = ()):
+        functools.update_wrapper(self, fn)
+        self._fn = fn
         self._jit = jax.jit(fn, static_argnums=static_argnums)
-        self._name = name
+        self._name = name if name is not None else f"{fn.__module__}.{fn.__qualname__}"
         self._static = tuple(static_argnums)
         self._compiled: dict = {}
         self._locks: dict = {}
@@ -94,18 +98,31 @@ class Program:
         signature = (static, tree, tuple(jax.api_util.shaped_abstractify(leaf) for leaf in leaves))
         executable = self._compiled.get(signature)
         if executable is not None:
-            return executable(*dynamic)
+            return executable(*leaves)
         with self._locks.setdefault(signature, threading.Lock()):  # one thread compiles a signature
             executable = self._compiled.get(signature)
             if executable is not None:
-                return executable(*dynamic)
+                return executable(*leaves)
             path, text = self._path(signature)
             executable = _load(path, text) if path is not None else None
-            out = _run(executable, dynamic)
+            out = _run(executable, leaves)
             if out is None:  # nothing kept, or a kept file that does not run: compile (and keep)
-                executable, out = self._compile(args, path, text, dynamic)
+                executable, out = self._compile(static, tree, leaves, path, text)
             self._compiled[signature] = executable
         return out
+
+    def _of_leaves(self, static: tuple, tree):
+        """The function of a signature's array leaves, jitted: its executables take and return only arrays, so
+        that a kept one unpickles in another process whatever the arguments' tree (a pickled tree with custom
+        nodes, such as a `Model`'s, does not unflatten there)."""
+        def fn(*leaves):
+            dynamic = tree.unflatten(leaves)
+            pending, fixed = iter(dynamic), iter(static)
+            return self._fn(*(next(fixed) if i in self._static else next(pending)
+                              for i in range(len(static) + len(dynamic))))
+
+        fn.__name__, fn.__qualname__ = self._fn.__name__, self._fn.__qualname__  # JAX's logs and profiles name it
+        return jax.jit(fn)
 
     def _path(self, signature):
         """The file and the full key text of a signature, or ``(None, None)`` where nothing is kept."""
@@ -116,7 +133,7 @@ class Program:
         text = "\n".join([_stamp(), self._name, statics, str(signature[1]), str(signature[2])])
         return directory / (hashlib.sha256(text.encode()).hexdigest() + ".bin"), text
 
-    def _compile(self, args, path, text, dynamic):
+    def _compile(self, static: tuple, tree, leaves: list, path, text):
         """Compile for a new signature and, with a ``path``, keep the executable there if a copy read back from
         its serialised form runs on these arguments. XLA compiles it itself, not JAX's persistent cache: on the
         CPU an executable that JAX's cache loaded (or the second compilation of a module in one process)
@@ -124,16 +141,17 @@ class Program:
         found"); the check keeps such a copy from ever being written.
 
         Returns:
-            ``(executable, output on dynamic)``: the output is the checked copy's where it ran (the program runs
+            ``(executable, output on the leaves)``: the output is the checked copy's where it ran (the program runs
             once either way).
         """
+        program = self._of_leaves(static, tree)
         if path is None:
-            compiled = self._jit.lower(*args).compile()
-            return compiled, compiled(*dynamic)
+            compiled = program.lower(*leaves).compile()
+            return compiled, compiled(*leaves)
         with _jax_config.enable_compilation_cache(False):  # in this thread only
-            compiled = self._jit.lower(*args).compile()
-        out = _keep(path, text, compiled, dynamic)
-        return compiled, (compiled(*dynamic) if out is None else out)
+            compiled = program.lower(*leaves).compile()
+        out = _keep(path, text, compiled, leaves)
+        return compiled, (compiled(*leaves) if out is None else out)
 
 
 def _run(executable, dynamic):

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..arrays import to_device
+from ..fitting.programs import Program
 from ..geometry import LocalPair, spherical_to_vector
 from ..params import ParamSpec, ParamTable
 from .layout import Layout, layout
@@ -102,10 +103,12 @@ def coerce_value(spec: ParamSpec, value, channels: int):
     return value if traced else to_device(value)
 
 
-# `evaluate_dirs` and `evaluate` are jitted: one compilation per model structure and input shape, instead of one
+# `evaluate_dirs` and `evaluate` are compiled: one compilation per model structure and input shape, instead of one
 # per primitive as JAX does when it runs them eagerly (dozens per lobe, which made reports and selection spend
-# most of their time compiling). Inside a traced function they inline as before.
-@jax.jit
+# most of their time compiling). As `Program`s they are also kept on disk where JAX's persistent cache is on, so a
+# warm process loads them without tracing (a report's or a selection's plausibility checks traced them anew for
+# every model; issue 15). Inside a traced function they inline as ``jax.jit`` does.
+@Program
 def evaluate_dirs(model: Model, wi, wo):
     """Evaluate a model for pairs of unit direction vectors.
 
@@ -138,7 +141,7 @@ def evaluate_pair(model: Model, pair: LocalPair):
     return jnp.where(pair.above[..., None], total, 0.0)
 
 
-@jax.jit
+@Program
 def evaluate(model: Model, theta_i, phi_i, theta_o, phi_o):
     """Evaluate a model at spherical angles.
 
