@@ -629,6 +629,7 @@ def _cmd_report(args) -> int:
     h5 = Path(args.result)
     measurements = io.load(h5)
     result = FitResult.load(h5, args.name)
+    enable_compilation_cache()  # the figures' programs, as a fit's report finds them
     post = None
     with h5py.File(h5, "r") as f:
         chain_group = f"posteriors/{(args.name or result.spec).replace('/', '_')}/chain"
@@ -675,6 +676,7 @@ def _cmd_synth(args) -> int:
 
     values = _parse_fixed(args.param)
     model = models.get(args.model, channels=args.channels, **values)
+    enable_compilation_cache()
     m = synth.generate(model, pattern=args.pattern, n=args.n, noise=args.noise, seed=args.seed)
     io.save(m, args.out)
     if not args.quiet:
@@ -698,6 +700,7 @@ def _cmd_convert(args) -> int:
         if result.model is None or result.model.channels != 3:
             raise UsageError(f"{source}: MERL tables hold 3 channels; this fit has "
                              f"{'independent channels' if result.model is None else result.model.channels}")
+        enable_compilation_cache()
         io.write_merl(result.model, target)
         if not args.quiet:
             print(f"wrote {target}: MERL tabulation of {result.spec}")
@@ -714,6 +717,7 @@ def _cmd_export(args) -> int:
     from .export import TARGETS, export, export_details
 
     result = FitResult.load(args.result, args.name)
+    enable_compilation_cache()
     # The fit option's export to a renderer is recorded beside the result, for its report.
     recorded = args.fit and TARGETS[args.to].renderer
     details = export_details(result, args.to, name=args.material, fit=True) if recorded else None
@@ -776,6 +780,7 @@ def _cmd_render(args) -> int:
 
     path = Path(args.file)
     source, what = _render_source(path, args)
+    enable_compilation_cache()
     lights = list(render.DEFAULT_LIGHTS)
     if args.area_light:
         key_theta, key_phi, key_intensity = lights[0]

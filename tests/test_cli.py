@@ -60,6 +60,28 @@ def test_not_converged_fit_exits_1(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["status"] == "max-steps"
 
 
+def test_every_computing_command_turns_on_the_compilation_cache(tmp_path, monkeypatch):
+    # `brdffit report`, `export` and `render` compiled every program anew in each process before they did.
+    import jax
+
+    out = tmp_path / "fit"
+    assert main(["fit", str(ROOT / "data" / "synthetic" / "clay.h5"), "--model", "lambert", "--no-report", "--out",
+                 str(out), "--quiet"]) == EXIT_OK
+    result = str(out / "result.h5")
+    before = jax.config.jax_compilation_cache_dir
+    try:
+        for k, argv in enumerate([["report", result], ["export", result, "--to", "mitsuba", "--out",
+                                                        str(tmp_path / "m.xml")],
+                                  ["render", result, "--resolution", "16", "--out", str(tmp_path / "r.png")]]):
+            folder = tmp_path / f"cache-{k}"
+            monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(folder))
+            jax.config.update("jax_compilation_cache_dir", None)
+            assert main(argv + ["--quiet"]) == EXIT_OK
+            assert jax.config.jax_compilation_cache_dir == str(folder), argv[0]
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)
+
+
 @pytest.mark.parametrize("argv, message", [
     (["fit", "does-not-exist.h5"], "does-not-exist.h5"),
     (["fit", str(PLASTIC), "--model", "lambert+nonsense"], "unknown lobe 'nonsense'"),
