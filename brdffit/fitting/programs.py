@@ -112,9 +112,9 @@ class Program:
         return out
 
     def _of_leaves(self, static: tuple, tree):
-        """The function of a signature's array leaves, jitted: its executables take and return only arrays, so
-        that a kept one unpickles in another process whatever the arguments' tree (a pickled tree with custom
-        nodes, such as a `Model`'s, does not unflatten there)."""
+        """The function of a signature's array leaves, jitted: its executables take only the leaves, so that a kept
+        one unpickles in another process whatever the arguments' tree (a pickled tree with custom nodes, such as a
+        `Model`'s, does not unflatten there)."""
         def fn(*leaves):
             dynamic = tree.unflatten(leaves)
             pending, fixed = iter(dynamic), iter(static)
