@@ -21,7 +21,7 @@ from ._lazy import module
 
 jax = module("jax")  # loaded on first use: the readers import this module, and `brdffit info` loads no JAX
 
-__all__ = ["to_device", "jitted", "padded_columns", "COLUMN_CHUNK"]
+__all__ = ["to_device", "traced", "jitted", "padded_columns", "COLUMN_CHUNK"]
 
 # The most samples of one call of `padded_columns` (bounds the memory of a MERL-size table's intermediates).
 COLUMN_CHUNK = 1 << 18
@@ -42,12 +42,18 @@ def to_device(value, dtype=None):
     if isinstance(value, jax.Array):
         if dtype is None or value.dtype == jax.dtypes.canonicalize_dtype(dtype):
             return value
-        if isinstance(value, jax.core.Tracer):
+        if traced(value):
             import jax.numpy as jnp
 
             return jnp.asarray(value, dtype=dtype)
     array = np.asarray(value, dtype=dtype)
     return jax.device_put(array.astype(jax.dtypes.canonicalize_dtype(array.dtype), copy=False))
+
+
+def traced(tree) -> bool:
+    """True when a leaf of ``tree`` (an array, a `Model`, any pytree) is a JAX tracer: the value is being traced
+    inside ``jax.jit``, ``jax.grad`` or the like, and cannot go through the host."""
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
 
 
 @functools.lru_cache(maxsize=None)

@@ -32,11 +32,10 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .arrays import to_device
+from .arrays import to_device, traced
 from .fitting.programs import Program
 from .geometry import spherical_to_vector
 from .models import Model, evaluate_dirs
@@ -133,14 +132,10 @@ def _gauss_legendre(n: int, lower: float, upper: float):
     return lower + half * (x + 1.0), half * w
 
 
-def _traced(model: Model) -> bool:
-    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(model))
-
-
 def _anisotropic(model: Model) -> bool:
     # Measured rather than declared: an anisotropic lobe at equal widths is isotropic. Traced parameters cannot be
     # measured; the finer azimuth rule is then the safe choice.
-    return _traced(model) or isotropy_error(model, n=3000) > ISOTROPY_TOL
+    return traced(model) or isotropy_error(model, n=3000) > ISOTROPY_TOL
 
 
 def _resolution_pair(resolution) -> tuple[int, int]:
@@ -218,7 +213,7 @@ def directional_albedo(model: Model, theta_i, phi_i=0.0, *, resolution: int | tu
     phi_pad = np.zeros(padded)
     theta_pad[:count], phi_pad[:count] = theta_flat, phi_flat
     # The chunks' sums on the host unless the model is traced (eager device additions compiled a program each).
-    xp, pieces = (jnp if _traced(model) else np), []
+    xp, pieces = (jnp if traced(model) else np), []
     for start in range(0, padded, chunk):
         theta_chunk, phi_chunk = to_device(theta_pad[start:start + chunk]), to_device(phi_pad[start:start + chunk])
         total = 0.0

@@ -33,6 +33,8 @@ from pathlib import Path
 import jax
 from jax._src import config as _jax_config  # its options as thread-local context managers
 
+from ..arrays import traced
+
 __all__ = ["Program", "program_directory"]
 
 _FOLDER = "brdffit-programs"
@@ -93,7 +95,7 @@ class Program:
         static = tuple(args[i] for i in self._static)
         dynamic = tuple(a for i, a in enumerate(args) if i not in self._static)
         leaves, tree = jax.tree_util.tree_flatten(dynamic)
-        if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
+        if traced(leaves):
             return self._jit(*args)
         signature = (static, tree, tuple(jax.api_util.shaped_abstractify(leaf) for leaf in leaves))
         executable = self._compiled.get(signature)
@@ -154,12 +156,13 @@ class Program:
         return compiled, (compiled(*leaves) if out is None else out)
 
 
-def _run(executable, dynamic):
-    """The output of a loaded executable on ``dynamic``, or None when there is none or it does not run."""
+def _run(executable, leaves):
+    """The output of a loaded executable on the arguments' ``leaves``, or None when there is none or it does not
+    run."""
     if executable is None:
         return None
     try:
-        return jax.block_until_ready(executable(*dynamic))
+        return jax.block_until_ready(executable(*leaves))
     except Exception:  # noqa: BLE001 - compiled again by the caller, and the file replaced
         return None
 
@@ -178,25 +181,28 @@ def _load(path: Path, text: str):
         return None
 
 
-def _keep(path: Path, text: str, compiled, dynamic):
-    """Write a compiled program atomically, if its serialised form read back runs on ``dynamic``; a folder that
-    cannot be written, or a backend that cannot serialise, only costs the next process its compilation.
+def _keep(path: Path, text: str, compiled, leaves):
+    """Write a compiled program atomically, if the copy that a later process would read from the file runs on the
+    arguments' ``leaves``: the check deserialises the executable with its trees as pickled, so a tree that does not
+    survive pickling (custom nodes) is never written. A folder that cannot be written, or a backend that cannot
+    serialise, only costs the next process its compilation.
 
     Returns:
-        The read-back copy's output on ``dynamic``, or None where it did not run (or nothing could be serialised).
+        The read-back copy's output on ``leaves``, or None where it did not run (or nothing could be serialised).
     """
     from jax.experimental.serialize_executable import deserialize_and_load, serialize
 
     temporary, out = None, None
     try:
-        blob, in_tree, out_tree = serialize(compiled)
-        out = _run(deserialize_and_load(blob, in_tree, out_tree), dynamic)
+        payload = pickle.dumps((text, *serialize(compiled)), protocol=pickle.HIGHEST_PROTOCOL)
+        _, blob, in_tree, out_tree = pickle.loads(payload)
+        out = _run(deserialize_and_load(blob, in_tree, out_tree), leaves)
         if out is None:
             return None
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, temporary = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
-            pickle.dump((text, blob, in_tree, out_tree), f, protocol=pickle.HIGHEST_PROTOCOL)
+            f.write(payload)
         os.replace(temporary, path)
     except Exception:  # noqa: BLE001 - serialisation unsupported here, or the folder unwritable
         if temporary is not None:

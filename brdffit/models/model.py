@@ -7,11 +7,10 @@ the lobes and channel count are static structure.
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import to_device
+from ..arrays import to_device, traced
 from ..fitting.programs import Program
 from ..geometry import LocalPair, spherical_to_vector
 from ..params import ParamSpec, ParamTable
@@ -87,8 +86,8 @@ def coerce_value(spec: ParamSpec, value, channels: int):
     """Turn a user-given value into the stored shape of ``spec``, or raise a ValueError that names it. A host value
     is shaped in NumPy and moved to the device once (`brdffit.arrays`: no compiled program); a traced one stays
     traced."""
-    traced = isinstance(value, jax.core.Tracer)
-    xp = jnp if traced else np
+    on_tracer = traced(value)
+    xp = jnp if on_tracer else np
     value = xp.asarray(value, dtype=float)
     if spec.colour:
         if value.ndim == 0:
@@ -100,7 +99,7 @@ def coerce_value(spec: ParamSpec, value, channels: int):
     elif value.ndim != 0:
         raise ValueError(f"shape parameter {spec.name!r} is shared by all channels and needs a scalar, "
                          f"got shape {value.shape}")
-    return value if traced else to_device(value)
+    return value if on_tracer else to_device(value)
 
 
 # `evaluate_dirs` and `evaluate` are compiled: one compilation per model structure and input shape, instead of one
