@@ -5,8 +5,10 @@
 one compilation per shape and dtype, 10–40 ms each in a new process (lowering included), and still a lowering and
 a cache lookup each in a warm one. A first fit made about thirty of them: 0.5–0.9 s of a 5–7 s single fit, 0.45 s
 of a warm one (docs/benchmarks.md). ``jax.device_put`` of a NumPy array compiles nothing, so the fitting pipeline
-builds small host-side arrays in NumPy and moves them with `to_device`; work on device arrays stays in compiled
-programs (`brdffit.fitting.programs.Program`). Host-side maths on columns of samples in JAX functions (the readers'
+builds its data's arrays (their fields, subsamples, stacks and pieces) and its other small arrays in NumPy on the
+host and moves them with `to_device` / `on_device`: only the model's own maths is compiled
+(`brdffit.fitting.programs.Program`), since a compiled program of the data's few operations cost its compilation
+(60-400 ms each here) to every first fit. Host-side maths on columns of samples in JAX functions (the readers'
 and the report's angle conversions, the synthesised data) goes through `padded_columns`: a jitted function called on
 lengths padded to a power of two, so that files of any length share a few compilations.
 """
@@ -21,7 +23,7 @@ from ._lazy import module
 
 jax = module("jax")  # loaded on first use: the readers import this module, and `brdffit info` loads no JAX
 
-__all__ = ["to_device", "traced", "jitted", "padded_columns", "COLUMN_CHUNK"]
+__all__ = ["to_device", "on_device", "on_host", "traced", "jitted", "padded_columns", "COLUMN_CHUNK"]
 
 # The most samples of one call of `padded_columns` (bounds the memory of a MERL-size table's intermediates).
 COLUMN_CHUNK = 1 << 18
@@ -48,6 +50,16 @@ def to_device(value, dtype=None):
             return jnp.asarray(value, dtype=dtype)
     array = np.asarray(value, dtype=dtype)
     return jax.device_put(array.astype(jax.dtypes.canonicalize_dtype(array.dtype), copy=False))
+
+
+def on_device(tree):
+    """Every leaf of ``tree`` (a NamedTuple, a dict, ...) through `to_device`."""
+    return jax.tree_util.tree_map(to_device, tree)
+
+
+def on_host(tree):
+    """Every leaf of ``tree`` as a NumPy array (a view of a CPU device array; a copy from an accelerator)."""
+    return jax.tree_util.tree_map(np.asarray, tree)
 
 
 def traced(tree) -> bool:

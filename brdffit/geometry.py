@@ -182,23 +182,24 @@ class LocalPair(NamedTuple):
     above: jnp.ndarray
 
     @classmethod
-    def from_dirs(cls, wi, wo) -> "LocalPair":
-        """Build the shared quantities from unit vectors ``wi`` and ``wo`` (broadcastable, last axis 3)."""
-        wi, wo = jnp.broadcast_arrays(jnp.asarray(wi, dtype=float), jnp.asarray(wo, dtype=float))
+    def from_dirs(cls, wi, wo, xp=jnp) -> "LocalPair":
+        """Build the shared quantities from unit vectors ``wi`` and ``wo`` (broadcastable, last axis 3); ``xp``:
+        ``jax.numpy``, or ``numpy`` for a fit's data, prepared on the host (`brdffit.fitting.problem`)."""
+        wi, wo = xp.broadcast_arrays(xp.asarray(wi, dtype=float), xp.asarray(wo, dtype=float))
         # Component by component (the same arithmetic as `half_vector`): XLA on the CPU runs reductions over a
         # last axis of length 3 slowly; this form took half the time on a MERL-size table.
         sx, sy, sz = (wi[..., k] + wo[..., k] for k in range(3))
         norm2 = sx * sx + sy * sy + sz * sz
         ok = norm2 > TINY * TINY
-        norm = jnp.sqrt(jnp.where(ok, norm2, 1.0))
-        hx, hy, hz = jnp.where(ok, sx / norm, 0.0), jnp.where(ok, sy / norm, 0.0), jnp.where(ok, sz / norm, 1.0)
+        norm = xp.sqrt(xp.where(ok, norm2, 1.0))
+        hx, hy, hz = xp.where(ok, sx / norm, 0.0), xp.where(ok, sy / norm, 0.0), xp.where(ok, sz / norm, 1.0)
         return cls(
             wi=wi,
             wo=wo,
-            cos_i=jnp.maximum(wi[..., 2], TINY),
-            cos_o=jnp.maximum(wo[..., 2], TINY),
-            h=jnp.stack([hx, hy, hz], axis=-1),
-            cos_h=jnp.maximum(hz, TINY),
-            cos_d=jnp.maximum(0.5 * (sx * hx + sy * hy + sz * hz), TINY),
+            cos_i=xp.maximum(wi[..., 2], TINY),
+            cos_o=xp.maximum(wo[..., 2], TINY),
+            h=xp.stack([hx, hy, hz], axis=-1),
+            cos_h=xp.maximum(hz, TINY),
+            cos_d=xp.maximum(0.5 * (sx * hx + sy * hy + sz * hz), TINY),
             above=(wi[..., 2] > 0) & (wo[..., 2] > 0),
         )

@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..arrays import on_host
 from ..metrics import metric_sums
 from ..models.model import evaluate_pair
 from .problem import BUCKET_CHUNK, FitData, Problem, chunk_data, physical_params, residuals_of
@@ -146,26 +147,20 @@ def compile_seconds() -> float:
     return getattr(_COMPILE_SECONDS, "value", 0.0)
 
 
-def _metric_sums(f, values, mask, cos_i, sqrt_weight):
-    """`brdffit.metrics.metric_sums` of model values ``f`` ``(M, S, N, C)`` against a piece's data:
-    ``(M, S, R, C)``.
-    It does not depend on the model, so one compiled program per data shape serves every model of a selection
-    (inside the pass it doubled the pass's compilation; in NumPy it took 0.4 s of a MERL-size fit)."""
-    def one(point, values, mask, cos_i, sqrt_weight):
-        return metric_sums(point, values, mask, cos_i, sqrt_weight ** 2)
-
-    per_material = jax.vmap(one, in_axes=(0, None, None, None, None))
-    return jax.vmap(per_material)(f, values, mask, cos_i, sqrt_weight)
-
-
-_metric_program = Program(_metric_sums, "metric sums")
-
-
 def metric_sums_of(values: list, pieces: list[FitData]) -> np.ndarray:
     """The metric sums ``(M, S, R, C)`` of a pass's model values (`accumulate` with ``values=True``: one
-    ``(M, S, N, C)`` array per piece) against the pieces' data."""
-    return sum(np.asarray(_metric_program(f, piece.values, piece.mask, piece.cos_i, piece.sqrt_weight))
-               for f, piece in zip(values, pieces))
+    ``(M, S, N, C)`` array per piece) against the pieces' data, `brdffit.metrics.metric_sums` in NumPy on the
+    host: they do not depend on the model, and a solver asks for them at its answers only (one point a material),
+    so a compiled program only added its compilation to a first fit (0.43-0.46 s; issue 15). The errors are
+    ignored as XLA ignores them (a value below -1/cosθi has no log-loss term: NaN, as in the compiled sums)."""
+    total = 0.0
+    with np.errstate(all="ignore"):
+        for f, piece in zip(values, pieces):
+            f = np.asarray(f)
+            data, mask, cos_i, sqrt_weight = on_host((piece.values, piece.mask, piece.cos_i, piece.sqrt_weight))
+            total = total + np.array([[metric_sums(f[m, s], data[m], mask[m], cos_i[m], sqrt_weight[m] ** 2, xp=np)
+                                       for s in range(f.shape[1])] for m in range(f.shape[0])])
+    return total
 
 
 def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
@@ -182,7 +177,7 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
         problem: the `Problem`.
         trees: free name -> physical values ``(M, S) + shape``: S points for each of M materials.
         pieces: the data of the M materials (leading material axis), whole or in chunks (`chunks`).
-        metrics: also sum the goodness-of-fit terms of the model values (`_metric_program`).
+        metrics: also sum the goodness-of-fit terms of the model values (`metric_sums_of`).
         values: also return the pass's arrays of each piece: the tangents and residuals ``(M, S, C, Q + 1, N)``
             (host) and the model values ``(M, S, N, C)`` (device). A solver keeps them for its current points and
             forms the meat (`meat_of`) and the metric sums (`metric_sums_of`) of its answer only.

@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import to_device
+from ..arrays import on_device, on_host, to_device
 from ..geometry import LocalPair, spherical_to_vector
 from ..models.layout import Layout, layout
 from ..models.model import Model, evaluate_pair
@@ -162,10 +162,10 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad
         a = np.asarray(a, dtype=float)
         return np.concatenate([a, np.full((extra,) + a.shape[1:], fill)]) if extra else a
 
-    pair, values, mask, cos_i, sqrt_weight, sigma = _sample_arrays(
+    pair, values, mask, cos_i, sqrt_weight, sigma = on_device(_sample_fields(
         host(measurements.values, np.nan), *(host(getattr(measurements, k))
                                              for k in ("theta_i", "phi_i", "theta_o", "phi_o")),
-        host(measurements.weights, 1.0), host(measurements.sigma, 1.0))
+        host(measurements.weights, 1.0), host(measurements.sigma, 1.0)))
     as_array = lambda a: to_device(a, dtype=float)  # noqa: E731
     return FitData(
         pair=pair, values=values, mask=mask, cos_i=cos_i, sqrt_weight=sqrt_weight, sigma=sigma, eps=as_array(eps),
@@ -173,20 +173,19 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad
     )
 
 
+# The data's own arrays (their fields, subsamples, stacks, pieces) are computed on the host in NumPy and moved to
+# the device once: they do not depend on the model, so compiled programs would only add their compilations to a
+# first fit (1.0 s of a 6 s single fit in a new process: XLA compiles even an addition in 60-130 ms here), and
+# NumPy does each in milliseconds (issue 15, docs/benchmarks.md).
 def _sample_fields(values, theta_i, phi_i, theta_o, phi_o, weights, sigma):
-    """The per-sample fields of `FitData` in one compiled program: the `LocalPair`, the values with missing ones
-    set to 0, the mask, cosθi clamped at 0, √weights (ones when None) and σ (ones where unknown or not positive)."""
-    # The barrier makes XLA store the two direction arrays: without it the CPU compiler fused the sines and cosines
-    # into every consumer and computed them several times over (twice the time on a MERL-size table).
-    wi, wo = jax.lax.optimization_barrier((spherical_to_vector(theta_i, phi_i), spherical_to_vector(theta_o, phi_o)))
-    mask = jnp.isfinite(values)
-    sigma = jnp.ones_like(values) if sigma is None else jnp.where(jnp.isfinite(sigma) & (sigma > 0), sigma, 1.0)
-    sqrt_weight = jnp.ones_like(theta_i) if weights is None else jnp.sqrt(weights)
-    return (LocalPair.from_dirs(wi, wo), jnp.where(mask, values, 0.0), mask, jnp.maximum(wi[:, 2], 0.0),
+    """The per-sample fields of `FitData` (NumPy, on the host): the `LocalPair`, the values with missing ones set
+    to 0, the mask, cosθi clamped at 0, √weights (ones when None) and σ (ones where unknown or not positive)."""
+    wi, wo = spherical_to_vector(theta_i, phi_i, xp=np), spherical_to_vector(theta_o, phi_o, xp=np)
+    mask = np.isfinite(values)
+    sigma = np.ones_like(values) if sigma is None else np.where(np.isfinite(sigma) & (sigma > 0), sigma, 1.0)
+    sqrt_weight = np.ones_like(theta_i) if weights is None else np.sqrt(weights)
+    return (LocalPair.from_dirs(wi, wo, xp=np), np.where(mask, values, 0.0), mask, np.maximum(wi[:, 2], 0.0),
             sqrt_weight, sigma)
-
-
-_sample_arrays = Program(_sample_fields, "sample arrays")
 
 
 def _per_sample(data: FitData) -> dict:
@@ -201,17 +200,6 @@ def _shared(data: FitData, index) -> dict:
             for k in data._fields if k not in _PER_SAMPLE}
 
 
-def _samples(fields: dict, rows, valid):
-    fields = jax.tree_util.tree_map(lambda a: a[rows], fields)
-    mask = fields["mask"] & valid[:, None]
-    return dict(fields, mask=mask, values=jnp.where(mask, fields["values"], 0.0))
-
-
-# One gather per pair of sizes: a subsample's fields computed anew (`make_fit_data`) compiled the sample fields
-# once more for each subsample size, 0.2-0.3 s each in a first fit (issue 15).
-_take_samples = Program(_samples, "take samples")
-
-
 def take_samples(data: FitData, rows) -> FitData:
     """The samples ``rows`` (sorted indices into one material's ``data``) as `FitData` of `bucket` of their count
     samples, the padding masked: the `make_fit_data` of those rows of the measurements (``pad=True``).
@@ -223,73 +211,45 @@ def take_samples(data: FitData, rows) -> FitData:
     Returns:
         The `FitData` of those samples.
     """
-    rows = np.asarray(rows, dtype=np.int32)
+    rows = np.asarray(rows, dtype=np.intp)
     size = bucket(rows.size)
     valid = np.arange(size) < rows.size
-    return data._replace(**_take_samples(_per_sample(data), to_device(
-        np.concatenate([rows, np.zeros(size - rows.size, np.int32)])), to_device(valid)))
-
-
-def _stacked(items: list):
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
-
-
-# One compiled program per count and shapes: stacked eagerly, each field compiled a program of its own (fourteen in
-# a first fit, 0.3 s; see `brdffit.arrays`).
-_stack = Program(_stacked, "stack data")
+    index = np.concatenate([rows, np.zeros(size - rows.size, np.intp)])
+    fields = jax.tree_util.tree_map(lambda a: a[index], on_host(_per_sample(data)))
+    mask = fields["mask"] & valid[:, None]
+    return data._replace(**on_device(dict(fields, mask=mask, values=np.where(mask, fields["values"], 0.0))))
 
 
 def stack_data(items: list[FitData]) -> FitData:
     """Stack equally shaped `FitData` along a new leading axis (for the vmapped `fit_many`; one item: an axis of
     1)."""
-    return _stack(list(items))
-
-
-def _take(fields: dict, materials):
-    return jax.tree_util.tree_map(lambda a: a[materials], fields)
-
-
-# One compiled program per data shape and count: eager slicing dispatched one operation per array (~4 ms a
-# material, a tenth of a fit_many material's time), and one program returning every material took 19 s to compile
-# for 150 materials.
-_take_materials = Program(_take, "take materials")
+    return on_device(jax.tree_util.tree_map(lambda *xs: np.stack(xs), *on_host(list(items))))
 
 
 def take_materials(data: FitData, materials) -> FitData:
     """The materials ``materials`` (integer indices, repeats allowed) of stacked ``data`` (`stack_data`), stacked
     in that order."""
-    materials = np.asarray(materials, dtype=np.int32)
-    return FitData(**_take_materials(_per_sample(data), to_device(materials)), **_shared(data, materials))
+    materials = np.asarray(materials, dtype=np.intp)
+    taken = jax.tree_util.tree_map(lambda a: a[materials], on_host(_per_sample(data)))
+    return FitData(**on_device(taken), **_shared(data, materials))
 
 
-def _piece(fields: dict, material, start, size: int) -> dict:
-    n = fields["values"].shape[1]
-    pad = -n % size
-
-    def cut(a):
-        a = a[material]
-        if pad:
-            a = jnp.concatenate([a, jnp.zeros((pad,) + a.shape[1:], a.dtype)])
-        return jax.lax.dynamic_slice_in_dim(a, start, size)[None]
-
-    return jax.tree_util.tree_map(cut, fields)
-
-
-# One small compiled program per data shape and piece size, called once per piece (one program returning every
-# piece compiled in 0.37 s for 8 pieces; see also `_take_materials`).
-_take_piece = Program(_piece, "data piece", static_argnums=(3,))
+def _cut(a: np.ndarray, start: int, width: int) -> np.ndarray:
+    """Samples ``start`` to ``start + width`` of ``a`` (leading axis), padded with zeros (masked) to ``width``."""
+    part = a[start:start + width]
+    return np.concatenate([part, np.zeros((width - part.shape[0],) + a.shape[1:], a.dtype)])
 
 
 def material_pieces(data: FitData, size: int) -> list[list[FitData]]:
     """For each material of stacked ``data`` (`stack_data`), its samples in pieces of ``size`` (`chunk_data`:
     a leading material axis of 1, the last piece padded with masked samples; at most ``size`` samples: one)."""
     materials, n = data.values.shape[:2]
-    size, fields = min(size, n), _per_sample(data)
+    size, fields = min(size, n), on_host(_per_sample(data))
     out = []
     for m in range(materials):
-        shared, material = _shared(data, [m]), to_device(np.int32(m))
-        out.append([FitData(**_take_piece(fields, material, to_device(np.int32(start)), size), **shared)
-                    for start in range(0, n, size)])
+        shared = _shared(data, [m])
+        out.append([FitData(**on_device(jax.tree_util.tree_map(lambda a: _cut(a[m], start, size)[None], fields)),
+                            **shared) for start in range(0, n, size)])
     return out
 
 
@@ -301,27 +261,13 @@ def chunk_data(data: FitData, size: int):
     Returns:
         A list of `FitData`.
     """
-    return [FitData(**piece) for piece in _split(data._asdict(), size)]
-
-
-def _pieces(fields: dict, size: int) -> list:
-    # One compiled program cuts and stacks every piece (eager slicing took 0.1 s on a MERL-size table, eager
-    # stacking 0.4 s).
+    fields = on_host(data._asdict())
     n = fields["values"].shape[0]
-    pieces = max(-(-n // size), 1)
-    pad = pieces * size - n if n > size else 0
-
-    def padded(a):
-        return jnp.concatenate([a, jnp.zeros((pad,) + a.shape[1:], a.dtype)]) if pad else a
-
-    per_sample = {k: jax.tree_util.tree_map(padded, fields[k]) for k in _PER_SAMPLE}
-    shared = {k: jax.tree_util.tree_map(lambda a: a[None], v) for k, v in fields.items() if k not in _PER_SAMPLE}
     width = min(size, n)
-    return [dict(shared, **jax.tree_util.tree_map(lambda a, start=start: a[None, start:start + width], per_sample))
-            for start in range(0, pieces * width, width)]
-
-
-_split = Program(_pieces, "data pieces", static_argnums=(1,))
+    shared = {k: jax.tree_util.tree_map(lambda a: a[None], v) for k, v in fields.items() if k not in _PER_SAMPLE}
+    return [FitData(**on_device(dict(shared, **{k: jax.tree_util.tree_map(lambda a: _cut(a, start, width)[None],
+                                                                             fields[k]) for k in _PER_SAMPLE})))
+            for start in range(0, max(n, 1), max(width, 1))]
 
 
 def flatten_free(problem: Problem, tree: dict, names=None):
