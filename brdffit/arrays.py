@@ -53,8 +53,28 @@ def to_device(value, dtype=None):
 
 
 def on_device(tree):
-    """Every leaf of ``tree`` (a NamedTuple, a dict, ...) through `to_device`."""
-    return jax.tree_util.tree_map(to_device, tree)
+    """Every leaf of ``tree`` (a NamedTuple, a dict, ...) as `to_device` gives it, the host leaves moved by one
+    ``jax.device_put`` (one call a leaf took ~1.8 times as long: ~30 µs a leaf, and a `fit_many` pass moves
+    dozens; issue 19).
+
+    Arguments:
+        tree: a pytree of NumPy arrays, numbers or JAX arrays.
+
+    Returns:
+        The same tree of JAX arrays on the default device.
+    """
+    leaves, structure = jax.tree_util.tree_flatten(tree)
+    out, host = list(leaves), []
+    for i, leaf in enumerate(leaves):
+        if isinstance(leaf, jax.Array):
+            out[i] = to_device(leaf)
+        else:
+            array = np.asarray(leaf)
+            host.append((i, array.astype(jax.dtypes.canonicalize_dtype(array.dtype), copy=False)))
+    if host:
+        for (i, _), moved in zip(host, jax.device_put([array for _, array in host])):
+            out[i] = moved
+    return structure.unflatten(out)
 
 
 def on_host(tree):

@@ -42,7 +42,7 @@ import dataclasses
 import numpy as np
 
 from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of
-from .problem import FitData, Problem, take_materials
+from .problem import FitData, Problem
 from .separable import solve_box
 
 __all__ = ["Marquardt", "solve", "answer", "MAX_DAMPING", "RELATIVE_OFFSET", "EXACT_MOVE", "BEST_TIE", "GAIN_RATIO"]
@@ -203,7 +203,6 @@ class _Batch:
         # (M,) valid residuals, counted on the host (a compiled count added 0.12-0.16 s to a first fit)
         self.n_values = sum(np.sum(np.asarray(piece.mask), axis=(1, 2)) for piece in pieces)
         self.compact = compact
-        self._gathered: dict = {}
 
     def trees(self, x) -> dict:
         batch = x.shape[:2]
@@ -270,19 +269,11 @@ class _Batch:
             group = chosen[start:start + _MAX_WIDTH]
             width = _width(group.size, x.shape[0] * count)
             padded = np.concatenate([group, np.full(width - group.size, group[-1])])
-            sums = accumulate(self.problem, self.trees(flat[padded]), self._pieces_of(padded // count),
-                              metrics=metrics, meat=metrics)
+            sums = accumulate(self.problem, self.trees(flat[padded]), self.pieces, metrics=metrics, meat=metrics,
+                              materials=padded // count)
             groups.append([None if a is None else np.reshape(a, (width,) + np.shape(a)[2:])[:group.size]
                            for a in sums])
         return NormalEquations(*(None if parts[0] is None else np.concatenate(parts) for parts in zip(*groups)))
-
-    def _pieces_of(self, materials) -> list[FitData]:
-        """The data pieces of a gathered batch: piece p's material ``materials[i]`` at position i (the gather is
-        kept for the repeated pass of the same points)."""
-        key = materials.tobytes()
-        if key not in self._gathered:
-            self._gathered = {key: [take_materials(piece, materials) for piece in self.pieces]}
-        return self._gathered[key]
 
     def _projected(self, x, sums: NormalEquations, values) -> _State:
         delta = np.zeros(x.shape)

@@ -116,24 +116,33 @@ _COMPILE_SECONDS = threading.local()  # per thread: `brdffit.select` fits candid
 
 @functools.lru_cache(maxsize=64)
 def pass_program(structure: Problem):
-    """The jitted pass of a problem structure (`Problem.structure`): ``fn(trees, data) -> (A, sums)`` with
-    ``trees`` free name -> value ``(M, S) + shape`` (materials, points of each), ``data`` a `FitData` with a
+    """The jitted pass of a problem structure (`Problem.structure`): ``fn(trees, data, materials=None) -> (A, f)``
+    with ``trees`` free name -> value ``(M, S) + shape`` (materials, points of each), ``data`` a `FitData` with a
     leading material axis, ``A`` ``(M, S, C, Q + 1, N)`` the tangents and residuals of `_tangents` and ``f``
-    ``(M, S, N, C)`` the model values. Its first call for a shape compiles; the seconds are added to
-    `compile_seconds`."""
-    per_point = jax.vmap(lambda tree, data: _tangents(structure, tree, data), in_axes=(0, None))
-    jitted = Program(jax.vmap(per_point, in_axes=(0, 0)), f"pass {structure!r}")
+    ``(M, S, N, C)`` the model values. With ``materials`` (integer indices ``(M,)``), row i of ``trees`` is
+    evaluated on material ``materials[i]`` of ``data``, gathered inside the program: the data of a batch stay on
+    the device, and a compact polish's passes move only the points and their indices (a host gather of the data
+    at every step was a fifth of a `fit_many`, issue 19). The first call of each shape compiles; the seconds are
+    added to `compile_seconds`."""
+    per_material = jax.vmap(jax.vmap(lambda tree, data: _tangents(structure, tree, data), in_axes=(0, None)),
+                            in_axes=(0, 0))
+    programs = (Program(per_material, f"pass {structure!r}"),
+                Program(lambda trees, data, index: per_material(trees, jax.tree_util.tree_map(lambda a: a[index],
+                                                                                              data)),
+                        f"gathered pass {structure!r}"))
     seen = set()
 
-    def fn(trees, data):
+    def fn(trees, data, materials=None):
+        program, args = (programs[0], (trees, data)) if materials is None else \
+            (programs[1], (trees, data, np.asarray(materials, dtype=np.int32)))
         # The shapes that decide a compilation: every other leaf's shape follows from the values' and the
         # problem's (a cheap key: this runs once per chunk of every pass).
         key = (tuple(np.shape(v) for v in trees.values()), data.values.shape, str(data.values.dtype),
-               tuple(sorted(data.fixed)))
+               tuple(sorted(data.fixed)), materials is None)
         if key in seen:
-            return jitted(trees, data)
+            return program(*args)
         start = time.perf_counter()
-        out = jax.block_until_ready(jitted(trees, data))
+        out = jax.block_until_ready(program(*args))
         seen.add(key)
         _COMPILE_SECONDS.value = compile_seconds() + time.perf_counter() - start
         return out
@@ -147,17 +156,20 @@ def compile_seconds() -> float:
     return getattr(_COMPILE_SECONDS, "value", 0.0)
 
 
-def metric_sums_of(values: list, pieces: list[FitData]) -> np.ndarray:
+def metric_sums_of(values: list, pieces: list[FitData], materials=None) -> np.ndarray:
     """The metric sums ``(M, S, R, C)`` of a pass's model values (`accumulate` with ``values=True``: one
-    ``(M, S, N, C)`` array per piece) against the pieces' data, `brdffit.metrics.metric_sums` in NumPy on the
+    ``(M, S, N, C)`` array per piece) against the pieces' data (material ``materials[i]`` for row i, when given),
+    `brdffit.metrics.metric_sums` in NumPy on the
     host: they do not depend on the model, and a solver asks for them at its answers only (one point a material),
     so a compiled program only added its compilation to a first fit (0.43-0.46 s; issue 15). The errors are
     ignored as XLA ignores them (a value below -1/cosθi has no log-loss term: NaN, as in the compiled sums)."""
     total = 0.0
+    index = slice(None) if materials is None else np.asarray(materials)
     with np.errstate(all="ignore"):
         for f, piece in zip(values, pieces):
             f = np.asarray(f)
-            data, mask, cos_i, sqrt_weight = on_host((piece.values, piece.mask, piece.cos_i, piece.sqrt_weight))
+            data, mask, cos_i, sqrt_weight = (a[index] for a in on_host((piece.values, piece.mask, piece.cos_i,
+                                                                          piece.sqrt_weight)))
             total = total + np.array([[metric_sums(f[m, s], data[m], mask[m], cos_i[m], sqrt_weight[m] ** 2, xp=np)
                                        for s in range(f.shape[1])] for m in range(f.shape[0])])
     return total
@@ -170,7 +182,7 @@ def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
 
 
 def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bool = False,
-               values: bool = False, meat: bool = True):
+               values: bool = False, meat: bool = True, materials=None):
     """JᵀJ, Jᵀr, rᵀr, Jᵀ diag(r²) J and the per-channel rᵀr over all of the data, for every point of a batch.
 
     Arguments:
@@ -182,6 +194,8 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
             (host) and the model values ``(M, S, N, C)`` (device). A solver keeps them for its current points and
             forms the meat (`meat_of`) and the metric sums (`metric_sums_of`) of its answer only.
         meat: form Jᵀ diag(r²) J (else the field is None): a third of the host's work in a pass.
+        materials: integer indices ``(M,)``: point row i is evaluated on material ``materials[i]`` of the pieces
+            (gathered on the device, `pass_program`); None: the pieces have the M materials of ``trees``.
 
     Returns:
         The `NormalEquations`, each field with leading axes ``(M, S)``; with ``values``, the pair
@@ -207,7 +221,7 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
         for piece in pieces:
             # The per-channel Gram matrices with BLAS on the host: measured 3x faster on the CPU than the same
             # reductions in XLA, and a (M, S, C, Q + 1, N) transfer per chunk on a GPU.
-            a, f = fn(trees, piece)
+            a, f = fn(trees, piece, materials)
             a = np.asarray(a)
             kept.append((a, f))
             gram = gram + a @ np.swapaxes(a, -1, -2)  # (M, S, C, Q+1, Q+1): tangents and residuals
@@ -218,7 +232,7 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
                                cost=np.sum(channel_cost, axis=-1),
                                meat=meat_of(problem, [a for a, _ in kept]) if meat else None,
                                channel_cost=channel_cost,
-                               metric_sums=metric_sums_of([f for _, f in kept], pieces) if metrics else None)
+                               metric_sums=metric_sums_of([f for _, f in kept], pieces, materials) if metrics else None)
     return (sums, kept) if values else sums
 
 

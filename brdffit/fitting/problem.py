@@ -22,7 +22,7 @@ from .losses import get_loss, robust_residuals
 from .programs import Program
 
 __all__ = ["Problem", "FitData", "make_fit_data", "bucket", "BUCKET_CHUNK", "physical_params", "residual_fn", "residuals_at", "stack_data",
-           "material_pieces", "take_materials", "take_samples", "chunk_data",
+           "sample_pieces", "take_materials", "take_samples", "chunk_data",
            "flatten_free"]
 
 _PER_SAMPLE = ("pair", "values", "mask", "cos_i", "sqrt_weight", "sigma")
@@ -234,40 +234,35 @@ def take_materials(data: FitData, materials) -> FitData:
     return FitData(**on_device(taken), **_shared(data, materials))
 
 
-def _cut(a: np.ndarray, start: int, width: int) -> np.ndarray:
-    """Samples ``start`` to ``start + width`` of ``a`` (leading axis), padded with zeros (masked) to ``width``."""
-    part = a[start:start + width]
-    return np.concatenate([part, np.zeros((width - part.shape[0],) + a.shape[1:], a.dtype)])
+def sample_pieces(data: FitData, size: int) -> list[FitData]:
+    """Stacked ``data`` (`stack_data`: a leading material axis) in pieces of ``size`` samples, every material in
+    each piece, on the device; the last piece is padded with masked samples so that every piece has the same shape
+    (one compilation serves all). Data of at most ``size`` samples is one piece.
 
-
-def material_pieces(data: FitData, size: int) -> list[list[FitData]]:
-    """For each material of stacked ``data`` (`stack_data`), its samples in pieces of ``size`` (`chunk_data`:
-    a leading material axis of 1, the last piece padded with masked samples; at most ``size`` samples: one)."""
-    materials, n = data.values.shape[:2]
-    size, fields = min(size, n), on_host(_per_sample(data))
-    out = []
-    for m in range(materials):
-        shared = _shared(data, [m])
-        out.append([FitData(**on_device(jax.tree_util.tree_map(lambda a: _cut(a[m], start, size)[None], fields)),
-                            **shared) for start in range(0, n, size)])
-    return out
-
-
-def chunk_data(data: FitData, size: int):
-    """Split one material's ``data`` into `FitData` pieces of ``size`` samples, each with a leading material axis
-    of 1 (the layout of `stack_data`); the last is padded with masked samples so that every piece has the same
-    shape (one compilation serves all). Data of at most ``size`` samples is one piece.
+    Arguments:
+        data: `FitData` with leading axes (materials, samples) on the per-sample fields.
+        size: the samples of a piece.
 
     Returns:
-        A list of `FitData`.
+        A list of `FitData`, each with the material axis of ``data``.
     """
     fields = on_host(data._asdict())
-    n = fields["values"].shape[0]
-    width = min(size, n)
-    shared = {k: jax.tree_util.tree_map(lambda a: a[None], v) for k, v in fields.items() if k not in _PER_SAMPLE}
-    return [FitData(**on_device(dict(shared, **{k: jax.tree_util.tree_map(lambda a: _cut(a, start, width)[None],
-                                                                             fields[k]) for k in _PER_SAMPLE})))
-            for start in range(0, max(n, 1), max(width, 1))]
+    n = fields["values"].shape[1]
+    width = max(min(size, n), 1)
+
+    def cut(a, start):  # samples start to start + width of a (axis 1), padded with zeros (masked)
+        part = a[:, start:start + width]
+        return np.concatenate([part, np.zeros((a.shape[0], width - part.shape[1]) + a.shape[2:], a.dtype)], axis=1)
+
+    return [FitData(**on_device(dict(fields, **{k: jax.tree_util.tree_map(lambda a: cut(a, start), fields[k])
+                                                 for k in _PER_SAMPLE})))
+            for start in range(0, max(n, 1), width)]
+
+
+def chunk_data(data: FitData, size: int) -> list[FitData]:
+    """One material's ``data`` (no material axis) in `sample_pieces` of ``size`` samples, each with a leading
+    material axis of 1 (the layout of `stack_data`)."""
+    return sample_pieces(jax.tree_util.tree_map(lambda a: a[None], on_host(data)), size)
 
 
 def flatten_free(problem: Problem, tree: dict, names=None):

@@ -27,10 +27,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import to_device
+from ..arrays import on_device
 from ..params import bound_margin
 from .losses import get_loss
-from .problem import FitData, Problem, material_pieces, residual_fn
+from .problem import FitData, Problem, residual_fn, sample_pieces
 from .programs import Program
 from .separable import amplitude_sums, solve_box
 
@@ -179,39 +179,65 @@ def quasi_random_starts(problem: Problem, count: int, seed: int) -> list[dict]:
     return [{s.name: _from_unit(u[k], s) for k, s in enumerate(specs)} for u in units]
 
 
+def _over_materials(one, name: str) -> Program:
+    """``one(params, data)`` of one candidate and one material, compiled for ``(M, B)`` candidates and data with a
+    leading material axis M: the candidates vmapped, the materials one after another in the program
+    (``lax.map``). Vmapped over the materials too, the ``(M, B, N)`` intermediates of a `fit_many` batch left the
+    cache: its search ran 2.3 times slower than this (issue 19, docs/benchmarks.md)."""
+    per_material = jax.vmap(one, in_axes=(0, None))
+
+    @functools.wraps(one)  # its name in JAX's logs and profiles
+    def over_materials(params, data):
+        return jax.lax.map(lambda args: per_material(*args), (params, data))
+
+    return Program(over_materials, name)
+
+
 @functools.lru_cache(maxsize=64)
 def _sums_fn(problem: Problem):
-    """Jitted ``(candidates, data) -> (c0, gram, rhs)`` of the weighted amplitude problem of every candidate:
+    """Compiled ``(candidates, data) -> (c0, gram, rhs)`` of the weighted amplitude problem of every candidate:
     ``c0`` ``(M, B, C)`` the squared norm of w·(f_d − f₀), ``gram`` ``(M, B, C, K, K)`` and ``rhs``
-    ``(M, B, C, K)`` its normal equations (`brdffit.fitting.separable.amplitude_sums`), candidates batched on a
-    leading axis B and the data on a leading material axis M. The bounded solve runs on the host: enumerated on
-    the device it held 3^K unrolled systems per candidate and compiled in 1–4 s per model, five times the rest."""
+    ``(M, B, C, K)`` its normal equations (`brdffit.fitting.separable.amplitude_sums`), for B candidates of each of
+    M materials (candidates ``(M, B) + shape``, data with a leading material axis). The bounded solve runs on the
+    host: enumerated on the device it held 3^K unrolled systems per candidate and compiled in 1–4 s per model,
+    five times the rest."""
     def one(params, data: FitData):
         return amplitude_sums(problem, params, problem.linear, data)
 
-    return Program(jax.vmap(jax.vmap(one, in_axes=(0, None)), in_axes=(None, 0)), f"search sums {problem!r}")
+    return _over_materials(one, f"search sums {problem!r}")
 
 
 @functools.lru_cache(maxsize=64)
 def _cost_fn(problem: Problem):
-    """Jitted ``(candidates, data) -> costs (M, B)``: the loss at complete parameters (amplitudes given), for the
-    losses whose cost is not the quadratic of the projection (nonlinear, robust)."""
+    """Compiled ``(candidates, data) -> (costs (M, B),)``: the loss at complete parameters (amplitudes given),
+    for the losses whose cost is not the quadratic of the projection (nonlinear, robust); shapes as
+    `_sums_fn`'s."""
     def one(params, data: FitData):
         r = residual_fn(problem, params, data)
-        return jnp.sum(r * r)
+        return (jnp.sum(r * r),)
 
-    return Program(jax.vmap(jax.vmap(one, in_axes=(0, None)), in_axes=(None, 0)), f"search costs {problem!r}")
+    return _over_materials(one, f"search costs {problem!r}")
 
 
-def _batches(candidates: list[dict], width: int) -> list[tuple]:
-    """The candidates in chunks of ``width`` (the last padded by repeating its last), each stacked on the host and
-    sent to the device once (a device array per dict cost ~0.1 s per search): ``(count, host, device)``."""
+def _batches(candidates: list, materials: int, width: int) -> list[tuple[int, dict]]:
+    """The candidates in chunks of ``width`` (the last padded by repeating its last), each stacked on the host
+    for every material: ``(count, {name: (M, width) + shape})``. ``candidates`` is one list of dicts for every
+    material, or a list of such lists, one a material (equally long)."""
+    per_material = isinstance(candidates[0], list)
+    total = len(candidates[0]) if per_material else len(candidates)
     out = []
-    for start in range(0, len(candidates), width):
-        chunk = candidates[start:start + width]
-        padded = chunk + [chunk[-1]] * (width - len(chunk))
-        batch = {k: np.stack([np.asarray(d[k], dtype=float) for d in padded]) for k in padded[0]}
-        out.append((len(chunk), batch, jax.tree_util.tree_map(to_device, batch)))
+    for start in range(0, total, width):
+        def stacked(listed):
+            chunk = listed[start:start + width]
+            padded = chunk + [chunk[-1]] * (width - len(chunk))
+            return {k: np.stack([np.asarray(d[k], dtype=float) for d in padded]) for k in padded[0]}
+
+        if per_material:
+            chunks = [stacked(listed) for listed in candidates]
+            batch = {k: np.stack([chunk[k] for chunk in chunks]) for k in chunks[0]}
+        else:
+            batch = {k: np.broadcast_to(v, (materials,) + v.shape) for k, v in stacked(candidates).items()}
+        out.append((min(width, total - start), batch))
     return out
 
 
@@ -222,12 +248,12 @@ def score(problem: Problem, candidates: list, data: FitData, width: int = SCORE_
     The device forms each candidate's normal equations in its amplitudes, piece by piece of the samples (the sums
     add); the host solves them within the bounds (`brdffit.fitting.separable.solve_box`) and, for a linear loss,
     reads the cost off the same sums: ‖w(f₀ + Ba − f_d)‖² = c₀ − 2aᵀb + aᵀGa. A nonlinear loss or a robust one is
-    scored by its own residuals at the solved amplitudes. The materials are scored one at a time, by a single
-    fit's program: batched over them, the (materials × candidates × samples) intermediates left the cache, and
-    fit_many's search ran 1.3 times slower a material on one core, 1.6 times beside another process
-    (docs/benchmarks.md). One compiled shape, ``width`` candidates on ``piece`` samples, serves every subsample
-    of a search: the screen, the rescoring and an unscreened search (issue 15: each size compiled its own, 0.3 s
-    a candidate model in a first selection).
+    scored by its own residuals at the solved amplitudes. One call scores ``width`` candidates of every material
+    on one piece of ``piece`` samples, so that one compiled shape per batch size serves every subsample of a
+    search: the screen, the rescoring and an unscreened search (issue 15: each subsample size compiled its own,
+    0.3 s a candidate model in a first selection), and a `fit_many` batch of M materials makes as many calls as
+    one material (called material by material, the calls' dispatch and the data's transfers were a quarter of a
+    `fit_many`, issue 19).
 
     Arguments:
         problem: the problem, with `separable` set for the scoring (amplitudes projected with the loss's
@@ -243,45 +269,40 @@ def score(problem: Problem, candidates: list, data: FitData, width: int = SCORE_
     """
     names = problem.linear
     quadratic = get_loss(problem.loss).linear and problem.robust is None
-    sums = _sums_fn(problem.structure) if names else None
     specs = problem.specs
     lower, upper = [specs[a].lower for a in names], [specs[a].upper for a in names]
-    materials = material_pieces(data, int(np.shape(data.values)[1]) if piece is None else piece)
-    if isinstance(candidates[0], list):
-        batches = [_batches(listed, width) for listed in candidates]
-    else:  # stacked and sent once for every material
-        batches = [_batches(candidates, width)] * len(materials)
-    counts = [count for count, _, _ in batches[0]]
+    materials, n = np.shape(data.values)[:2]
+    pieces = sample_pieces(data, n if piece is None else piece)
+    batches = _batches(candidates, materials, width)
 
-    def added(outputs):  # the sums of a call's pieces, on the host
+    def added(program, params):  # a program's outputs summed over the pieces, on the host, cut to the chunk
+        params = on_device(params)
+        outputs = [program(params, p) for p in pieces]
         return [sum(np.asarray(out[j], dtype=float) for out in outputs) for j in range(len(outputs[0]))]
 
     amplitudes = {}
     if names:
-        # Every candidate's sums on the device, material by material, then one bounded solve of them all.
-        per_material = [[added([sums(batch[2], p) for p in pieces]) for batch in chunks]
-                        for chunks, pieces in zip(batches, materials)]
-        c0, gram, rhs = (np.concatenate([np.concatenate([out[j][:, :count] for out, count in zip(material, counts)],
-                                                        axis=1) for material in per_material]) for j in range(3))
+        # Every candidate's sums on the device, then one bounded solve of them all.
+        sums = _sums_fn(problem.structure)
+        outs = [[a[:, :count] for a in added(sums, batch)] for count, batch in batches]
+        c0, gram, rhs = (np.concatenate([out[j] for out in outs], axis=1) for j in range(3))
         a = solve_box(gram, rhs, lower, upper)  # (M, B, C, K)
         amplitudes = {name: a[..., k] for k, name in enumerate(names)}
     if names and quadratic:
-        costs = np.sum(c0 - 2.0 * np.sum(a * rhs, axis=-1) + np.einsum("...k,...kl,...l->...", a, gram, a), axis=-1)
-    else:  # scored by the loss itself at the solved amplitudes
-        costs, start = np.zeros((len(materials), sum(counts))), 0
-        for b, count in enumerate(counts):
-            for m, (chunks, pieces) in enumerate(zip(batches, materials)):
-                solved = {name: _padded(value[m, start:start + count], width) for name, value in amplitudes.items()}
-                params = jax.tree_util.tree_map(to_device, dict(chunks[b][1], **solved))
-                costs[m, start:start + count] = added([(_cost_fn(problem.structure)(params, p),)
-                                                       for p in pieces])[0][0, :count]
-            start += count
-    return costs, amplitudes
+        return np.sum(c0 - 2.0 * np.sum(a * rhs, axis=-1) + np.einsum("...k,...kl,...l->...", a, gram, a),
+                      axis=-1), amplitudes
+    # Scored by the loss itself at the solved amplitudes.
+    costs, start = [], 0
+    for count, batch in batches:
+        solved = {name: _padded(value[:, start:start + count], width) for name, value in amplitudes.items()}
+        costs.append(added(_cost_fn(problem.structure), dict(batch, **solved))[0][:, :count])
+        start += count
+    return np.concatenate(costs, axis=1), amplitudes
 
 
 def _padded(values: np.ndarray, width: int) -> np.ndarray:
-    """``values`` ``(B, ...)`` padded to ``width`` rows by repeating the last (as `_batches` pads candidates)."""
-    return np.concatenate([values, np.repeat(values[-1:], width - len(values), axis=0)])
+    """``values`` ``(M, B, ...)`` padded to ``width`` candidates by repeating the last (as `_batches` pads)."""
+    return np.concatenate([values, np.repeat(values[:, -1:], width - values.shape[1], axis=1)], axis=1)
 
 
 def _separated(costs, units, count: int, separation: float) -> list[int]:
