@@ -23,7 +23,7 @@ from ._lazy import module
 
 jax = module("jax")  # loaded on first use: the readers import this module, and `brdffit info` loads no JAX
 
-__all__ = ["to_device", "on_device", "on_host", "traced", "jitted", "padded_columns", "COLUMN_CHUNK"]
+__all__ = ["to_device", "on_device", "on_host", "host_arrays", "traced", "jitted", "padded_columns", "COLUMN_CHUNK"]
 
 # The most samples of one call of `padded_columns` (bounds the memory of a MERL-size table's intermediates).
 COLUMN_CHUNK = 1 << 18
@@ -52,6 +52,16 @@ def to_device(value, dtype=None):
     return jax.device_put(array.astype(jax.dtypes.canonicalize_dtype(array.dtype), copy=False))
 
 
+def host_arrays(tree):
+    """Every leaf of ``tree`` as a NumPy array of the dtype `to_device` would give it on the device (float64 ->
+    float32 without float64 mode): data that a pipeline stacks or cuts on the host before it moves them once."""
+    def host(leaf):
+        array = np.asarray(leaf)
+        return array.astype(jax.dtypes.canonicalize_dtype(array.dtype), copy=False)
+
+    return jax.tree_util.tree_map(host, tree)
+
+
 def on_device(tree):
     """Every leaf of ``tree`` (a NamedTuple, a dict, ...) as `to_device` gives it, the host leaves moved by one
     ``jax.device_put`` (one call a leaf took ~1.8 times as long: ~30 µs a leaf, and a `fit_many` pass moves
@@ -64,13 +74,11 @@ def on_device(tree):
         The same tree of JAX arrays on the default device.
     """
     leaves, structure = jax.tree_util.tree_flatten(tree)
-    out, host = list(leaves), []
+    out = list(leaves)
+    host = [(i, host_arrays(leaf)) for i, leaf in enumerate(leaves) if not isinstance(leaf, jax.Array)]
     for i, leaf in enumerate(leaves):
         if isinstance(leaf, jax.Array):
             out[i] = to_device(leaf)
-        else:
-            array = np.asarray(leaf)
-            host.append((i, array.astype(jax.dtypes.canonicalize_dtype(array.dtype), copy=False)))
     if host:
         for (i, _), moved in zip(host, jax.device_put([array for _, array in host])):
             out[i] = moved

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import to_device
+from ..arrays import host_arrays, to_device
 from ..metrics import fit_sums, metrics_from_sums
 from ..models.model import Model
 from ..models.registry import get as get_model
@@ -546,8 +546,8 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
     bar.update(0, "search")
     t0 = time.perf_counter()
 
-    # Every subsample is gathered from the whole data's fields (one compiled program of the fields per file size).
-    full = [make_fit_data(m, fixed_values, e, 1.0, pad=True) for m, e in zip(items, eps)]
+    # The data's arrays stay NumPy until `stack_data` moves a stack of them (every subsample is cut from `full`).
+    full = [make_fit_data(m, fixed_values, e, 1.0, pad=True, device=False) for m, e in zip(items, eps)]
 
     def subsample(m, limit):
         rows = items[m].subsample_rows(limit, seed=seed)
@@ -568,7 +568,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         scales = [robust_scale if robust_scale is not None else 1.0] * len(items)
     init_time = time.perf_counter() - t0
 
-    full = [d._replace(robust_scale=to_device(s, dtype=float)) for d, s in zip(full, scales)]
+    full = [d._replace(robust_scale=host_arrays(np.asarray(s, dtype=float))) for d, s in zip(full, scales)]
     if two_stage:
         solve_items = [subsample(m, COARSE_SAMPLES) for m in range(len(items))]
         loose = coarse_solver(solver, max(COARSE_RTOL, rtol), max(COARSE_ATOL, atol)) \

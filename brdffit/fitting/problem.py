@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import on_device, on_host, to_device
+from ..arrays import host_arrays, on_device, on_host, to_device
 from ..geometry import LocalPair, spherical_to_vector
 from ..models.layout import Layout, layout
 from ..models.model import Model, evaluate_pair
@@ -140,7 +140,8 @@ def bucket(n: int) -> int:
     return next(size for size in _BUCKETS if size >= n)
 
 
-def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad: bool = False) -> FitData:
+def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad: bool = False,
+                  device: bool = True) -> FitData:
     """Build `FitData` from `brdffit.Measurements`.
 
     Arguments:
@@ -149,6 +150,9 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad
         eps: ``(C,)`` the relative loss's ε.
         robust_scale: scale of the robust loss.
         pad: append missing samples (at normal incidence and exitance, masked) up to `bucket` of the count.
+        device: put the arrays on the device; False leaves them NumPy arrays (`brdffit.arrays.host_arrays`) for a
+            pipeline that cuts and stacks them first (`take_samples`, `stack_data`, `sample_pieces`: a `fit_many`
+            moved each material's arrays to the device and back before stacking them, issue 19).
 
     Returns:
         The `FitData`.
@@ -162,15 +166,16 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad
         a = np.asarray(a, dtype=float)
         return np.concatenate([a, np.full((extra,) + a.shape[1:], fill)]) if extra else a
 
-    pair, values, mask, cos_i, sqrt_weight, sigma = on_device(_sample_fields(
+    pair, values, mask, cos_i, sqrt_weight, sigma = _sample_fields(
         host(measurements.values, np.nan), *(host(getattr(measurements, k))
                                              for k in ("theta_i", "phi_i", "theta_o", "phi_o")),
-        host(measurements.weights, 1.0), host(measurements.sigma, 1.0)))
-    as_array = lambda a: to_device(a, dtype=float)  # noqa: E731
-    return FitData(
+        host(measurements.weights, 1.0), host(measurements.sigma, 1.0))
+    as_array = lambda a: np.asarray(a, dtype=float)  # noqa: E731
+    data = FitData(
         pair=pair, values=values, mask=mask, cos_i=cos_i, sqrt_weight=sqrt_weight, sigma=sigma, eps=as_array(eps),
         robust_scale=as_array(robust_scale), fixed={k: as_array(v) for k, v in fixed.items()},
     )
+    return on_device(data) if device else host_arrays(data)
 
 
 # The data's own arrays (their fields, subsamples, stacks, pieces) are computed on the host in NumPy and moved to
@@ -202,7 +207,8 @@ def _shared(data: FitData, index) -> dict:
 
 def take_samples(data: FitData, rows) -> FitData:
     """The samples ``rows`` (sorted indices into one material's ``data``) as `FitData` of `bucket` of their count
-    samples, the padding masked: the `make_fit_data` of those rows of the measurements (``pad=True``).
+    samples, the padding masked: the `make_fit_data` of those rows of the measurements (``pad=True``), as NumPy
+    arrays (``device=False``; `stack_data` moves them).
 
     Arguments:
         data: one material's `FitData` (no material axis).
@@ -217,7 +223,7 @@ def take_samples(data: FitData, rows) -> FitData:
     index = np.concatenate([rows, np.zeros(size - rows.size, np.intp)])
     fields = jax.tree_util.tree_map(lambda a: a[index], on_host(_per_sample(data)))
     mask = fields["mask"] & valid[:, None]
-    return data._replace(**on_device(dict(fields, mask=mask, values=np.where(mask, fields["values"], 0.0))))
+    return host_arrays(data._replace(**dict(fields, mask=mask, values=np.where(mask, fields["values"], 0.0))))
 
 
 def stack_data(items: list[FitData]) -> FitData:
