@@ -28,20 +28,26 @@ os.environ.setdefault("JAX_PLATFORMS", "cpu")
 SPEC = "lambert+ggx"
 
 
+def material(i: int, samples: int):
+    """Material ``i`` of the database: Lambert + GGX with parameters varied by ``i``, ``samples`` uniform samples
+    with 1% relative noise seeded by ``i`` (`brdffit.Measurements`)."""
+    from brdffit import models, synth
+
+    truth = models.get(SPEC, alpha=0.05 + 0.4 * (i % 97) / 97, ks=[0.05 + 0.3 * (i % 13) / 13] * 3,
+                       rho_d=[0.2 + 0.6 * (i % 7) / 7] * 3)
+    return synth.generate(truth, n=samples, noise="relative:0.01", seed=i)
+
+
 def make_database(folder: Path, count: int, samples: int) -> list[str]:
-    """``count`` Lambert + GGX materials with varied parameters, one HDF5 file each (a file already in ``folder``
-    is kept: it holds what would be written, the data seeded by the material's number)."""
-    from brdffit import io, models, synth
+    """``count`` materials (`material`), one HDF5 file each (a file already in ``folder`` is kept: it holds what
+    would be written, the data seeded by the material's number)."""
+    from brdffit import io
 
     paths = []
     for i in range(count):
         path = folder / f"m{i:04d}.h5"
-        if path.exists():
-            paths.append(str(path))
-            continue
-        truth = models.get(SPEC, alpha=0.05 + 0.4 * (i % 97) / 97, ks=[0.05 + 0.3 * (i % 13) / 13] * 3,
-                           rho_d=[0.2 + 0.6 * (i % 7) / 7] * 3)
-        io.save(synth.generate(truth, n=samples, noise="relative:0.01", seed=i), path)
+        if not path.exists():
+            io.save(material(i, samples), path)
         paths.append(str(path))
     return paths
 
