@@ -179,16 +179,26 @@ def quasi_random_starts(problem: Problem, count: int, seed: int) -> list[dict]:
     return [{s.name: _from_unit(u[k], s) for k, s in enumerate(specs)} for u in units]
 
 
+def _materials_a_step(materials: int) -> int:
+    """The materials of a batch that the search's program scores together: one on a CPU, whose cache holds one
+    material's (candidates × samples) intermediates but not a batch's (`_over_materials`); all of them on an
+    accelerator, whose parallelism needs them."""
+    return 1 if jax.default_backend() == "cpu" else materials
+
+
 def _over_materials(one, name: str) -> Program:
     """``one(params, data)`` of one candidate and one material, compiled for ``(M, B)`` candidates and data with a
-    leading material axis M: the candidates vmapped, the materials one after another in the program
-    (``lax.map``). Vmapped over the materials too, the ``(M, B, N)`` intermediates of a `fit_many` batch left the
-    cache: its search ran 2.3 times slower than this (issue 19, docs/benchmarks.md)."""
+    leading material axis M: the candidates vmapped, the materials `_materials_a_step` at a time in the program
+    (``lax.map``): one after another on a CPU, where vmapped over the materials too, the ``(M, B, N)``
+    intermediates of a `fit_many` batch left the cache (its search ran 2.3 times slower; 1, 2 or 4 materials a
+    step ran alike; issue 19, docs/benchmarks.md)."""
     per_material = jax.vmap(one, in_axes=(0, None))
 
     @functools.wraps(one)  # its name in JAX's logs and profiles
     def over_materials(params, data):
-        return jax.lax.map(lambda args: per_material(*args), (params, data))
+        materials = jax.tree_util.tree_leaves(data)[0].shape[0]
+        return jax.lax.map(lambda args: per_material(*args), (params, data),
+                           batch_size=_materials_a_step(materials))
 
     return Program(over_materials, name)
 
