@@ -74,13 +74,10 @@ def on_device(tree):
         The same tree of JAX arrays on the default device.
     """
     leaves, structure = jax.tree_util.tree_flatten(tree)
-    out = list(leaves)
-    host = [(i, host_arrays(leaf)) for i, leaf in enumerate(leaves) if not isinstance(leaf, jax.Array)]
-    for i, leaf in enumerate(leaves):
-        if isinstance(leaf, jax.Array):
-            out[i] = to_device(leaf)
+    out = [to_device(leaf) if isinstance(leaf, jax.Array) else host_arrays(leaf) for leaf in leaves]
+    host = [i for i, leaf in enumerate(leaves) if not isinstance(leaf, jax.Array)]
     if host:
-        for (i, _), moved in zip(host, jax.device_put([array for _, array in host])):
+        for i, moved in zip(host, jax.device_put([out[i] for i in host])):
             out[i] = moved
     return structure.unflatten(out)
 

@@ -25,7 +25,6 @@ import dataclasses
 import time
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from ..arrays import host_arrays, to_device

@@ -158,11 +158,11 @@ def compile_seconds() -> float:
 
 def metric_sums_of(values: list, pieces: list[FitData], materials=None) -> np.ndarray:
     """The metric sums ``(M, S, R, C)`` of a pass's model values (`accumulate` with ``values=True``: one
-    ``(M, S, N, C)`` array per piece) against the pieces' data (material ``materials[i]`` for row i, when given),
-    `brdffit.metrics.metric_sums` in NumPy on the
-    host: they do not depend on the model, and a solver asks for them at its answers only (one point a material),
-    so a compiled program only added its compilation to a first fit (0.43-0.46 s; issue 15). The errors are
-    ignored as XLA ignores them (a value below -1/cosθi has no log-loss term: NaN, as in the compiled sums)."""
+    ``(M, S, N, C)`` array per piece) against the pieces' data (row i against material ``materials[i]``, when
+    given), `brdffit.metrics.metric_sums` in NumPy on the host: they do not depend on the model, and a solver asks
+    for them at its answers only (one point a material), so a compiled program only added its compilation to a
+    first fit (0.43-0.46 s; issue 15). The errors are ignored as XLA ignores them (a value below -1/cosθi has no
+    log-loss term: NaN, as in the compiled sums)."""
     total = 0.0
     index = slice(None) if materials is None else np.asarray(materials)
     with np.errstate(all="ignore"):
@@ -232,7 +232,8 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
                                cost=np.sum(channel_cost, axis=-1),
                                meat=meat_of(problem, [a for a, _ in kept]) if meat else None,
                                channel_cost=channel_cost,
-                               metric_sums=metric_sums_of([f for _, f in kept], pieces, materials) if metrics else None)
+                               metric_sums=(metric_sums_of([f for _, f in kept], pieces, materials) if metrics
+                                            else None))
     return (sums, kept) if values else sums
 
 
