@@ -30,6 +30,7 @@ import brdffit
 from brdffit import io, models, synth
 from brdffit.cli import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_OK, main
 from brdffit.distributed import expand_sources, fit_database, read_results, tasks, write_results
+from brdffit.distributed.database import local_cluster
 from brdffit.distributed.sources import read_sources
 from brdffit.distributed.tasks import fit_batch, result_row
 from brdffit.io.hdf5 import write_measurements_group
@@ -96,11 +97,29 @@ def serial(database) -> dict:
 
 @pytest.fixture(scope="module")
 def client(jax_on_cpu):
-    from distributed import Client, LocalCluster
+    """fit_database's own local cluster of two workers (`local_cluster`)."""
+    from distributed import Client
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster, Client(cluster) as connected:
+    with local_cluster(2) as cluster, Client(cluster) as connected:
         yield connected
+
+
+def _thread_cores():
+    """The cores each thread of this process may run on, after XLA's threads started (run on a worker)."""
+    import jax.numpy as jnp
+
+    jnp.ones(3).sum().block_until_ready()
+    return sorted({tuple(sorted(os.sched_getaffinity(int(t)))) for t in os.listdir("/proc/self/task")})
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+                    reason="sharing out the cores needs Linux's affinity and at least two cores")
+def test_the_local_cluster_gives_each_worker_its_own_share_of_the_cores(client):
+    cores = sorted(os.sched_getaffinity(0))
+    shares = client.run(_thread_cores)
+    # Every thread of a worker, XLA's too, on that worker's share; the two shares split the cores between them.
+    assert all(len(threads) == 1 for threads in shares.values()), shares
+    assert sorted(threads[0] for threads in shares.values()) == [tuple(cores[0::2]), tuple(cores[1::2])]
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,8 @@
 - `sources`: what is read: a file per material, or the material groups of a multi-material HDF5 file;
 - `tasks`: what the workers do: read shapes, fit a batch of equally shaped materials, make rows;
 - `table`: the results table (``.h5``, ``.csv``, ``.parquet``), written atomically;
-- `database`: `fit_database`, the client that plans the batches and records the rows.
+- `database`: `fit_database`, the client that plans the batches and records the rows, and its local cluster;
+- `affinity`: the local cluster's cores shared out among its workers.
 
 The public names are imported on first use (`brdffit._lazy`), so that importing brdffit never loads Dask.
 """

@@ -105,7 +105,8 @@ def _connected(client, workers: int | None):
 
 
 def local_cluster(workers: int):
-    """A LocalCluster of ``workers`` single-threaded worker processes on 127.0.0.1, started without the
+    """A LocalCluster of ``workers`` single-threaded worker processes on 127.0.0.1, each pinned to its share of the
+    cores where there are at least as many cores (`brdffit.distributed.affinity.PinnedCore`), started without the
     ``MALLOC_TRIM_THRESHOLD_`` that Dask's nannies set by default (``distributed.nanny.pre-spawn-environ``).
 
     Setting that variable turns off glibc's dynamic mmap threshold, so every large array of a fit is mapped and
@@ -123,9 +124,15 @@ def local_cluster(workers: int):
     import dask
     from distributed import LocalCluster
 
+    cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    plugins = set()
+    if 0 < workers <= len(cores):
+        from .affinity import PinnedCore
+
+        plugins.add(PinnedCore(cores, workers))
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                            dashboard_address=None)
+                            dashboard_address=None, plugins=plugins)
 
 
 class _Record:
