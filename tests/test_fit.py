@@ -123,6 +123,24 @@ def test_fit_many_matches_fits_one_by_one():
         assert batched.status == alone.status
 
 
+@pytest.mark.slow
+def test_fit_many_of_large_data_solves_the_coarse_stage_together_and_matches_fits_one_by_one():
+    # 60,000 samples × 3 channels is beyond COARSE_RESIDUALS: each material is solved on a 10,000-sample subsample
+    # (three materials × four starts: a compact batch, whose answers carry no sandwich middle) and refined on all
+    # of its samples. Such a batch raised TypeError before (NormalEquations.at_point indexed the absent meat).
+    sets = [synth.generate(models.get("lambert+ggx", alpha=0.1 + 0.05 * k), n=60_000, noise="relative:0.01", seed=k)
+            for k in range(3)]
+    together = fit_many(sets, "lambert+ggx")
+    for k, (data, batched) in enumerate(zip(sets, together)):
+        alone = fit(data, "lambert+ggx")
+        assert batched.strategy == alone.strategy == "coarse (10000 samples) + refine"
+        assert batched.status == alone.status == "converged"
+        assert batched.cost == pytest.approx(alone.cost, rel=1e-8)
+        for name in alone.params:
+            np.testing.assert_allclose(batched.params[name], alone.params[name], rtol=1e-5, atol=1e-10)
+        assert float(batched.params["alpha"]) == pytest.approx(0.1 + 0.05 * k, rel=0.01)  # the truth
+
+
 def test_fit_many_rejects_unequal_shapes():
     a = synth.generate("lambert", n=100, seed=0)
     b = synth.generate("lambert", n=120, seed=0)

@@ -47,7 +47,8 @@ class NormalEquations(NamedTuple):
         jtj: JᵀJ ``(..., P, P)``.
         jtr: Jᵀr ``(..., P)``.
         cost: rᵀr ``(...)``.
-        meat: Jᵀ diag(r²) J ``(..., P, P)`` (the sandwich covariance's middle).
+        meat: Jᵀ diag(r²) J ``(..., P, P)`` (the sandwich covariance's middle), or None where the pass was not
+            asked for it.
         channel_cost: rᵀr of each channel ``(..., C)``.
         metric_sums: the sums of `brdffit.metrics.metric_sums` ``(..., R, C)`` (its R rows: the metrics' and the
             noise models') at the evaluated point when `accumulate` was asked for them, else None
@@ -63,8 +64,9 @@ class NormalEquations(NamedTuple):
 
     def at_point(self, m: int, s: int) -> "NormalEquations":
         """The sums of point ``(m, s)`` of the batch."""
-        return NormalEquations(self.jtj[m, s], self.jtr[m, s], float(self.cost[m, s]), self.meat[m, s],
-                               self.channel_cost[m, s], None if self.metric_sums is None else self.metric_sums[m, s])
+        return NormalEquations(self.jtj[m, s], self.jtr[m, s], float(self.cost[m, s]),
+                               None if self.meat is None else self.meat[m, s], self.channel_cost[m, s],
+                               None if self.metric_sums is None else self.metric_sums[m, s])
 
 
 def _tangent_groups(problem: Problem) -> list[tuple]:
