@@ -48,8 +48,7 @@ def to_device(value, dtype=None):
             import jax.numpy as jnp
 
             return jnp.asarray(value, dtype=dtype)
-    array = np.asarray(value, dtype=dtype)
-    return jax.device_put(array.astype(jax.dtypes.canonicalize_dtype(array.dtype), copy=False))
+    return jax.device_put(host_arrays(np.asarray(value, dtype=dtype)))
 
 
 def host_arrays(tree):
@@ -74,10 +73,10 @@ def on_device(tree):
         The same tree of JAX arrays on the default device.
     """
     leaves, structure = jax.tree_util.tree_flatten(tree)
-    out = [to_device(leaf) if isinstance(leaf, jax.Array) else host_arrays(leaf) for leaf in leaves]
     host = [i for i, leaf in enumerate(leaves) if not isinstance(leaf, jax.Array)]
+    out = [to_device(leaf) if isinstance(leaf, jax.Array) else leaf for leaf in leaves]
     if host:
-        for i, moved in zip(host, jax.device_put([out[i] for i in host])):
+        for i, moved in zip(host, jax.device_put([host_arrays(leaves[i]) for i in host])):
             out[i] = moved
     return structure.unflatten(out)
 

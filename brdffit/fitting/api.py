@@ -567,7 +567,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         scales = [robust_scale if robust_scale is not None else 1.0] * len(items)
     init_time = time.perf_counter() - t0
 
-    full = [d._replace(robust_scale=host_arrays(np.asarray(s, dtype=float))) for d, s in zip(full, scales)]
+    full = [d._replace(robust_scale=host_arrays(float(s))) for d, s in zip(full, scales)]
     if two_stage:
         solve_items = [subsample(m, COARSE_SAMPLES) for m in range(len(items))]
         loose = coarse_solver(solver, max(COARSE_RTOL, rtol), max(COARSE_ATOL, atol)) \

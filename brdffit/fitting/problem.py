@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import host_arrays, on_device, on_host, to_device
+from ..arrays import host_arrays, on_device, on_host
 from ..geometry import LocalPair, spherical_to_vector
 from ..models.layout import Layout, layout
 from ..models.model import Model, evaluate_pair
@@ -194,15 +194,9 @@ def _sample_fields(values, theta_i, phi_i, theta_o, phi_o, weights, sigma):
 
 
 def _per_sample(data: FitData) -> dict:
-    """The per-sample fields of ``data``: the programs that cut and gather samples take only these, so that one
-    compilation serves every model (the other fields' structure, ``fixed``, differs between models)."""
+    """The per-sample fields of ``data``, which a subsample cuts (the others, ε, the robust scale and the fixed
+    values, are a few numbers a material)."""
     return {k: getattr(data, k) for k in _PER_SAMPLE}
-
-
-def _shared(data: FitData, index) -> dict:
-    """The other fields (ε, the robust scale, the fixed values: a few numbers a material) indexed on the host."""
-    return {k: jax.tree_util.tree_map(lambda a: to_device(np.asarray(a)[index]), getattr(data, k))
-            for k in data._fields if k not in _PER_SAMPLE}
 
 
 def take_samples(data: FitData, rows) -> FitData:
@@ -236,8 +230,7 @@ def take_materials(data: FitData, materials) -> FitData:
     """The materials ``materials`` (integer indices, repeats allowed) of stacked ``data`` (`stack_data`), stacked
     in that order."""
     materials = np.asarray(materials, dtype=np.intp)
-    taken = jax.tree_util.tree_map(lambda a: a[materials], on_host(_per_sample(data)))
-    return FitData(**on_device(taken), **_shared(data, materials))
+    return on_device(jax.tree_util.tree_map(lambda a: a[materials], on_host(data)))
 
 
 def sample_pieces(data: FitData, size: int) -> list[FitData]:
