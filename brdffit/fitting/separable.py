@@ -120,6 +120,21 @@ def _spd_solve(a, b, xp=jnp):
     return xp.stack(x, axis=-1)
 
 
+def _scaled_system(gram, rhs, xp):
+    """``(diagonal, scale, g, b)``: the Jacobi-scaled system of the bounded solves (the basis functions of a diffuse
+    and a sharp lobe differ by decades in magnitude), with the relative ridge `_RIDGE`."""
+    k = gram.shape[-1]
+    diagonal = xp.diagonal(gram, axis1=-2, axis2=-1)
+    scale = xp.sqrt(xp.maximum(diagonal, _NEGLIGIBLE_COLUMN))  # (..., K)
+    return diagonal, scale, gram / (scale[..., :, None] * scale[..., None, :]) + _RIDGE * np.eye(k), rhs / scale
+
+
+def _inside(a, lower, upper, xp, slack: float = 1e-10):
+    """Whether each solution ``(..., K)`` lies in the box, to a relative ``slack`` (negative: that far inside)."""
+    slack = slack * (1.0 + xp.abs(a))
+    return xp.all((a >= lower - slack) & (a <= upper + slack), axis=-1)
+
+
 def _enumerate_box_qp(gram, rhs, lower, upper, patterns, xp=jnp):
     """argmin ½ aᵀ G a − bᵀ a over lower <= a <= upper, by enumerating the active sets (see the module doc).
 
@@ -134,11 +149,7 @@ def _enumerate_box_qp(gram, rhs, lower, upper, patterns, xp=jnp):
         ``(a, free)``: the optima ``(..., K)`` and the masks of their amplitudes off their bounds.
     """
     k = gram.shape[-1]
-    diagonal = xp.diagonal(gram, axis1=-2, axis2=-1)
-    # Jacobi scaling: the basis functions of a diffuse and a sharp lobe differ by decades in magnitude.
-    scale = xp.sqrt(xp.maximum(diagonal, _NEGLIGIBLE_COLUMN))  # (..., K)
-    g = gram / (scale[..., :, None] * scale[..., None, :]) + _RIDGE * np.eye(k)
-    b = rhs / scale
+    diagonal, scale, g, b = _scaled_system(gram, rhs, xp)
     lo = np.where(np.isfinite(lower), lower, 0.0)
     hi = np.where(np.isfinite(upper), upper, 0.0)
     codes = np.asarray(patterns)
@@ -149,8 +160,7 @@ def _enumerate_box_qp(gram, rhs, lower, upper, patterns, xp=jnp):
     lhs = free[:, :, None] * g[..., None, :, :] * free[:, None, :] + np.eye(k) * (1.0 - free)[:, :, None]
     cand = _spd_solve(lhs, free * (b[..., None, :] - held @ g) + held, xp)  # (..., P, K) scaled
     a = cand / scale[..., None, :]
-    slack = 1e-10 * (1.0 + xp.abs(a))
-    feasible = xp.all((a >= lower - slack) & (a <= upper + slack), axis=-1)
+    feasible = _inside(a, lower, upper, xp)
     # A negligible column's amplitude is never free (`_NEGLIGIBLE_COLUMN`; an amplitude without a lower bound
     # has no other pattern, and keeps its solve).
     negligible = (diagonal < _NEGLIGIBLE_COLUMN) & np.isfinite(lower)  # (..., K)
@@ -257,16 +267,29 @@ def solve_box(gram, rhs, lower, upper) -> np.ndarray:
     NumPy on the host (the full-data passes of `brdffit.fitting.marquardt` re-solve the amplitudes from their
     sums this way, batched over points and channels).
 
+    The problem is convex, so where its unconstrained optimum (the all-free pattern, the enumeration's first)
+    lies in the box and no column is negligible, it is the optimum: only the other systems enumerate their active
+    sets. An optimum within 1e-8 (relative) of a bound is enumerated too, so that an amplitude that the data do
+    not want lands exactly on its bound, as the enumeration puts it (a free solve left ks = 2e-15). Nearly all of a search's or a polish's systems are such (99.6% of the candidates of a `fit_many` batch of
+    Lambert + GGX materials), and the enumeration of 6 patterns was 12% of a `fit_many` (issue 19).
+
     Arguments:
         gram: G ``(..., K, K)``; rhs: b ``(..., K)``; lower, upper: sequences of K bounds (±inf for none).
 
     Returns:
         The optima as a NumPy array ``(..., K)``.
     """
-    lower = tuple(float(v) for v in lower)
-    upper = tuple(float(v) for v in upper)
-    return _enumerate_box_qp(np.asarray(gram, dtype=float), np.asarray(rhs, dtype=float), np.asarray(lower),
-                             np.asarray(upper), box_patterns(lower, upper), xp=np)[0]
+    lower = np.array([float(v) for v in lower])
+    upper = np.array([float(v) for v in upper])
+    gram, rhs = np.asarray(gram, dtype=float), np.asarray(rhs, dtype=float)
+    diagonal, scale, g, b = _scaled_system(gram, rhs, np)
+    a = _spd_solve(g, b, np) / scale
+    done = _inside(a, lower, upper, np, slack=-1e-8) & ~np.any((diagonal < _NEGLIGIBLE_COLUMN) & np.isfinite(lower), axis=-1)
+    if not np.all(done):
+        rest = ~done
+        a[rest] = _enumerate_box_qp(gram[rest], rhs[rest], lower, upper, box_patterns(tuple(lower), tuple(upper)),
+                                    xp=np)[0]
+    return np.clip(a, lower, upper)
 
 
 def _weights(problem: Problem, data: FitData):
