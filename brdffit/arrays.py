@@ -70,7 +70,7 @@ def on_device(tree):
         tree: a pytree of NumPy arrays, numbers or JAX arrays.
 
     Returns:
-        The same tree of JAX arrays on the default device.
+        The same tree of JAX arrays on the default device (a dict in its own order of keys, not JAX's sorted one).
     """
     leaves, structure = jax.tree_util.tree_flatten(tree)
     host = [i for i, leaf in enumerate(leaves) if not isinstance(leaf, jax.Array)]
@@ -78,7 +78,8 @@ def on_device(tree):
     if host:
         for i, moved in zip(host, jax.device_put([host_arrays(leaves[i]) for i in host])):
             out[i] = moved
-    return structure.unflatten(out)
+    moved = structure.unflatten(out)
+    return {key: moved[key] for key in tree} if type(tree) is dict else moved
 
 
 def on_host(tree):

@@ -10,7 +10,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import to_device, traced
+from ..arrays import on_device, traced
 from ..fitting.programs import Program
 from ..geometry import LocalPair, spherical_to_vector
 from ..params import ParamSpec, ParamTable
@@ -72,10 +72,8 @@ class Model(eqx.Module):
             KeyError: for an unknown name. ValueError: for a value of the wrong shape.
         """
         table = self.param_specs
-        new = dict(self.params)
-        for name, value in params.items():
-            new[name] = coerce_value(table[name], value, self.channels)
-        return Model(params=new, lobes=self.lobes, channels=self.channels)
+        new = {name: coerce_value(table[name], value, self.channels) for name, value in params.items()}
+        return Model(params=dict(self.params, **on_device(new)), lobes=self.lobes, channels=self.channels)
 
     def __call__(self, wi, wo):
         """Same as `evaluate_dirs(self, wi, wo)`."""
@@ -84,7 +82,8 @@ class Model(eqx.Module):
 
 def coerce_value(spec: ParamSpec, value, channels: int):
     """Turn a user-given value into the stored shape of ``spec``, or raise a ValueError that names it. A host value
-    is shaped in NumPy and moved to the device once (`brdffit.arrays`: no compiled program); a traced one stays
+    is shaped in NumPy and stays on the host: the caller moves a model's values with one `brdffit.arrays.on_device`
+    (no compiled program; a transfer a value was a third of a `fit_many`'s results, issue 19); a traced one stays
     traced."""
     on_tracer = traced(value)
     xp = jnp if on_tracer else np
@@ -99,7 +98,7 @@ def coerce_value(spec: ParamSpec, value, channels: int):
     elif value.ndim != 0:
         raise ValueError(f"shape parameter {spec.name!r} is shared by all channels and needs a scalar, "
                          f"got shape {value.shape}")
-    return value if on_tracer else to_device(value)
+    return value
 
 
 # `evaluate_dirs` and `evaluate` are compiled: one compilation per model structure and input shape, instead of one

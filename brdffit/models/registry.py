@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import re
 
+from .. import arrays
 from .._lazy import module
 from .ashikhmin_shirley import AshikhminShirley, AshikhminShirleyAniso
 from .cook_torrance import GGX, CookTorrance
@@ -154,8 +155,8 @@ def get(spec, channels: int = 3, **options_and_params) -> "Model":
     if unknown:
         raise ValueError(f"model {spec!r} has no parameter or option {sorted(unknown)[0]!r}; parameters: "
                          f"{', '.join(s.name for s in specs)}")
-    params = {s.name: _model.coerce_value(s, values[s.name], channels) if s.name in values else s.initial(channels)
-              for s in specs}
+    params = arrays.on_device({s.name: _model.coerce_value(s, values[s.name], channels) if s.name in values
+                               else s.initial(channels) for s in specs})
     return _model.Model(params=params, lobes=lobes, channels=channels)
 
 
