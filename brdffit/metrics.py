@@ -44,38 +44,38 @@ def metric_sums(f_model, values, valid, cos_i, weights, xp=jnp):
     shares (`brdffit.fitting.normal_equations.accumulate`).
 
     Arguments:
-        f_model: model values ``(N, C)``.
-        values: data ``(N, C)`` (any value where not ``valid``).
-        valid: ``(N, C)`` True where the data count.
-        cos_i: ``(N,)`` cosθi.
-        weights: ``(N,)`` quadrature weights.
+        f_model: model values ``(..., N, C)`` (leading axes: independent sets of samples, summed apart).
+        values: data ``(..., N, C)`` (any value where not ``valid``).
+        valid: ``(..., N, C)`` True where the data count.
+        cos_i: ``(..., N)`` cosθi.
+        weights: ``(..., N)`` quadrature weights.
         xp: `jax.numpy` (traced) or ``numpy``.
 
     Returns:
-        ``(15, C)``: for each metric of `METRICS` its numerator, then its denominator; then the rows of
+        ``(..., 15, C)``: for each metric of `METRICS` its numerator, then its denominator; then the rows of
         `NOISE_ROWS`, over the valid samples with cosθi ≥ `NOISE_MIN_COS` among every k-th (`NOISE_SAMPLES`),
         with d = f_m − f_d, f̃ = max(f_m, `MODEL_FLOOR`) and ω = cosθi √w (the cosine loss's weight): their count,
         Σ d², Σ ln f̃, Σ d²/f̃, Σ d²/f̃², Σ ln ω and Σ ω² d².
     """
     f_data = xp.where(valid, values, 0.0)
-    c = cos_i[:, None]
-    w = xp.where(valid, weights[:, None], 0.0)
+    c = cos_i[..., None]
+    w = xp.where(valid, weights[..., None], 0.0)
     diff = xp.where(valid, f_model - f_data, 0.0)
     positive = valid & (f_data > 0)
     relative = xp.where(positive, diff / xp.where(positive, f_data, 1.0), 0.0)
     low = xp.where(valid, xp.log1p(xp.maximum(f_model * c, -0.999)) - xp.log1p(f_data * c), 0.0)
     terms = [diff * diff, valid, relative * relative, positive, w * (diff * c) ** 2, w, w * low * low, w]
-    step = max(1, f_model.shape[0] // NOISE_SAMPLES)
-    sub_valid = valid[::step] & (cos_i[::step] >= NOISE_MIN_COS)[:, None]
-    sub_diff = xp.where(sub_valid, diff[::step], 0.0)
-    floored = xp.where(sub_valid, xp.maximum(f_model[::step], MODEL_FLOOR), 1.0)
+    step = max(1, f_model.shape[-2] // NOISE_SAMPLES)
+    sub_valid = valid[..., ::step, :] & (cos_i[..., ::step] >= NOISE_MIN_COS)[..., None]
+    sub_diff = xp.where(sub_valid, diff[..., ::step, :], 0.0)
+    floored = xp.where(sub_valid, xp.maximum(f_model[..., ::step, :], MODEL_FLOOR), 1.0)
     d2 = sub_diff * sub_diff
     d2_over_f = d2 / floored
-    omega2 = (xp.maximum(cos_i[::step], NOISE_MIN_COS) ** 2 * weights[::step])[:, None]
+    omega2 = (xp.maximum(cos_i[..., ::step], NOISE_MIN_COS) ** 2 * weights[..., ::step])[..., None]
     log_weight = xp.where(sub_valid, 0.5 * xp.log(xp.maximum(omega2, 1e-300)), 0.0)
     terms += [sub_valid, d2, xp.log(floored), d2_over_f, d2_over_f / floored, log_weight,
               xp.where(sub_valid, omega2, 0.0) * d2]
-    return xp.stack([xp.sum(t, axis=0, dtype=diff.dtype) for t in terms])
+    return xp.stack([xp.sum(t, axis=-2, dtype=diff.dtype) for t in terms], axis=-2)
 
 
 def metrics_from_sums(sums) -> dict:

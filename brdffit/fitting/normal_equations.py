@@ -170,10 +170,12 @@ def metric_sums_of(values: list, pieces: list[FitData], materials=None) -> np.nd
     with np.errstate(all="ignore"):
         for f, piece in zip(values, pieces):
             f = np.asarray(f)
-            data, mask, cos_i, sqrt_weight = (a[index] for a in on_host((piece.values, piece.mask, piece.cos_i,
-                                                                          piece.sqrt_weight)))
-            total = total + np.array([[metric_sums(f[m, s], data[m], mask[m], cos_i[m], sqrt_weight[m] ** 2, xp=np)
-                                       for s in range(f.shape[1])] for m in range(f.shape[0])])
+            data, mask, cos_i, sqrt_weight = (a[index][:, None] for a in on_host((piece.values, piece.mask,
+                                                                                   piece.cos_i, piece.sqrt_weight)))
+            per_sample, per_value = f.shape[:-1], f.shape  # every point of a material against its data
+            total = total + metric_sums(f, np.broadcast_to(data, per_value), np.broadcast_to(mask, per_value),
+                                        np.broadcast_to(cos_i, per_sample),
+                                        np.broadcast_to(sqrt_weight ** 2, per_sample), xp=np)
     return total
 
 
