@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import brdffit  # noqa: F401  (float64)
-from brdffit.arrays import jitted, padded_columns, to_device
+from brdffit.arrays import jitted, on_device, padded_columns, to_device
 
 
 @pytest.mark.parametrize("value, dtype", [(np.arange(5.0), None), (np.arange(4), None), (np.arange(4), float),
@@ -102,3 +102,10 @@ def test_padded_columns_compiles_once_for_lengths_within_a_power_of_two(rng):
         (out,) = padded_columns(fn, np.ones(n), np.zeros(n))
         np.testing.assert_allclose(out, np.sin(1.0))
     assert TRACED == [(1024,)]
+
+
+def test_on_device_moves_a_dict_and_keeps_its_order_of_keys():
+    moved = on_device({"rho_d": np.ones(3), "ks": 0.5, "alpha": jnp.asarray(0.1)})
+    assert list(moved) == ["rho_d", "ks", "alpha"]
+    assert all(isinstance(v, jax.Array) for v in moved.values())
+    np.testing.assert_array_equal(moved["rho_d"], np.ones(3))

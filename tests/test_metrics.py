@@ -40,3 +40,20 @@ def test_metrics_match_numpy(n):
     for name in want:
         assert np.all(want[name] > 0)
         np.testing.assert_allclose(got[name], want[name], rtol=1e-10, err_msg=name)
+
+
+def test_metric_sums_over_leading_axes_equal_the_sums_of_each_set():
+    # The fits sum every point of a pass in one call with leading (material, point) axes; each set's sums must be
+    # those of its own call.
+    from brdffit.metrics import metric_sums
+
+    rng = np.random.default_rng(3)
+    f = rng.random((3, 4, 700, 3))
+    data, valid = rng.random((3, 4, 700, 3)), rng.random((3, 4, 700, 3)) > 0.1
+    cos_i, weights = rng.random((3, 4, 700)), rng.random((3, 4, 700))
+    together = metric_sums(f, data, valid, cos_i, weights, xp=np)
+    assert together.shape == (3, 4, 15, 3)
+    for m in range(3):
+        for s in range(4):
+            np.testing.assert_array_equal(together[m, s], metric_sums(f[m, s], data[m, s], valid[m, s], cos_i[m, s],
+                                                                      weights[m, s], xp=np))

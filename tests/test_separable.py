@@ -12,7 +12,7 @@ from scipy.optimize import lsq_linear
 from brdffit import fit, models, synth
 from brdffit.fitting.api import _SEVERITY
 from brdffit.fitting.losses import LOSSES, loss_table
-from brdffit.fitting.separable import box_patterns, solve_box
+from brdffit.fitting.separable import _enumerate_box_qp, box_patterns, solve_box
 from brdffit.fitting.status import STATUSES
 from brdffit.geometry import LocalPair, spherical_to_vector
 
@@ -70,6 +70,26 @@ def test_bounded_amplitude_solve_matches_scipy_bvls(seed):
     cost = lambda x: float(np.sum((a @ x - y) ** 2))  # noqa: E731
     assert np.all(got >= lower - 1e-12) and np.all(got <= upper + 1e-12)
     assert cost(got) <= cost(want) * (1 + 1e-9) + 1e-12
+
+
+def test_batched_bounded_solve_equals_the_enumeration_inside_near_and_beyond_the_bounds():
+    # solve_box solves the unconstrained system first and enumerates only where its optimum is not clearly inside
+    # the box; on a batch of systems with optima inside, on (within 1e-12) and beyond their bounds it must give
+    # the enumeration's answers bit for bit (the enumeration itself against BVLS: the test above).
+    rng = np.random.default_rng(7)
+    basis = rng.standard_normal((400, 40, 2)) * np.array([1.0, 0.05])
+    target = rng.uniform(-0.5, 1.5, (400, 2))
+    target[:50, 1] = rng.uniform(0.0, 1e-13, 50)  # optima just inside the lower bound 0 of the second amplitude
+    y = np.einsum("bnk,bk->bn", basis, target) + 1e-3 * rng.standard_normal((400, 40))
+    y[:50] = np.einsum("bnk,bk->bn", basis[:50], target[:50])
+    gram, rhs = np.einsum("bnk,bnl->bkl", basis, basis), np.einsum("bnk,bn->bk", basis, y)
+    lower, upper = np.array([0.0, 0.0]), np.array([1.0, np.inf])
+    got = solve_box(gram, rhs, lower, upper)
+    want = _enumerate_box_qp(gram, rhs, lower, upper, box_patterns((0.0, 0.0), (1.0, np.inf)), xp=np)[0]
+    np.testing.assert_array_equal(got, want)
+    inside = np.all((target > 0.01) & (target < [0.99, np.inf]), axis=-1)
+    assert 100 < inside.sum() < 350  # the batch holds both kinds
+    assert np.any(got[:50, 1] == 0.0)  # the near-bound optima went to the enumeration, which held some at 0
 
 
 def test_box_patterns_enumerate_every_active_set():
