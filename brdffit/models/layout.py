@@ -17,6 +17,7 @@ it reads the slot of the nearest earlier lobe declaring that name. ``"lambert+gg
 from __future__ import annotations
 
 import dataclasses
+import math
 import functools
 from collections import Counter
 
@@ -49,7 +50,7 @@ class Slot:
     @property
     def size(self) -> int:
         """Number of scalars."""
-        return int(np.prod(self.shape, dtype=int))
+        return math.prod(self.shape)  # not np.prod: ~40 times slower, and the engine asks per parameter per pass
 
     def labels(self) -> list[str]:
         """``[name]`` for a scalar, ``[name[0], name[1], ...]`` per channel."""
