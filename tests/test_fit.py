@@ -141,6 +141,25 @@ def test_fit_many_of_large_data_solves_the_coarse_stage_together_and_matches_fit
         assert float(batched.params["alpha"]) == pytest.approx(0.1 + 0.05 * k, rel=0.01)  # the truth
 
 
+def test_fit_many_batch_sizes_are_bucketed_and_padding_leaves_each_answer_unchanged():
+    # fit_many pads a batch with copies of its last data set up to batch_bucket of its size (a database's batches
+    # come in sizes that differ by one, and each size compiled anew): at most a quarter more work, few sizes per
+    # octave, and a material's answer the same whatever the batch around it.
+    from brdffit.fitting.api import batch_bucket
+
+    buckets = [batch_bucket(n) for n in range(1, 2049)]
+    assert all(n <= b <= max(n, 1.25 * (n - 1)) for n, b in zip(range(1, 2049), buckets))
+    assert len(set(buckets)) == 8 + 4 * 8  # 1..8, then four sizes in each octave up to 2048
+    sets = [synth.generate(models.get("lambert+ggx", alpha=0.1 + 0.03 * k), n=300, noise="relative:0.01", seed=k)
+            for k in range(10)]
+    nine, ten = fit_many(sets[:9], "lambert+ggx"), fit_many(sets, "lambert+ggx")
+    assert len(nine) == 9 and batch_bucket(9) == 10
+    for a, b in zip(nine, ten):
+        assert a.cost == b.cost
+        for name in a.params:
+            np.testing.assert_array_equal(a.params[name], b.params[name])
+
+
 def test_fit_many_rejects_unequal_shapes():
     a = synth.generate("lambert", n=100, seed=0)
     b = synth.generate("lambert", n=120, seed=0)
