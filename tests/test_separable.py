@@ -46,6 +46,32 @@ def test_declared_linear_amplitudes_are_affine_and_the_others_are_not_claimed(na
                                        rtol=1e-10, atol=1e-12)
 
 
+@pytest.mark.parametrize("name", models.names())
+def test_a_lobe_without_a_declared_offset_is_zero_with_its_amplitudes_at_zero(name):
+    # amplitude_basis does not evaluate a lobe at zero amplitudes unless it declares an offset (Lobe.offset):
+    # the declaration must hold exactly, at the defaults and at random values of the other parameters, and a
+    # declared offset must be real (not a stale declaration that only costs time).
+    lobe = models.lobe_class(name)()
+    pair = _pair()
+    rng = np.random.default_rng(1)
+    amplitudes = [spec.name for spec in lobe.param_specs() if spec.linear]
+    largest = 0.0
+    for trial in range(3):
+        params = {}
+        for spec in lobe.param_specs():
+            value = np.asarray(spec.initial(3))
+            if trial and not spec.linear:  # within the bounds, around the default
+                value = np.clip(value * rng.uniform(0.5, 1.5), spec.lower, spec.upper)
+            params[spec.name] = jnp.asarray(0.0 * value if spec.linear else value)
+        largest = max(largest, float(np.max(np.abs(np.asarray(lobe(params, pair))))))
+    if not amplitudes:
+        return
+    if lobe.offset:
+        assert largest > 0.0
+    else:
+        assert largest == 0.0
+
+
 def test_the_amplitude_declarations_are_the_ones_the_engine_projects():
     declared = {s.name for lobe in models.names() for s in models.lobe_class(lobe)().param_specs() if s.linear}
     assert declared == {"rho_d", "ks", "rs", "rho_shade"} | {f"ks_{j}" for j in (1,)}

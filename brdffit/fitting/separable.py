@@ -53,7 +53,9 @@ def amplitude_basis(problem: Problem, params: dict, names: tuple, data: FitData)
 
     Each lobe is evaluated on its own: once with its amplitudes at 0 (its part of f₀) and once per amplitude at 1
     (the others at 0) for that amplitude's B. A channel's value depends only on that channel's amplitude, so
-    ones in every channel give every channel's column at once. Lobes without such amplitudes go into f₀.
+    ones in every channel give every channel's column at once. Lobes without such amplitudes go into f₀. A lobe
+    without an `offset` (`Lobe.offset`: most) is zero with its amplitudes at 0 and is not evaluated there: in a
+    search or a pass of Lambert + GGX that evaluation was a third of the GGX lobe's.
 
     Arguments:
         problem: the `Problem`.
@@ -74,7 +76,7 @@ def amplitude_basis(problem: Problem, params: dict, names: tuple, data: FitData)
         local = layout.local_params(params, j)
         mine = [slot for slot in layout.lobe_slots(j) if slot.name in names]
         zero = dict(local, **{slot.local: jnp.zeros(problem.channels) for slot in mine})
-        base = jnp.broadcast_to(lobe(zero, pair), shape)
+        base = jnp.broadcast_to(lobe(zero, pair), shape) if lobe.offset or not mine else 0.0
         f0 = f0 + base
         for slot in mine:
             unit = dict(zero, **{slot.local: jnp.ones(problem.channels)})

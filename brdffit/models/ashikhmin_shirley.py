@@ -39,6 +39,7 @@ class AshikhminShirley(Lobe):
 
     name = "ashikhmin-shirley"
     reference = "Ashikhmin & Shirley, An anisotropic Phong BRDF model, JGT 5(2), 2000, Eq. 4"
+    offset = True  # its Fresnel term rs + (1 - rs)(1 - h·k)^5 is affine in rs
 
     def param_specs(self):
         return (RS, exponent("n", 100.0, doc="Phong-like exponent"))
@@ -53,6 +54,7 @@ class AshikhminShirleyAniso(Lobe):
 
     name = "ashikhmin-shirley-aniso"
     reference = "Ashikhmin & Shirley, An anisotropic Phong BRDF model, JGT 5(2), 2000, Eq. 4"
+    offset = True  # its Fresnel term rs + (1 - rs)(1 - h·k)^5 is affine in rs
 
     def param_specs(self):
         return (RS, exponent("nu", 100.0, doc="exponent along the tangent x"),

@@ -26,6 +26,10 @@ class Lobe(abc.ABC):
     - ``name``: the registry name (``"cook-torrance"``);
     - ``reference``: the paper the formula comes from;
     - ``reciprocal``: whether f(ωi, ωo) = f(ωo, ωi) holds for every parameter value;
+    - ``offset``: whether part of the value does not scale with the linear amplitudes (affine, not linear, in
+      them: Ashikhmin-Shirley's Fresnel term rs + (1 − rs)(1 − h·k)⁵); False for most lobes, whose value is zero
+      with every amplitude at zero, so that the separable solve does not evaluate them there
+      (`brdffit.fitting.separable.amplitude_basis`);
     - ``param_specs()``: the parameter declarations, in order;
     - ``__call__(params, pair)``: the BRDF value in 1/sr, without the cosine factor.
 
@@ -38,6 +42,7 @@ class Lobe(abc.ABC):
     name: ClassVar[str]
     reference: ClassVar[str]
     reciprocal: ClassVar[bool] = True
+    offset: ClassVar[bool] = False
 
     share: str = ""
 
