@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from . import __version__
+from .distributed import DEFAULT_BATCH
 from .export.records import EXPORTS_FILE
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
@@ -1042,8 +1043,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "default: a local cluster on this machine's cores")
     p.add_argument("--workers", type=bounded(int, 1), metavar="N",
                    help="worker processes of the local cluster (default: one per core)")
-    p.add_argument("--batch", type=bounded(int, 1), default=32, metavar="N",
-                   help="the most equally shaped materials one task fits together (default 32)")
+    p.add_argument("--batch", type=bounded(int, 1), default=DEFAULT_BATCH, metavar="N",
+                   help=f"the most materials one task reads and fits (default {DEFAULT_BATCH})")
     p.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
                    help="keep the rows of --out and fit only the other materials and the failed ones (the default); "
                         "--no-resume starts a new table")

@@ -10,7 +10,7 @@ time holds beyond it is reading, rows, scheduling, idle workers and the table.
 A serial baseline fits ``--serial`` of the materials one by one with `brdffit.fit` in this process, which then
 measures the cost of reading a file (`read_cost`).
 
-    python scripts/bench_batch.py [--materials 1000] [--samples 2000] [--workers 1,2] [--batch 32] [--serial 50]
+    python scripts/bench_batch.py [--materials 1000] [--samples 2000] [--workers 1,2] [--batch 128] [--serial 50]
                                   [--data DIR]
 """
 
@@ -24,6 +24,8 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
+
+from brdffit.distributed import DEFAULT_BATCH  # noqa: E402  (after the platform is set; loads neither JAX nor Dask)
 
 SPEC = "lambert+ggx"
 
@@ -119,7 +121,7 @@ def main() -> None:
     parser.add_argument("--materials", type=int, default=1000)
     parser.add_argument("--samples", type=int, default=2000)
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts")
-    parser.add_argument("--batch", type=int, default=32)
+    parser.add_argument("--batch", type=int, default=DEFAULT_BATCH, help=f"default {DEFAULT_BATCH} (fit_database's)")
     parser.add_argument("--serial", type=int, default=50, help="materials fitted one by one for the baseline")
     parser.add_argument("--data", type=Path, help="a folder for the database, whose files a later run reuses "
                                                   "(default: a temporary folder)")

@@ -221,6 +221,24 @@ def test_failing_fit_gets_its_row_and_spares_the_batch(database, serial, monkeyp
         assert row == {**serial[row["source"]], "time": row["time"]}
 
 
+def test_a_batch_beyond_fit_samples_is_fitted_in_equal_parts(database, serial, monkeypatch):
+    """A task's fit_many calls hold at most FIT_SAMPLES samples: four materials of 300 samples under a limit of
+    700 are fitted as two calls of two, and their rows are those of the serial fits."""
+    calls = []
+    real_fit_many = brdffit.fit_many
+
+    def counting(items, model, **options):
+        calls.append(len(items))
+        return real_fit_many(items, model, **options)
+
+    keys = [k for k, m in database["materials"].items() if m is not None and m.n == 300][:4]
+    monkeypatch.setattr(brdffit, "fit_many", counting)
+    monkeypatch.setattr(tasks, "FIT_SAMPLES", 700)
+    rows, _ = fit_batch(expand_sources(keys), SPEC, None, {}, None)
+    assert calls == [2, 2]
+    _assert_rows_equal_serial(rows, {"materials": {k: database["materials"][k] for k in keys}}, serial)
+
+
 def test_an_interrupted_run_keeps_every_row_it_received(database, tmp_path, monkeypatch):
     """Ctrl-C in the client: the rows that arrived are in the table (the last within the write interval too)."""
     from brdffit.distributed import database as client_side

@@ -36,13 +36,13 @@ import time
 from pathlib import Path
 
 from ..progress import Progress
+from . import DEFAULT_BATCH
 from .sources import error_text, expand_sources
 from .table import complete, read_results, table_format, write_results
 from .tasks import error_row, fit_batch
 
-__all__ = ["fit_database", "local_cluster", "DEFAULT_BATCH"]
+__all__ = ["fit_database", "local_cluster"]
 
-DEFAULT_BATCH = 32
 # The table is rewritten whole; at most this often (and at the end), so that a large database does not spend its
 # time rewriting a growing table after every batch; and at most `WRITE_SHARE` of the time (1,000 rows take 0.14 s
 # to write, CPU time that the client takes from the workers when it shares their machine).

@@ -14,7 +14,12 @@ import numpy as np
 
 from .sources import Source, error_text, read_sources
 
-__all__ = ["configure", "fit_batch", "result_row", "error_row"]
+__all__ = ["configure", "fit_batch", "result_row", "error_row", "FIT_SAMPLES"]
+
+# The most samples (materials times samples each) of one `fit_many` call of a task: a batch of larger materials is
+# fitted in equal parts within it, so that `batch` sets a task's size and not its memory (a batch of 128 MERL-size
+# materials would hold their data, and each pass its tangents, for all of them at once).
+FIT_SAMPLES = 1 << 18
 
 
 @functools.cache
@@ -123,9 +128,12 @@ def fit_batch(sources: list[Source], model, read_options: dict | None, fit_optio
         else:
             m = read.measurements
             shapes.setdefault((m.n, m.n_channels), []).append((read.source, m))
-    for loaded in shapes.values():
+    for (samples, _), loaded in shapes.items():
         if isinstance(model, str):
-            rows.update((row["source"], row) for row in _fit_together(loaded, model, fit_options))
+            parts = -(-len(loaded) * samples // FIT_SAMPLES)  # equal parts: their sizes share compiled programs
+            for part in np.array_split(np.arange(len(loaded)), max(1, min(parts, len(loaded)))):
+                rows.update((row["source"], row) for row in _fit_together([loaded[i] for i in part], model,
+                                                                          fit_options))
         else:
             rows.update((item[0].key, _select_one(item, model, fit_options)) for item in loaded)
     return [rows[source.key] for source in sources if source.key in rows], members
