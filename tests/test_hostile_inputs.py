@@ -137,6 +137,13 @@ def test_declared_rows_the_file_does_not_store_are_refused(tmp_path):
     with pytest.raises(FormatError, match=r"declares shape \(10000000,\) \(80,000,000 bytes\) but the file stores "
                                           r"0 bytes of it"):
         bio.load(path)
+    # A database task reads the file in its inspecting child, from what the inspection read: the same refusal.
+    from brdffit.distributed.sources import Source, read_sources
+
+    (read,) = read_sources([Source(str(path))])
+    assert read.measurements is None and read.error == f"FormatError: {path}: /measurements/theta_i declares shape " \
+        "(10000000,) (80,000,000 bytes) but the file stores 0 bytes of it (unwritten rows read as fill values); not " \
+        "measured data"
     # Compressed data are real content: a gzip-filtered file reads back exactly.
     m = small(n=5000, values=np.full(5000, 0.25))
     bio.save(m, tmp_path / "gzip.h5", compression="gzip")

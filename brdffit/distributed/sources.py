@@ -5,8 +5,8 @@ A multi-material HDF5 file holds several groups in the layout of ``/measurements
 ``/materials/red`` and ``/materials/blue``, written with `brdffit.io.update_hdf5` and
 `brdffit.io.hdf5.write_measurements_group`. A source names one of them as ``FILE::GROUP``; the file alone stands
 for all of them (or for its ``/measurements`` group where it has one). Every opening of a brdffit HDF5 file
-inspects all of it in a child process (`brdffit.io.hdf5.inspect_hdf5`): the files a task reads are inspected in
-one child (`brdffit.io.hdf5.open_hdf5_many`), and the groups of one file are read through one opening.
+inspects all of it in a child process (`brdffit.io.hdf5.inspect_hdf5`): the files a task reads are read by the
+child that inspects them, one child for the batch (`brdffit.io.hdf5.read_hdf5_many`), each file once.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from ..io import FORMATS, FormatError, detect_format, load
-from ..io.hdf5 import MEASUREMENTS_GROUP, open_hdf5_many, read_measurements_group
+from ..io.hdf5 import MEASUREMENTS_GROUP, read_hdf5_many, read_measurements_group
 from ..measurements import Measurements
 
 __all__ = ["Source", "Read", "GROUP_SEPARATOR", "expand_sources", "read_sources", "material_groups", "error_text"]
@@ -75,23 +75,28 @@ def error_text(err: BaseException) -> str:
     return f"{type(err).__name__}: {err}"
 
 
-def _read_hdf5(f, path: str, sources: list[Source]) -> list[Read]:
+def _read_hdf5(f, path: str, sources: list[Source], captured: dict) -> list[Read]:
     """Read sources of one open brdffit HDF5 file: the named groups, and for the file itself its ``/measurements``
-    or the list of its material groups."""
+    or the list of its material groups; a group's datasets as the inspection kept them (``captured``: group name
+    -> `brdffit.io.hdf5.read_hdf5_many`'s contents)."""
+    def group(name: str):
+        name = "/" + name.strip("/")
+        return captured[name] if name in captured else f[name]
+
     reads = []
     for source in sources:
         try:
             if source.group is not None:
                 if source.group not in f:
                     raise FormatError(path, f"no group /{source.group}")
-                reads.append(Read(source, read_measurements_group(f[source.group], path)))
+                reads.append(Read(source, read_measurements_group(group(source.group), path)))
                 continue
             # /measurements, where the file has it, is the file's material: no need to visit the others
             groups = [MEASUREMENTS_GROUP] if _holds_material(f.get(MEASUREMENTS_GROUP)) else material_groups(f)
             if not groups:
                 raise FormatError(path, f"no group holds a material (datasets {', '.join(_MATERIAL_DATASETS)})")
             if groups[0] == MEASUREMENTS_GROUP:
-                reads.append(Read(source, read_measurements_group(f[MEASUREMENTS_GROUP], path)))
+                reads.append(Read(source, read_measurements_group(group(MEASUREMENTS_GROUP), path)))
             else:
                 reads.append(Read(source, members=tuple(Source(path, group) for group in groups)))
         except Exception as err:  # noqa: BLE001 - a damaged group is that material's error
@@ -126,14 +131,18 @@ def read_sources(sources, read_options: dict | None = None) -> list[Read]:
             reads[source] = Read(source, load(source.path, **(read_options or {})))
         except Exception as err:  # noqa: BLE001 - an unreadable material is its row's error
             reads[source] = Read(source, error=error_text(err))
-    # One opening a file, and the inspections of all the batch's files in one child (brdffit.io.hdf5).
-    for path, opened in open_hdf5_many(by_file):
-        path = str(path)
-        if isinstance(opened, Exception):  # every source of the file gets the reason
-            reads.update((source, Read(source, error=error_text(opened))) for source in by_file[path])
-            continue
-        with opened:
-            reads.update((read.source, read) for read in _read_hdf5(opened, path, by_file[path]))
+    # Each file read once, by the child that inspects it; the batch's files in one child (brdffit.io.hdf5).
+    def capture(path):
+        return {"/" + (source.group or MEASUREMENTS_GROUP).strip("/") for source in by_file[str(path)]}
+
+    def read(f, path, captured):
+        return _read_hdf5(f, str(path), by_file[str(path)], captured)
+
+    for path, outcome in read_hdf5_many(by_file, capture, read):
+        if isinstance(outcome, Exception):  # every source of the file gets the reason
+            reads.update((source, Read(source, error=error_text(outcome))) for source in by_file[str(path)])
+        else:
+            reads.update((read.source, read) for read in outcome)
     return [reads[source] for source in sources]
 
 
