@@ -211,12 +211,15 @@ def render() -> str:
         "## Reciprocity and energy conservation",
         "",
         "A lobe is reciprocal when f(ωi, ωo) = f(ωo, ωi) for every parameter value; `Lobe.reciprocal` records it and "
-        "`Model.reciprocal` is true when every lobe of a sum is.",
+        "`Model.reciprocal` is true when every lobe of a sum is. A lobe has an offset when part of it does not scale "
+        "with its linear amplitudes (`Lobe.offset`): the separable solve evaluates only such lobes at zero "
+        "amplitudes (docs/fitting.md); a test holds every lobe to its declaration.",
         "",
-        "| lobe | reciprocal |",
-        "|---|---|",
+        "| lobe | reciprocal | offset |",
+        "|---|---|---|",
     ]
-    out += [f"| `{n}` | {'yes' if models.lobe_class(n).reciprocal else '**no**'} |" for n in names]
+    out += [f"| `{n}` | {'yes' if models.lobe_class(n).reciprocal else '**no**'} | "
+            f"{'yes' if models.lobe_class(n).offset else 'no'} |" for n in names]
     out += [
         "",
         "Energy conservation (whether the directional albedo stays at or below 1) depends on the parameters; the "
