@@ -251,3 +251,36 @@ def test_a_child_that_crashes_refuses_only_the_file_it_crashed_on(tmp_path, monk
                                 "HDF5 file")
     with pytest.raises(FormatError, match="libhdf5 crashed"):
         hdf5.inspect_hdf5(paths[1])
+
+
+def test_the_inspection_reads_every_kind_of_dataset_as_h5py_does(tmp_path, monkeypatch):
+    # The inspection opens datasets with h5py's low-level calls and reads plain numeric ones itself (issue 19):
+    # what it keeps of a group must be what h5py's high-level reading gives, for every kind of dataset, and a
+    # dataset's attributes are still checked.
+    import h5py
+
+    path = tmp_path / "kinds.h5"
+    with h5py.File(path, "w") as f:
+        g = f.create_group("g")
+        g["scalar"], g["text"], g["ints"] = 3.5, "hello", np.arange(6, dtype="i2").reshape(2, 3)
+        g.create_dataset("empty", shape=(0, 3), dtype="f8")
+        g["compound"] = np.zeros(3, dtype=[("a", "f8"), ("b", "i4")])
+        g.create_dataset("null", data=h5py.Empty("f8"))
+        g["big_endian"] = np.arange(4, dtype=">f8")
+        g["ints"].attrs["note"] = "x" * 10
+    with hdf5._opened_for_inspection(path) as f:
+        kept = hdf5._visit(f, path, {"/g"})["/g"]
+        for name, dataset in kept.members.items():
+            expected = f["g"][name][()]
+            if dataset.read is None:  # a dataset whose declared bytes the file does not store is not read
+                assert name == "null"
+                continue
+            got = dataset.read()
+            assert type(got) is type(expected) and np.array_equal(got, expected), name
+            if isinstance(got, np.ndarray):
+                assert got.dtype == expected.dtype and got.shape == expected.shape, name
+    with h5py.File(path, "a") as f:
+        f["g"]["ints"].attrs.create("huge", np.zeros(1, dtype="u1"), shape=(1,))
+    monkeypatch.setattr(hdf5, "MAX_ATTRIBUTE_BYTES", 0)  # every attribute too large: the first one checked refused
+    with hdf5._opened_for_inspection(path) as f, pytest.raises(FormatError, match="attribute 'huge' of /g/ints"):
+        hdf5._visit(f, path)
