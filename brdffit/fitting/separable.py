@@ -131,6 +131,12 @@ def _scaled_system(gram, rhs, xp):
     return diagonal, scale, gram / (scale[..., :, None] * scale[..., None, :]) + _RIDGE * np.eye(k), rhs / scale
 
 
+def _negligible(diagonal, lower):
+    """``(..., K)``: the amplitudes whose basis column is negligible (`_NEGLIGIBLE_COLUMN`) and which have a lower
+    bound to stay on."""
+    return (diagonal < _NEGLIGIBLE_COLUMN) & np.isfinite(lower)
+
+
 def _inside(a, lower, upper, xp, slack: float = 1e-10):
     """Whether each solution ``(..., K)`` lies in the box, to a relative ``slack`` (negative: that far inside)."""
     slack = slack * (1.0 + xp.abs(a))
@@ -165,8 +171,7 @@ def _enumerate_box_qp(gram, rhs, lower, upper, patterns, xp=jnp):
     feasible = _inside(a, lower, upper, xp)
     # A negligible column's amplitude is never free (`_NEGLIGIBLE_COLUMN`; an amplitude without a lower bound
     # has no other pattern, and keeps its solve).
-    negligible = (diagonal < _NEGLIGIBLE_COLUMN) & np.isfinite(lower)  # (..., K)
-    feasible = feasible & ~xp.any(negligible[..., None, :] & (free > 0), axis=-1)
+    feasible = feasible & ~xp.any(_negligible(diagonal, lower)[..., None, :] & (free > 0), axis=-1)
     objective = 0.5 * xp.sum(cand * (cand @ g), axis=-1) - xp.sum(cand * b[..., None, :], axis=-1)
     best = xp.argmin(xp.where(feasible, objective, np.inf), axis=-1)
     chosen = xp.take_along_axis(a, best[..., None, None], axis=-2)[..., 0, :]
@@ -272,8 +277,9 @@ def solve_box(gram, rhs, lower, upper) -> np.ndarray:
     The problem is convex, so where its unconstrained optimum (the all-free pattern, the enumeration's first)
     lies in the box and no column is negligible, it is the optimum: only the other systems enumerate their active
     sets. An optimum within 1e-8 (relative) of a bound is enumerated too, so that an amplitude that the data do
-    not want lands exactly on its bound, as the enumeration puts it (a free solve left ks = 2e-15). Nearly all of a search's or a polish's systems are such (99.6% of the candidates of a `fit_many` batch of
-    Lambert + GGX materials), and the enumeration of 6 patterns was 12% of a `fit_many` (issue 19).
+    not want lands exactly on its bound, as the enumeration puts it (a free solve left ks = 2e-15). Nearly all of
+    a search's or a polish's systems are inside (99.6% of the candidates of a `fit_many` batch of Lambert + GGX
+    materials), and the enumeration of 6 patterns was 12% of a `fit_many` (issue 19).
 
     Arguments:
         gram: G ``(..., K, K)``; rhs: b ``(..., K)``; lower, upper: sequences of K bounds (±inf for none).
@@ -286,7 +292,7 @@ def solve_box(gram, rhs, lower, upper) -> np.ndarray:
     gram, rhs = np.asarray(gram, dtype=float), np.asarray(rhs, dtype=float)
     diagonal, scale, g, b = _scaled_system(gram, rhs, np)
     a = _spd_solve(g, b, np) / scale
-    done = _inside(a, lower, upper, np, slack=-1e-8) & ~np.any((diagonal < _NEGLIGIBLE_COLUMN) & np.isfinite(lower), axis=-1)
+    done = _inside(a, lower, upper, np, slack=-1e-8) & ~np.any(_negligible(diagonal, lower), axis=-1)
     if not np.all(done):
         rest = ~done
         a[rest] = _enumerate_box_qp(gram[rest], rhs[rest], lower, upper, box_patterns(tuple(lower), tuple(upper)),

@@ -9,7 +9,6 @@ from __future__ import annotations
 import dataclasses
 import re
 
-from .. import arrays
 from .._lazy import module
 from .ashikhmin_shirley import AshikhminShirley, AshikhminShirleyAniso
 from .cook_torrance import GGX, CookTorrance
@@ -23,6 +22,7 @@ from .ward import Ward, WardAniso, WardDuer
 
 # The composed Model (equinox, JAX) is loaded when a model is built, not when the registry is read.
 _model = module("brdffit.models.model")
+_arrays = module("brdffit.arrays")  # NumPy, loaded with the model: reading the registry loads neither
 
 __all__ = ["names", "get", "lobe_class", "parse_spec", "describe", "model_to_dict", "model_from_dict"]
 
@@ -155,7 +155,7 @@ def get(spec, channels: int = 3, **options_and_params) -> "Model":
     if unknown:
         raise ValueError(f"model {spec!r} has no parameter or option {sorted(unknown)[0]!r}; parameters: "
                          f"{', '.join(s.name for s in specs)}")
-    params = arrays.on_device({s.name: _model.coerce_value(s, values[s.name], channels) if s.name in values
+    params = _arrays.on_device({s.name: _model.coerce_value(s, values[s.name], channels) if s.name in values
                                else s.initial(channels) for s in specs})
     return _model.Model(params=params, lobes=lobes, channels=channels)
 
