@@ -159,3 +159,20 @@ def test_the_screened_search_finds_the_optimum_of_the_unscreened_one(truth_spec,
     monkeypatch.setattr(search, "SCREEN_ABOVE", 10**9)
     unscreened = brdffit.fit(data, candidate)
     assert screened.cost <= unscreened.cost * (1 + 1e-6), (screened.summary(), unscreened.summary())
+
+
+def test_a_rounded_projection_cannot_end_a_solve_with_a_cost_it_did_not_reach():
+    """Three Lafortune lobes on Ward data (2,000 samples): one start drives a lobe that sees almost no sample to an
+    amplitude of 1e53, whose projection predicted a cost of 3.2 that rounding made meaningless (the model there
+    costs 1.8e108). The solver took that prediction for the cost, "converged" there as the best start, and the fit
+    ended at 1.8e108, stalled (until 2026-12-04). A prediction whose terms are too large for its rounding is now
+    evaluated by a pass (`brdffit.fitting.marquardt._TRUSTED_SPREAD`): every start's cost is one it reached, none
+    below the answer, and the answer (4.99517) costs what its model costs."""
+    truth = models.get("lambert+ward", **TRUTHS["lambert+ward"])
+    data = synth.generate(truth, pattern="half-diff", n=2000, noise="relative:0.01",
+                          seed=11 + list(TRUTHS).index("lambert+ward"))
+    result = brdffit.fit(data, "lambert+lafortune(lobes=3)")
+    assert result.status == "converged", result.summary()
+    np.testing.assert_allclose(result.cost, bf.cost_of(data, result.model), rtol=1e-6)
+    assert result.cost < 5.0, result.summary()
+    assert min(start["cost"] for start in result.starts) >= result.cost * (1 - 1e-6), result.starts

@@ -61,7 +61,7 @@ _MIN_DAMPING = 1e-12
 # steps.
 GAIN_RATIO = 0.25
 # A projection that jumps an amplitude (off a bound, or by more than its value) by more than this fraction of the
-# new value is followed by a pass at the moved point (`_Batch.evaluate`).
+# new value is followed by a pass at the moved point (`_Batch.refresh`).
 _REPASS = 1e-3
 # Bates & Watts (1981)'s relative offset convergence criterion: the Gauss-Newton step's reach in the tangent
 # plane against the residual's size, √(gᵀ(JᵀJ)⁻¹g / p) / √(rᵀr / (n − p)). Below 1e-3 (their suggestion; R's
@@ -75,8 +75,17 @@ RELATIVE_OFFSET = 1e-3
 # cost is exact (quadratic in the amplitudes).
 EXACT_MOVE = 1e-6
 
-# A projection whose predicted cost differs from the pass's own by more than this fraction is evaluated by a
-# second pass: the prediction is exact in exact arithmetic, but not for a lobe whose Gram matrix is near 0.
+# A projection's predicted cost c + 2gᵀΔ + ΔᵀGΔ (g = Jᵀr and G = JᵀJ of the amplitudes) is exact in exact
+# arithmetic, where its terms are bounded by the cost: the quadratic is a sum of squares, nonnegative along the whole
+# line through Δ, so (gᵀΔ)² <= c ΔᵀGΔ, and as the projection does not raise the cost, |2gᵀΔ| + ΔᵀGΔ <= 9c. Its
+# rounding is of the order of 1e-16 N times the magnitude of its products, at most 2|g|ᵀ|Δ| + (Σ √G_kk |Δ_k|)²
+# (the spread). Where the spread exceeds this many times the pass's own cost, the prediction is not trusted and a
+# second pass evaluates the moved point before the solver uses its cost: a lobe whose Gram matrix is near 0 can jump
+# to 1e53 with a predicted cost that rounding made meaningless (Lambert + 3 Lafortune lobes on Ward data, 2,000
+# half-difference samples: the solve then "converged" at a cost of 3.2 that was 1.8e108, and the fit ended there).
+_TRUSTED_SPREAD = 1e6
+# A projection that changed the cost by more than this fraction, or that jumped an amplitude (`_REPASS`), has made
+# the outer parameters' tangents stale: an accepted trial is passed over again (`_Batch.refresh`).
 _TRUSTED_CHANGE = 0.1
 
 
@@ -155,11 +164,14 @@ def _scatter(sums: NormalEquations, chosen, shape: tuple, base: NormalEquations 
 class _State:
     """The batch's current points: physical values ``x (M, S, P)`` with their amplitudes projected, the pass's
     sums moved with them (see the module doc), and, when the solve keeps them, the pass's arrays of each piece
-    (`accumulate` with ``values=True``), at the evaluated point, before the projection moved ``x`` by ``delta``."""
+    (`accumulate` with ``values=True``), at the evaluated point, before the projection moved ``x`` by ``delta``;
+    ``spread`` ``(M, S)`` is the magnitude of the terms of the projection's predicted cost change (`_TRUSTED_SPREAD`,
+    0 where it did not move)."""
 
-    def __init__(self, x, sums: NormalEquations, delta, evaluated=None, values=None):
+    def __init__(self, x, sums: NormalEquations, delta, evaluated=None, values=None, spread=None):
         self.x, self.sums, self.delta, self.values = x, sums, delta, values
         self.evaluated = sums.cost if evaluated is None else evaluated  # the pass's own cost, before projecting
+        self.spread = np.zeros(np.shape(sums.cost)) if spread is None else spread
 
     def where(self, take, other: "_State") -> "_State":
         """This state where ``take (M, S)`` is True, ``other`` elsewhere."""
@@ -177,7 +189,8 @@ class _State:
             values = [(np.where(tangents, a, c), np.where(values, np.asarray(f), np.asarray(g)))
                       for (a, f), (c, g) in zip(self.values, other.values)]
         return _State(pick(self.x, other.x), NormalEquations(*(pick(a, b) for a, b in zip(self.sums, other.sums))),
-                      pick(self.delta, other.delta), pick(self.evaluated, other.evaluated), values)
+                      pick(self.delta, other.delta), pick(self.evaluated, other.evaluated), values,
+                      pick(self.spread, other.spread))
 
 
 class _Batch:
@@ -208,23 +221,21 @@ class _Batch:
         batch = x.shape[:2]
         return {n: np.reshape(x[..., self.offsets[n]], batch + self.layout[n].shape) for n in self.problem.free}
 
-    def evaluate(self, x, base: "_State | None" = None, points=None) -> _State:
-        """A pass at ``x`` with the amplitudes then moved to their optimum; where that moved an amplitude off a
-        bound or by more than its own value (and by more than `_REPASS` of the result), a second pass at the
-        moved point. The sums predict the cost at the moved amplitudes exactly in exact arithmetic, but the
-        tangents of the outer parameters are those at ``x``: a lobe whose trial amplitudes were clipped to 0 has
-        none at all, and its shape could never move again. And a lobe that sees almost no sample has a Gram
-        matrix near 0, whose solve can jump to 1e118 with a predicted cost that rounding made meaningless: the
-        second pass evaluates it, as it does whenever the projection predicts a cost change beyond `_TRUSTED_CHANGE`.
-        Smaller moves keep the predicted cost and the slightly older tangents, which
-        the damped step absorbs (one pass a step). Each point's second pass is its own: whether one point is
-        evaluated again never changes another's path (a fit's answer does not depend on the other starts and
-        materials of its batch).
+    def evaluate(self, x, base: "_State | None" = None, points=None, refresh: bool = True) -> _State:
+        """A pass at ``x`` with the amplitudes then moved to their optimum. The sums predict the cost at the moved
+        amplitudes exactly in exact arithmetic; where rounding may have made that prediction meaningless (a lobe
+        that sees almost no sample has a Gram matrix near 0, whose solve can jump to 1e118: `_TRUSTED_SPREAD`), a
+        second pass evaluates the moved point at once. With ``refresh``, so does every point whose tangents the
+        move made stale (`refresh`); the solver asks for that only for the trials it accepts, since a rejected
+        trial's tangents are never used (a quarter of those second passes of a Lambert + GGX `fit_many`, issue 19).
+        Each point's second pass is its own: whether one point is evaluated again never changes another's path (a
+        fit's answer does not depend on the other starts and materials of its batch).
 
         Arguments:
             x: physical values ``(M, S, P)``.
             base: the state whose points stand where ``points`` is False (required with ``points``).
             points: ``(M, S)`` the points to evaluate (default: all).
+            refresh: also pass again over the points that `refresh` would.
 
         Returns:
             The `_State` of every point.
@@ -232,12 +243,27 @@ class _Batch:
         if points is None:
             points = np.ones(x.shape[:2], bool)
         state = self._project(x, base, points)
+        with np.errstate(invalid="ignore"):
+            untrusted = ~(state.spread <= _TRUSTED_SPREAD * np.abs(state.evaluated))
+        again = points & (untrusted | (self._stale(state) if refresh else False))
+        return self._project(state.x, state, again) if again.any() else state
+
+    def refresh(self, state: _State, points) -> _State:
+        """``state`` with a second pass at those of ``points`` whose projection moved an amplitude off a bound or
+        by more than its own value (and by more than `_REPASS` of the result), or changed the cost by more than
+        `_TRUSTED_CHANGE`: the tangents of the outer parameters are those before the move, and a lobe whose
+        amplitudes were clipped to 0 has none at all, so that its shape could never move again. Smaller moves
+        keep the slightly older tangents, which the damped step absorbs (one pass a step)."""
+        again = points & self._stale(state)
+        return self._project(state.x, state, again) if again.any() else state
+
+    def _stale(self, state: _State):
+        """``(M, S)``: where `refresh` passes again."""
+        x = state.x - state.delta  # the evaluated point
         jump = (x <= self.lower) | (x >= self.upper) | (np.abs(state.delta) > np.abs(x))
         moved = np.any(jump & (np.abs(state.delta) > _REPASS * np.abs(state.x) + 1e-300), axis=-1)
         with np.errstate(invalid="ignore"):
-            predicted = np.abs(state.sums.cost - state.evaluated) > _TRUSTED_CHANGE * np.abs(state.evaluated)
-        again = points & (moved | predicted)
-        return self._project(state.x, state, again) if again.any() else state
+            return moved | (np.abs(state.sums.cost - state.evaluated) > _TRUSTED_CHANGE * np.abs(state.evaluated))
 
     def _project(self, x, base: "_State | None", points) -> _State:
         """`_pass` at the selected ``points`` of ``x``, each followed by its projection; the other points are
@@ -293,6 +319,9 @@ class _Batch:
             step = best - a
             change = 2.0 * np.sum(gradient * step, axis=-1) + np.einsum("...k,...kl,...l->...", step, gram, step)
             change = np.where(finite, change, 0.0)
+            reach = np.sum(np.sqrt(np.abs(np.einsum("...kk->...k", gram))) * np.abs(step), axis=-1)
+            spread = np.sum(np.where(finite, 2.0 * np.sum(np.abs(gradient * step), axis=-1) + reach * reach, 0.0),
+                            axis=-1)
             x = x.copy()
             x[..., index] = best
             delta[..., index] = step
@@ -300,7 +329,7 @@ class _Batch:
             moved = NormalEquations(jtj=jtj, jtr=jtr + np.einsum("...pq,...q->...p", jtj, delta),
                                     cost=np.where(np.isfinite(sums.cost), np.sum(channel_cost, axis=-1), sums.cost),
                                     meat=sums.meat, channel_cost=channel_cost, metric_sums=sums.metric_sums)
-        return _State(x, moved, delta, sums.cost, values)
+        return _State(x, moved, delta, sums.cost, values, spread)
 
     def unconstrained(self, x):
         """The outer scalars' unconstrained variables ``(M, S, P)`` (amplitude entries: the physical values)."""
@@ -429,13 +458,13 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         trial = batch.physical(u + step, state.x)
         trial = np.where(outer, trial, np.clip(state.x + step, batch.lower, batch.upper))
         trial = np.where(active[..., None], trial, state.x)
-        candidate = batch.evaluate(trial, state, active)
+        candidate = batch.evaluate(trial, state, active, refresh=False)
         change = np.where(active, np.abs(candidate.sums.cost - state.sums.cost), change)
         steps += active
         better = active & np.isfinite(candidate.sums.cost) & (candidate.sums.cost <= state.sums.cost)
         with np.errstate(invalid="ignore", divide="ignore"):
             poor = (candidate.sums.cost - state.sums.cost) / predicted < GAIN_RATIO
-        state = candidate.where(better, state)
+        state = batch.refresh(candidate, better).where(better, state)
         lam = np.where(better, np.where(poor, lam, np.maximum(lam / 10.0, _MIN_DAMPING)),
                        np.where(active, lam * 10.0, lam))
         done |= active & (lam > MAX_DAMPING)
