@@ -193,3 +193,42 @@ def test_a_spike_between_the_samples_does_not_win_the_search():
     assert result.status == "converged", result.summary()
     np.testing.assert_allclose(result.cost, reference.cost, rtol=1e-6)
     np.testing.assert_allclose(result.params["alpha"], 0.15, rtol=0.05)
+
+
+@pytest.mark.parametrize("loss", ["cosine", "relative"])
+@pytest.mark.parametrize("name", models.names() + ["cook-torrance(fresnel=conductor)"])
+def test_the_shared_basis_sums_equal_the_per_channel_ones(name, loss):
+    # The search's amplitude sums with the basis evaluated for one channel (every other colour parameter has one
+    # value in all channels) equal the sums of the per-channel weighted basis: with a channel's samples partly
+    # missing (a mask that differs between channels) and a loss whose weights differ between channels.
+    from brdffit.fitting.api import _prepare
+    from brdffit.fitting.losses import loss_epsilon
+    from brdffit.fitting.problem import make_fit_data
+    from brdffit.fitting.separable import amplitude_sums
+
+    spec = name if name == "lambert" else f"lambert+{name}"
+    model = models.get(spec)
+    data = synth.generate(model, n=300, noise="relative:0.05", seed=3)
+    values = np.array(data.values)
+    values[::7, 1] = np.nan
+    data = data.replace(values=values)
+    problem, base, fixed, _ = _prepare(data, spec, loss=loss, solver="lm", fixed=None, free=None, robust=None,
+                                       max_steps=10, rtol=1e-8, atol=1e-12)
+    fit_data = make_fit_data(data, fixed, loss_epsilon(loss, data.values))
+    params = {k: jnp.asarray(v, dtype=float) for k, v in base.params.items()}
+    sums = [amplitude_sums(problem, params, problem.linear, fit_data, shared=shared) for shared in (False, True)]
+    for per_channel, shared in zip(*sums):
+        np.testing.assert_allclose(shared, per_channel, rtol=1e-10, atol=1e-12 * float(jnp.max(jnp.abs(per_channel))))
+
+
+def test_a_search_with_colour_values_that_differ_between_channels_scores_each_channel_with_its_own():
+    # A fixed diffuse colour is part of f₀ and differs between channels: the search must not evaluate one
+    # channel's basis for all (`brdffit.fitting.search._channel_shared`). Its best start lies within a grid cell
+    # (a factor 1.54 of α) of the truth; scored with channel 0's f₀ in every channel it started at α = 0.9.
+    truth = models.get("lambert+ggx", rho_d=[0.1, 0.4, 0.8], ks=[0.3, 0.2, 0.1], alpha=0.3, f0=0.04)
+    data = synth.generate(truth, n=2000, noise="relative:0.001", seed=5)
+    result = fit(data, "lambert+ggx", fixed={"rho_d": [0.1, 0.4, 0.8], "f0": 0.04})
+    assert result.status == "converged", result.summary()
+    assert 0.3 / 1.6 < result.starts[0]["init"]["alpha"] < 0.3 * 1.6, result.starts
+    np.testing.assert_allclose(result.params["alpha"], 0.3, rtol=2e-3)
+    np.testing.assert_allclose(result.params["ks"], [0.3, 0.2, 0.1], rtol=5e-3)

@@ -47,6 +47,13 @@ POLISH_STARTS = 4
 # pairs of the misspecification matrix at 2,000 samples (where the screen runs), and took a tenth of a search.
 SCREEN_SAMPLES = 512
 SCREEN_KEEP = 2 * POLISH_STARTS
+# Screen costs within this relative difference of the last kept one are ties that the screen's rounding would
+# break: those candidates are scored again too, up to SCREEN_TIES candidates a material. A spike lobe between the
+# screen's samples fits the one sample nearest its peak with an amplitude of 1e14-1e72 and costs, to rounding,
+# what every other such spike costs (Ashikhmin-Shirley data and one Lafortune lobe: 9 tied candidates, of which
+# the rescoring on all samples, where the spikes differ, kept 8 chosen by rounding).
+SCREEN_TIE = 1e-9
+SCREEN_TIES = 4 * SCREEN_KEEP
 # Candidates of one scoring call; with SCREEN_SAMPLES samples a call, the one compiled shape of a search.
 SCORE_WIDTH = SCREEN_KEEP
 MAX_CANDIDATES = 256
@@ -205,17 +212,27 @@ def _over_materials(one, name: str) -> Program:
 
 
 @functools.lru_cache(maxsize=64)
-def _sums_fn(problem: Problem):
+def _sums_fn(problem: Problem, shared: bool):
     """Compiled ``(candidates, data) -> (c0, gram, rhs)`` of the weighted amplitude problem of every candidate:
     ``c0`` ``(M, B, C)`` the squared norm of w·(f_d − f₀), ``gram`` ``(M, B, C, K, K)`` and ``rhs``
-    ``(M, B, C, K)`` its normal equations (`brdffit.fitting.separable.amplitude_sums`), for B candidates of each of
+    ``(M, B, C, K)`` its normal equations (`brdffit.fitting.separable.amplitude_sums`, with the basis of one
+    channel for every channel where ``shared``: `_channel_shared`), for B candidates of each of
     M materials (candidates ``(M, B) + shape``, data with a leading material axis). The bounded solve runs on the
     host: enumerated on the device it held 3^K unrolled systems per candidate and compiled in 1–4 s per model,
     five times the rest."""
     def one(params, data: FitData):
-        return amplitude_sums(problem, params, problem.linear, data)
+        return amplitude_sums(problem, params, problem.linear, data, shared=shared)
 
-    return _over_materials(one, f"search sums {problem!r}")
+    return _over_materials(one, f"search {'shared ' if shared else ''}sums {problem!r}")
+
+
+def _channel_shared(problem: Problem, batches: list) -> bool:
+    """Whether every colour parameter but the projected amplitudes has one value in all channels in every
+    candidate of ``batches`` (`_batches`): then the amplitudes' basis is the same in every channel and is
+    evaluated once (`brdffit.fitting.separable.amplitude_sums`). So it is in a search, which gives a colour
+    parameter that is not linear one value for all channels; a caller's start or fixed values may not."""
+    names = [spec.name for spec in problem.specs if spec.colour and spec.name not in problem.linear]
+    return all(np.all(batch[name] == batch[name][..., :1]) for _, batch in batches for name in names)
 
 
 @functools.lru_cache(maxsize=64)
@@ -294,7 +311,7 @@ def score(problem: Problem, candidates: list, data: FitData, width: int = SCORE_
     amplitudes = {}
     if names:
         # Every candidate's sums on the device, then one bounded solve of them all.
-        sums = _sums_fn(problem.structure)
+        sums = _sums_fn(problem.structure, _channel_shared(problem, batches))
         outs = [[a[:, :count] for a in added(sums, batch)] for count, batch in batches]
         c0, gram, rhs = (np.concatenate([out[j] for out in outs], axis=1) for j in range(3))
         a = solve_box(gram, rhs, lower, upper)  # (M, B, C, K)
@@ -339,8 +356,14 @@ def _screened(problem: Problem, candidates: list[dict], data: FitData, screen: F
     for row in rough:
         keep = _separated(row, units, starts, separation)
         rest = [int(i) for i in np.argsort(row, kind="stable") if i not in keep]
-        best.append(keep + rest[:SCREEN_KEEP - len(keep)])
-    best = np.array(best)
+        more = SCREEN_KEEP - len(keep)
+        keep += rest[:more]
+        if 0 < more < len(rest):  # the candidates the screen cannot tell from the last one kept go on too
+            last = row[rest[more - 1]]
+            keep += [i for i in rest[more:] if row[i] <= last + SCREEN_TIE * abs(last)][:SCREEN_TIES - len(keep)]
+        best.append(keep)
+    width = max(len(keep) for keep in best)
+    best = np.array([keep + keep[-1:] * (width - len(keep)) for keep in best])
     chosen, chosen_amplitudes = score(problem, [[candidates[i] for i in row] for row in best], data)
     rows = np.arange(rough.shape[0])[:, None]
     costs = np.full(rough.shape, np.inf)

@@ -22,6 +22,7 @@ residual is jitted, vmapped over starts and materials and differentiated by the 
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import math
@@ -206,22 +207,42 @@ def _box_qp(lower: tuple, upper: tuple):
     return solve
 
 
-def amplitude_sums(problem: Problem, params: dict, names: tuple, data: FitData):
+def amplitude_sums(problem: Problem, params: dict, names: tuple, data: FitData, shared: bool = False):
     """The normal equations of the amplitudes ``names`` for residuals ``w · (f₀ + B a − f_d)``, w the loss's
     weights (`Loss.weight`, linearised at the data for a nonlinear loss).
+
+    With ``shared``, every colour parameter other than ``names`` has the same value in every channel (as in the
+    search's candidates, `brdffit.fitting.search`), so that f₀ and B, which evaluate each channel from that
+    channel's values alone, are the same in every channel: they are evaluated for one channel, and the weights,
+    which differ between channels (the mask; a nonlinear loss's linearisation), enter the sums as matrix products
+    over the samples: G_c = Σ_n w²_nc B_n B_nᵀ, b_c = Σ_n B_n w²_nc (f_d − f₀)_nc. On a CPU that scored a
+    Lambert + GGX candidate 2.2 times as fast as the per-channel products of the weighted basis (issue 19).
 
     Arguments:
         problem: the `Problem`.
         params: physical values of every parameter (the values of ``names`` are ignored).
         names: the linear amplitudes (K names).
         data: the `FitData`.
+        shared: the other colour parameters are the same in every channel (see above; else the result is wrong).
 
     Returns:
         ``(c0, gram, rhs)``: ‖w (f_d − f₀)‖² per channel ``(C,)``, G = (wB)ᵀ(wB) ``(C, K, K)`` and
         b = (wB)ᵀ w (f_d − f₀) ``(C, K)``, so that the squared residual norm is c₀ − 2aᵀb + aᵀGa.
     """
-    _, _, weighted, target = _amplitude_system(problem, params, names, data)
-    return (jnp.sum(target * target, axis=0),) + _normal_sums(weighted, target)
+    if not shared:
+        _, _, weighted, target = _amplitude_system(problem, params, names, data)
+        return (jnp.sum(target * target, axis=0),) + _normal_sums(weighted, target)
+    one = dataclasses.replace(problem, channels=1)
+    colour = {spec.name for spec in problem.specs if spec.colour}
+    first = {name: (value[..., :1] if name in colour else value) for name, value in params.items()}
+    f0, basis = amplitude_basis(one, first, names, data)  # (N, 1), (N, 1, K)
+    squared = jnp.square(_weights(problem, data))  # (N, C)
+    residual = data.values - f0
+    b = basis[:, 0, :]
+    k = b.shape[-1]
+    products = (b[:, :, None] * b[:, None, :]).reshape(b.shape[0], k * k)
+    gram = jnp.transpose((products.T @ squared).reshape(k, k, -1), (2, 0, 1))
+    return jnp.sum(squared * residual * residual, axis=0), gram, (b.T @ (squared * residual)).T
 
 
 def _amplitude_system(problem: Problem, params: dict, names: tuple, data: FitData):
