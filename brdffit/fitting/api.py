@@ -288,8 +288,14 @@ def _start_status(outcome: dict) -> str:
 
 
 def _best(outcomes: list[dict]) -> dict:
-    """The outcome the polish answers with (`brdffit.fitting.marquardt.answer`: the lowest cost, or a start that
-    converged within `BEST_TIE` of it rather than one that ran out of steps)."""
+    """The outcome the polish answers with: the one the default solver marked as its answer, else
+    `brdffit.fitting.marquardt.answer`'s (the lowest cost, or a start that converged within `BEST_TIE` of it
+    rather than one that ran out of steps). The solver's mark stands: its final pass at the answer can move that
+    cost by rounding above another start's at the same optimum (whose sums then are not the answer's: a further
+    pass, a new compiled shape in a `fit_many` worker)."""
+    marked = [o for o in outcomes if o.get("answer")]
+    if marked:
+        return marked[0]
     costs = np.array([np.inf if o["nonfinite"] else o["cost"] for o in outcomes])
     return outcomes[marquardt.answer(costs, np.array([o["max_steps"] for o in outcomes]))]
 

@@ -416,7 +416,8 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         ``max_steps`` (the step limit ended it), ``nonfinite``, ``normal`` (the `NormalEquations` at the
         returned point, in the physical free parameters; with ``metrics``, its metric sums) and ``exact``: the
         last pass evaluated the returned point itself, up to an amplitude move within `EXACT_MOVE` (its sums
-        are then those of the point to that order, and no further pass at the answer is needed).
+        are then those of the point to that order, and no further pass at the answer is needed); ``answer``:
+        the material's answer (`answer`, True for one point a material).
     """
     layout, free = problem.layout, problem.free
     materials, count = len(starts), len(starts[0])
@@ -468,14 +469,15 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         lam = np.where(better, np.where(poor, lam, np.maximum(lam / 10.0, _MIN_DAMPING)),
                        np.where(active, lam * 10.0, lam))
         done |= active & (lam > MAX_DAMPING)
-    answers = np.ones(x.shape[:2], bool)
+    # Each material's answer (`answer`): the point the pipeline keeps, marked so, since a further pass at it can
+    # move its cost by rounding below or above another start's at the same optimum.
+    ran_out = ~converged & (steps >= max_steps)
+    chosen = np.array([m * count + answer(state.sums.cost[m], ran_out[m]) for m in range(materials)])
+    answers = np.isin(np.arange(materials * count), chosen).reshape(x.shape[:2])
     if compact:
-        # One pass at each material's answer (`answer`, the point the pipeline keeps) gives its own sums, meat and
-        # metric sums: cheaper than carrying a whole batch's arrays through every step. The other points keep
-        # their last sums, without the meat and metrics.
-        ran_out = ~converged & (steps >= max_steps)
-        chosen = np.array([m * count + answer(state.sums.cost[m], ran_out[m]) for m in range(materials)])
-        answers = np.isin(np.arange(materials * count), chosen).reshape(x.shape[:2])
+        # One pass at each material's answer gives its own sums, meat and metric sums: cheaper than carrying a
+        # whole batch's arrays through every step. The other points keep their last sums, without the meat and
+        # metrics.
         state.sums = _scatter(batch.gathered_sums(state.x, chosen, metrics=metrics), chosen, answers.shape,
                               state.sums)
         state.delta = np.where(answers[..., None], 0.0, state.delta)
@@ -483,7 +485,7 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         state.sums = state.sums._replace(meat=meat_of(problem, [a for a, _ in state.values]),
                                          metric_sums=metric_sums_of([f for _, f in state.values], pieces))
     finite = np.isfinite(state.sums.cost)
-    exact = answers & np.all(np.abs(state.delta) <= EXACT_MOVE * np.abs(state.x) + atol, axis=-1)
+    exact = (answers | (not compact)) & np.all(np.abs(state.delta) <= EXACT_MOVE * np.abs(state.x) + atol, axis=-1)
     out = []
     for m, material in enumerate(starts):
         row = []
@@ -492,7 +494,7 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
             params = dict(start, **{k: np.asarray(v) for k, v in values.items()})
             row.append({"params": params, "cost": float(state.sums.cost[m, s]), "steps": int(steps[m, s]),
                         "max_steps": bool(finite[m, s] and not converged[m, s] and steps[m, s] >= max_steps),
-                        "nonfinite": not finite[m, s], "exact": bool(exact[m, s]),
+                        "nonfinite": not finite[m, s], "exact": bool(exact[m, s]), "answer": bool(answers[m, s]),
                         "normal": state.sums.at_point(m, s)})
         out.append(row)
     return out
