@@ -41,6 +41,7 @@ import dataclasses
 
 import numpy as np
 
+from .moments import applies, moment_sums
 from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of
 from .problem import FitData, Problem
 from .separable import solve_box
@@ -216,6 +217,9 @@ class _Batch:
         # (M,) valid residuals, counted on the host (a compiled count added 0.12-0.16 s to a first fit)
         self.n_values = sum(np.sum(np.asarray(piece.mask), axis=(1, 2)) for piece in pieces)
         self.compact = compact
+        # A compact batch's steps form their sums from the channels' shared moments where they can
+        # (`brdffit.fitting.moments`); its answers' sums, with the meat and the metric sums, come from `accumulate`.
+        self.moments = compact and applies(problem, {k: np.asarray(v) for k, v in pieces[0].fixed.items()})
 
     def trees(self, x) -> dict:
         batch = x.shape[:2]
@@ -295,8 +299,11 @@ class _Batch:
             group = chosen[start:start + _MAX_WIDTH]
             width = _width(group.size, x.shape[0] * count)
             padded = np.concatenate([group, np.full(width - group.size, group[-1])])
-            sums = accumulate(self.problem, self.trees(flat[padded]), self.pieces, metrics=metrics, meat=metrics,
-                              materials=padded // count)
+            if self.moments and not metrics:
+                sums = moment_sums(self.problem, self.trees(flat[padded]), self.pieces, padded // count)
+            else:
+                sums = accumulate(self.problem, self.trees(flat[padded]), self.pieces, metrics=metrics,
+                                  meat=metrics, materials=padded // count)
             groups.append([None if a is None else np.reshape(a, (width,) + np.shape(a)[2:])[:group.size]
                            for a in sums])
         return NormalEquations(*(None if parts[0] is None else np.concatenate(parts) for parts in zip(*groups)))

@@ -35,7 +35,7 @@ from ..models.model import evaluate_pair
 from .losses import get_loss
 from .problem import FitData, Problem
 
-__all__ = ["amplitude_basis", "amplitude_sums", "solve_box", "box_patterns", "project"]
+__all__ = ["amplitude_basis", "amplitude_sums", "weights", "solve_box", "box_patterns", "project"]
 
 # Relative ridge added to the amplitude normal matrix: keeps the candidate systems solvable when a basis
 # function vanishes on the data (a lobe that no sample sees) or two coincide (lambert+lambert); far below any
@@ -236,7 +236,7 @@ def amplitude_sums(problem: Problem, params: dict, names: tuple, data: FitData, 
     colour = {spec.name for spec in problem.specs if spec.colour}
     first = {name: (value[..., :1] if name in colour else value) for name, value in params.items()}
     f0, basis = amplitude_basis(one, first, names, data)  # (N, 1), (N, 1, K)
-    squared = jnp.square(_weights(problem, data))  # (N, C)
+    squared = jnp.square(weights(problem, data))  # (N, C)
     residual = data.values - f0
     b = basis[:, 0, :]
     k = b.shape[-1]
@@ -247,7 +247,7 @@ def amplitude_sums(problem: Problem, params: dict, names: tuple, data: FitData, 
 
 def _amplitude_system(problem: Problem, params: dict, names: tuple, data: FitData):
     """``(f0, basis, weighted basis w·B, target w·(f_d − f₀))`` of the amplitudes ``names``."""
-    weight = _weights(problem, data)
+    weight = weights(problem, data)
     f0, basis = amplitude_basis(problem, params, names, data)
     return f0, basis, basis * weight[..., None], (data.values - f0) * weight
 
@@ -267,7 +267,7 @@ def _projection(problem: Problem, params: dict, data: FitData):
     stacked = jax.vmap(solve)(gram, rhs)  # (C, K)
     amplitudes = {a: stacked[:, k] for k, a in enumerate(names)}
     f = f0 + jnp.einsum("nck,ck->nc", basis, stacked)
-    return dict(params, **amplitudes), f, weighted, _weights(problem, data)
+    return dict(params, **amplitudes), f, weighted, weights(problem, data)
 
 
 def project(problem: Problem, params: dict, data: FitData):
@@ -321,7 +321,9 @@ def solve_box(gram, rhs, lower, upper) -> np.ndarray:
     return np.clip(a, lower, upper)
 
 
-def _weights(problem: Problem, data: FitData):
+def weights(problem: Problem, data: FitData):
+    """The loss's weights ``(N, C)`` (`Loss.weight`: for a nonlinear loss, linearised at the data), 0 where a value
+    is missing."""
     w = get_loss(problem.loss).weight(data.values, data.cos_i, data.sqrt_weight, data.sigma, data.eps)
     return jnp.where(data.mask, w, 0.0)
 
@@ -362,7 +364,7 @@ def projected_residuals(problem: Problem, to_params, y, data: FitData):
 
         def plain(y):  # the residuals with the amplitudes held at their optimum
             p = dict(to_params(y, data), **held)
-            return jnp.where(data.mask, _weights(problem, data) * (evaluate_pair(problem.model(p), data.pair)
+            return jnp.where(data.mask, weights(problem, data) * (evaluate_pair(problem.model(p), data.pair)
                                                                    - data.values), 0.0)
 
         t = jax.jvp(plain, (y,), (dy,))[1]  # (N, C)

@@ -1,0 +1,92 @@
+"""The shared-moment pass (`brdffit.fitting.moments`): its normal equations equal those of the tangents' pass
+(`brdffit.fitting.normal_equations.accumulate`) for every lobe, and it applies only where its assumptions hold."""
+
+import numpy as np
+import pytest
+
+from brdffit import models, synth
+from brdffit.fitting import moments
+from brdffit.fitting.api import _prepare
+from brdffit.fitting.losses import loss_epsilon
+from brdffit.fitting.normal_equations import accumulate
+from brdffit.fitting.problem import make_fit_data, stack_data
+
+
+def _setup(spec, loss, n=300, fixed=None):
+    model = models.get(spec)
+    data = synth.generate(model, n=n, noise="relative:0.05", seed=4)
+    values = np.array(data.values)
+    values[::5, 2] = np.nan  # a mask that differs between channels
+    data = data.replace(values=values)
+    problem, base, fixed_values, _ = _prepare(data, spec, loss=loss, solver="lm", fixed=fixed, free=None,
+                                              robust=None, max_steps=10, rtol=1e-8, atol=1e-12)
+    fit_data = make_fit_data(data, fixed_values, loss_epsilon(loss, data.values), device=False)
+    return problem, base, stack_data([fit_data, fit_data])
+
+
+def _points(problem, base, count, seed):
+    """``count`` points per material around the model's values (amplitudes differ between channels)."""
+    rng = np.random.default_rng(seed)
+    trees = {}
+    for name in problem.free:
+        spec = problem.specs[name]
+        value = np.broadcast_to(np.asarray(base.params[name], dtype=float), (2, count) + problem.layout[name].shape)
+        scale = rng.uniform(0.7, 1.3, value.shape)
+        trees[name] = np.clip(value * scale, spec.lower, spec.upper) if spec.linear or spec.scale else value
+    return trees
+
+
+@pytest.mark.parametrize("loss", ["cosine", "relative"])
+@pytest.mark.parametrize("spec", [n if n == "lambert" else f"lambert+{n}" for n in models.names()]
+                         + ["lambert+ggx+ggx(share=f0)", "lambert+lafortune(lobes=2)"])
+def test_the_moments_give_the_normal_equations_of_the_tangents(spec, loss):
+    problem, base, data = _setup(spec, loss)
+    if not problem.outer:
+        pytest.skip(f"{spec} has no outer parameter: its fit is one linear solve, without passes")
+    assert moments.applies(problem, {k: np.asarray(v) for k, v in data.fixed.items()})
+    trees = _points(problem, base, 3, seed=len(spec))
+    materials = np.array([0, 1])
+    ours = moments.moment_sums(problem, trees, [data], materials)
+    theirs = accumulate(problem, trees, [data], meat=False, materials=materials)
+    scale = np.sqrt(np.abs(np.einsum("...ii->...i", theirs.jtj)))
+    for field in ("jtj", "jtr", "cost", "channel_cost"):
+        mine, reference = getattr(ours, field), getattr(theirs, field)
+        if field == "jtj":  # relative to the columns' norms: entries of near-orthogonal columns cancel
+            mine, reference = mine / (scale[..., :, None] * scale[..., None, :]), \
+                reference / (scale[..., :, None] * scale[..., None, :])
+        np.testing.assert_allclose(mine, reference, rtol=1e-9, atol=1e-12 * float(np.max(np.abs(reference))),
+                                   err_msg=field)
+
+
+def test_the_moments_do_not_apply_where_a_channel_has_its_own_values():
+    # A free conductor's η and k differ between channels in the polish; a fixed diffuse colour does as a value;
+    # the log loss's residual is not linear in the model.
+    problem, _, data = _setup("lambert+cook-torrance(fresnel=conductor)", "cosine")
+    assert not moments.applies(problem, {})
+    problem, _, data = _setup("lambert+ggx", "cosine", fixed={"rho_d": [0.1, 0.2, 0.3]})
+    assert not moments.applies(problem, {k: np.asarray(v) for k, v in data.fixed.items()})
+    problem, _, data = _setup("lambert+ggx", "cosine", fixed={"rho_d": 0.2})
+    assert moments.applies(problem, {k: np.asarray(v) for k, v in data.fixed.items()})
+    problem, _, _ = _setup("lambert+ggx", "log")
+    assert not moments.applies(problem, {})
+
+
+def test_a_fit_many_batch_steps_with_the_moments_and_answers_as_fits_one_by_one(monkeypatch):
+    from brdffit import fit, fit_many
+    from brdffit.fitting import marquardt
+
+    calls = []
+    counted = marquardt.moment_sums
+    monkeypatch.setattr(marquardt, "moment_sums", lambda *a, **k: calls.append(1) or counted(*a, **k))
+    sets = [synth.generate(models.get("lambert+ggx", alpha=0.1 + 0.1 * k, f0=0.04 + 0.1 * k), n=400,
+                           noise="relative:0.01", seed=k) for k in range(3)]
+    together = fit_many(sets, "lambert+ggx")
+    assert calls  # three materials of four starts: a compact batch
+    monkeypatch.setattr(marquardt, "moment_sums", counted)
+    for data, batched in zip(sets, together):
+        alone = fit(data, "lambert+ggx")
+        assert batched.status == alone.status and batched.cost == pytest.approx(alone.cost, rel=1e-10)
+        for name in alone.params:
+            np.testing.assert_allclose(batched.params[name], alone.params[name], rtol=1e-6, atol=1e-10)
+        for name in alone.stderr:
+            np.testing.assert_allclose(batched.stderr[name], alone.stderr[name], rtol=1e-4)
