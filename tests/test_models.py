@@ -428,6 +428,14 @@ def test_replace_rejects_unknown_names_and_wrong_shapes():
         model.replace(rho_d=[0.1, 0.2])
     with pytest.raises(ValueError, match="alpha"):
         model.replace(alpha=[0.1, 0.2, 0.3])
+    # Device values are held to the same shapes (one of the stored shape is kept as it is, without a copy).
+    with pytest.raises(ValueError, match="rho_d"):
+        model.replace(rho_d=jnp.asarray([0.1, 0.2]))
+    with pytest.raises(ValueError, match="alpha"):
+        model.replace(alpha=jnp.asarray([0.1, 0.2, 0.3]))
+    on_device = jnp.asarray(RHO, dtype=float)
+    assert model.replace(rho_d=on_device).params["rho_d"] is on_device
+    np.testing.assert_array_equal(model.replace(rho_d=jnp.asarray(0.25)).params["rho_d"], [0.25] * CHANNELS)
 
 
 @pytest.mark.parametrize(

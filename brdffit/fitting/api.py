@@ -27,7 +27,7 @@ import time
 import jax
 import numpy as np
 
-from ..arrays import host_arrays, to_device
+from ..arrays import host_arrays, on_device, to_device
 from ..metrics import fit_sums, metrics_from_sums
 from ..models.model import Model
 from ..models.registry import get as get_model
@@ -480,10 +480,11 @@ def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, dat
 
 # ---------------------------------------------------------------------------------------------------- the result
 def _result(problem: Problem, model: Model, measurements, data: FitData, params: dict, outcome: dict, normal,
-            starts: list, times: dict, strategy: str) -> FitResult:
-    """Diagnose the kept solution of one material and build its `FitResult`."""
+            starts: list, times: dict, strategy: str, moved: dict) -> FitResult:
+    """Diagnose the kept solution of one material and build its `FitResult` (``moved``: ``params`` on the device,
+    a batch's answers moved together: one transfer each was a twentieth of a `fit_many`, issue 19)."""
     params = {k: np.asarray(v) for k, v in params.items()}
-    fitted = model.replace(**params)
+    fitted = model.replace(**moved)
     layout = problem.layout
     valid = np.isfinite(measurements.values)
     n_valid = int(valid.sum())
@@ -650,7 +651,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             kept[m] = pruned
             normals[m] = _normal(problems[m], pruned, solve_items[m])
 
-    results = []
+    answers = []
     for m, measurements in enumerate(items):
         best, normal, problem = kept[m], normals[m], problems[m]
         params = canonical(problem, best["params"])
@@ -678,10 +679,12 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             # status, the covariance and the metrics.
             normal = normal_equations_at(problem, params, full[m],
                                          width=1 if two_stage else _polish_width(len(starts[0])))
-        results.append(_result(problem, base_model, measurements, full[m], params, best, normal, records[m],
-                               {"compile": compile_time, "run": run_time / len(items), "init": init_time / len(items)},
-                               strategy))
-    return results
+        answers.append((problem, measurements, full[m], params, best, normal, records[m]))
+    times = {"compile": compile_time, "run": run_time / len(items), "init": init_time / len(items)}
+    moved = on_device([{k: np.asarray(v, dtype=float) for k, v in answer[3].items()} for answer in answers])
+    return [_result(problem, base_model, measurements, data, params, best, normal, records_m, times, strategy,
+                    on_the_device)
+            for (problem, measurements, data, params, best, normal, records_m), on_the_device in zip(answers, moved)]
 
 
 # ---------------------------------------------------------------------------------------------------- public API

@@ -7,6 +7,7 @@ the lobes and channel count are static structure.
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -84,7 +85,11 @@ def coerce_value(spec: ParamSpec, value, channels: int):
     """Turn a user-given value into the stored shape of ``spec``, or raise a ValueError that names it. A host value
     is shaped in NumPy and stays on the host: the caller moves a model's values with one `brdffit.arrays.on_device`
     (no compiled program; a transfer a value was a third of a `fit_many`'s results, issue 19); a traced one stays
-    traced."""
+    traced. A device value already of the stored shape and of JAX's float type stays as it is (the pipeline
+    moves a batch's answers with one `on_device`)."""
+    if isinstance(value, jax.Array) and not traced(value) and value.dtype == jax.dtypes.canonicalize_dtype(float) \
+            and value.shape == ((channels,) if spec.colour else ()):
+        return value
     on_tracer = traced(value)
     xp = jnp if on_tracer else np
     value = xp.asarray(value, dtype=float)
