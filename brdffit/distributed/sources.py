@@ -65,6 +65,11 @@ def material_groups(f) -> list[str]:
 
 
 def _holds_material(obj) -> bool:
+    """Whether an h5py object, or a group's contents as the inspection kept them (`brdffit.io.hdf5.read_hdf5_many`:
+    ``members`` name -> dataset, None for a member that is not one), holds a material."""
+    members = getattr(obj, "members", None)
+    if members is not None:  # no lookup in the file: h5py's high-level objects were a tenth of a file's reading
+        return all(members.get(d) is not None for d in _MATERIAL_DATASETS)
     import h5py
 
     return isinstance(obj, h5py.Group) and all(isinstance(obj.get(d), h5py.Dataset) for d in _MATERIAL_DATASETS)
@@ -92,7 +97,9 @@ def _read_hdf5(f, path: str, sources: list[Source], captured: dict) -> list[Read
                 reads.append(Read(source, read_measurements_group(group(source.group), path)))
                 continue
             # /measurements, where the file has it, is the file's material: no need to visit the others
-            groups = [MEASUREMENTS_GROUP] if _holds_material(f.get(MEASUREMENTS_GROUP)) else material_groups(f)
+            own = captured.get("/" + MEASUREMENTS_GROUP.strip("/"))
+            own = f.get(MEASUREMENTS_GROUP) if own is None else own
+            groups = [MEASUREMENTS_GROUP] if _holds_material(own) else material_groups(f)
             if not groups:
                 raise FormatError(path, f"no group holds a material (datasets {', '.join(_MATERIAL_DATASETS)})")
             if groups[0] == MEASUREMENTS_GROUP:
