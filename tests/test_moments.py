@@ -12,7 +12,7 @@ from brdffit.fitting.normal_equations import accumulate
 from brdffit.fitting.problem import make_fit_data, stack_data
 
 
-def _setup(spec, loss, n=300, fixed=None):
+def _setup(spec, loss, n=300, fixed=None, pad=False):
     model = models.get(spec)
     data = synth.generate(model, n=n, noise="relative:0.05", seed=4)
     values = np.array(data.values)
@@ -20,7 +20,7 @@ def _setup(spec, loss, n=300, fixed=None):
     data = data.replace(values=values)
     problem, base, fixed_values, _ = _prepare(data, spec, loss=loss, solver="lm", fixed=fixed, free=None,
                                               robust=None, max_steps=10, rtol=1e-8, atol=1e-12)
-    fit_data = make_fit_data(data, fixed_values, loss_epsilon(loss, data.values), device=False)
+    fit_data = make_fit_data(data, fixed_values, loss_epsilon(loss, data.values), pad=pad, device=False)
     return problem, base, stack_data([fit_data, fit_data])
 
 
@@ -36,11 +36,18 @@ def _points(problem, base, count, seed):
     return trees
 
 
+# Beside every lobe: a shared parameter, two amplitudes in one lobe, a fixed amplitude beside a free one in the same
+# lobe (its part is f₀'s, not the free one's column: `brdffit.fitting.separable.adds_to_offset`), padded samples.
+CASES = ([(n if n == "lambert" else f"lambert+{n}", None, False) for n in models.names()]
+         + [("lambert+ggx+ggx(share=f0)", None, False), ("lambert+lafortune(lobes=2)", None, False),
+            ("lambert+toon-diffuse", {"rho_shade": 0.2}, False), ("lambert+lafortune(lobes=2)", {"ks_2": 0.3}, False),
+            ("lambert+ggx", None, True)])
+
+
 @pytest.mark.parametrize("loss", ["cosine", "relative"])
-@pytest.mark.parametrize("spec", [n if n == "lambert" else f"lambert+{n}" for n in models.names()]
-                         + ["lambert+ggx+ggx(share=f0)", "lambert+lafortune(lobes=2)"])
-def test_the_moments_give_the_normal_equations_of_the_tangents(spec, loss):
-    problem, base, data = _setup(spec, loss)
+@pytest.mark.parametrize("spec, fixed, pad", CASES)
+def test_the_moments_give_the_normal_equations_of_the_tangents(spec, fixed, pad, loss):
+    problem, base, data = _setup(spec, loss, fixed=fixed, pad=pad)
     if not problem.outer:
         pytest.skip(f"{spec} has no outer parameter: its fit is one linear solve, without passes")
     assert moments.applies(problem, {k: np.asarray(v) for k, v in data.fixed.items()})
@@ -90,3 +97,17 @@ def test_a_fit_many_batch_steps_with_the_moments_and_answers_as_fits_one_by_one(
             np.testing.assert_allclose(batched.params[name], alone.params[name], rtol=1e-6, atol=1e-10)
         for name in alone.stderr:
             np.testing.assert_allclose(batched.stderr[name], alone.stderr[name], rtol=1e-4)
+
+
+def test_a_fit_many_with_a_fixed_amplitude_beside_a_free_one_answers_as_fits_one_by_one():
+    # A toon lobe's rho_shade fixed at 0.2 beside its free rho_d_2: the moment passes see the fixed part in f₀.
+    from brdffit import fit, fit_many
+
+    truth = models.get("lambert+toon-diffuse", rho_shade=0.2)
+    sets = [synth.generate(truth.replace(threshold=0.3 + 0.1 * k), n=400, noise="relative:0.01", seed=k)
+            for k in range(3)]
+    together = fit_many(sets, "lambert+toon-diffuse", fixed={"rho_shade": 0.2})
+    for data, batched in zip(sets, together):
+        alone = fit(data, "lambert+toon-diffuse", fixed={"rho_shade": 0.2})
+        assert batched.status == alone.status
+        assert batched.cost == pytest.approx(alone.cost, rel=1e-8)

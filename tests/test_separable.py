@@ -232,3 +232,28 @@ def test_a_search_with_colour_values_that_differ_between_channels_scores_each_ch
     assert 0.3 / 1.6 < result.starts[0]["init"]["alpha"] < 0.3 * 1.6, result.starts
     np.testing.assert_allclose(result.params["alpha"], 0.3, rtol=2e-3)
     np.testing.assert_allclose(result.params["ks"], [0.3, 0.2, 0.1], rtol=5e-3)
+
+
+@pytest.mark.parametrize("spec, fixed", [("lambert+toon-diffuse", {"rho_shade": 0.2}),
+                                         ("lambert+lafortune(lobes=2)", {"ks_2": 0.3}),
+                                         ("lambert+ashikhmin-shirley", {"rs": 0.1})])
+def test_the_affine_decomposition_reproduces_the_model_with_a_fixed_amplitude_beside_a_free_one(spec, fixed):
+    # f₀ + B a equals the model: a lobe's fixed amplitude adds its part to f₀ (`adds_to_offset`); the free one's
+    # column held it before (2026-12-04), which misled the search and a fit_many's moment passes.
+    from brdffit.fitting.api import _prepare
+    from brdffit.fitting.losses import loss_epsilon
+    from brdffit.fitting.problem import make_fit_data
+    from brdffit.fitting.separable import amplitude_basis
+    from brdffit.models.model import evaluate_pair
+
+    model = models.get(spec, **fixed)
+    data = synth.generate(model, n=200, seed=2)
+    problem, base, fixed_values, _ = _prepare(data, spec, loss="cosine", solver="lm", fixed=fixed, free=None,
+                                              robust=None, max_steps=10, rtol=1e-8, atol=1e-12)
+    fit_data = make_fit_data(data, fixed_values, loss_epsilon("cosine", data.values))
+    params = {k: jnp.asarray(v, dtype=float) for k, v in dict(base.params, **fixed_values).items()}
+    params.update({name: jnp.asarray([0.3, 0.5, 0.7]) for name in problem.linear})
+    f0, basis = amplitude_basis(problem, params, problem.linear, fit_data)
+    amplitudes = jnp.stack([params[name] for name in problem.linear], axis=-1)  # (C, K)
+    np.testing.assert_allclose(f0 + jnp.einsum("nck,ck->nc", basis, amplitudes),
+                               evaluate_pair(problem.model(params), fit_data.pair), rtol=1e-12, atol=1e-14)

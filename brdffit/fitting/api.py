@@ -293,7 +293,7 @@ def _best(outcomes: list[dict]) -> dict:
     rather than one that ran out of steps). The solver's mark stands: its final pass at the answer can move that
     cost by rounding above another start's at the same optimum (whose sums then are not the answer's: a further
     pass, a new compiled shape in a `fit_many` worker)."""
-    marked = [o for o in outcomes if o.get("answer")]
+    marked = [o for o in outcomes if o.get("answer") and not o["nonfinite"]]
     if marked:
         return marked[0]
     costs = np.array([np.inf if o["nonfinite"] else o["cost"] for o in outcomes])

@@ -3,13 +3,14 @@ host over compiled passes, for a whole batch of points at once.
 
 Each step of every point (materials × starts; in a batch of several materials only the points still moving,
 gathered, `_COMPACT_POINTS`) is one compiled pass over the data
-(`brdffit.fitting.normal_equations.accumulate`): JᵀJ, Jᵀr and the cost at the point, J in the physical free
-parameters. Because the residuals are affine in the amplitudes, those sums give the cost as a function of the
-amplitudes exactly: each pass first moves the amplitudes to their bounded optimum for the current outer parameters
-(the projection of `brdffit.fitting.separable`, here from the pass's own sums: cost(a') = cost + 2 gᵀΔ + Δᵀ G Δ,
-Δ = a' − a, with the same exact active-set solve; a second pass at the moved point when Δ jumped off a bound or
-beyond the amplitude's own size, so that the outer tangents and the cost are those of the projected point), then
-takes a
+(`brdffit.fitting.normal_equations.accumulate`, or in such a batch `brdffit.fitting.moments` where it applies):
+JᵀJ, Jᵀr and the cost at the point, J in the physical free parameters. Because the residuals are affine in the
+amplitudes, those sums give the cost as a function of the amplitudes exactly: each pass first moves the amplitudes
+to their bounded optimum for the current outer parameters (the projection of `brdffit.fitting.separable`, here
+from the pass's own sums: cost(a') = cost + 2 gᵀΔ + Δᵀ G Δ, Δ = a' − a, with the same exact active-set solve; a
+second pass at the moved point where rounding may have spoilt that prediction, `_TRUSTED_SPREAD`, and, for a kept
+trial, where Δ jumped off a bound or beyond the amplitude's own size or changed the cost by more than
+`_TRUSTED_CHANGE`, so that the outer tangents are those of the projected point), then takes a
 Levenberg-Marquardt step
 
     (JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr        (Marquardt 1963, Eq. 29's scaling)
@@ -217,8 +218,8 @@ class _Batch:
         # (M,) valid residuals, counted on the host (a compiled count added 0.12-0.16 s to a first fit)
         self.n_values = sum(np.sum(np.asarray(piece.mask), axis=(1, 2)) for piece in pieces)
         self.compact = compact
-        # A compact batch's steps form their sums from the channels' shared moments where they can
-        # (`brdffit.fitting.moments`); its answers' sums, with the meat and the metric sums, come from `accumulate`.
+        # A compact batch's passes form their sums from the channels' shared moments where they can
+        # (`brdffit.fitting.moments`), but for the answers' sums with the meat and the metric sums (`accumulate`).
         self.moments = compact and applies(problem, {k: np.asarray(v) for k, v in pieces[0].fixed.items()})
 
     def trees(self, x) -> dict:
@@ -247,8 +248,8 @@ class _Batch:
         if points is None:
             points = np.ones(x.shape[:2], bool)
         state = self._project(x, base, points)
-        with np.errstate(invalid="ignore"):
-            untrusted = ~(state.spread <= _TRUSTED_SPREAD * np.abs(state.evaluated))
+        with np.errstate(invalid="ignore"):  # a point whose pass was not finite has nothing to evaluate again
+            untrusted = np.isfinite(state.evaluated) & ~(state.spread <= _TRUSTED_SPREAD * np.abs(state.evaluated))
         again = points & (untrusted | (self._stale(state) if refresh else False))
         return self._project(state.x, state, again) if again.any() else state
 

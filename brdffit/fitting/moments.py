@@ -18,9 +18,10 @@ in the cost). Measured on Lambert + GGX (32 points, 2,048 samples, one CPU core)
 about half the time of `brdffit.fitting.normal_equations.accumulate`'s, whose (C, Q + 1, N) tangents leave the
 cache (issue 19).
 
-The default solver's steps in a `fit_many` batch use it (`brdffit.fitting.marquardt`); the answers' sums, which
-need the residuals themselves (the sandwich covariance's meat, the metric sums), come from `accumulate`.
-`tests/test_moments.py` holds every lobe's moments to `accumulate`'s sums.
+The default solver's passes in a `fit_many` batch use it (`brdffit.fitting.marquardt`), but for the answers'
+sums on the whole data, which need the residuals themselves (the sandwich covariance's meat, the metric sums):
+those come from `accumulate`. `tests/test_moments.py` holds every lobe's moments to `accumulate`'s sums, also with
+a fixed amplitude beside a free one and with padded samples.
 """
 
 from __future__ import annotations
@@ -33,10 +34,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .losses import get_loss
-from .normal_equations import NormalEquations
+from .normal_equations import NormalEquations, shape_key, timed_first_calls
 from .problem import FitData, Problem
 from .programs import Program
-from .separable import amplitude_basis, weights
+from .separable import adds_to_offset, amplitude_basis, weights
 
 __all__ = ["applies", "moment_sums"]
 
@@ -67,7 +68,7 @@ def _columns(problem: Problem) -> tuple:
     layout, names, outer = problem.layout, problem.linear, problem.outer
     reads = [{slot.name for slot in layout.lobe_slots(j)} for j in range(len(problem.lobes))]
     owner = {name: next(j for j, read in enumerate(reads) if name in read) for name in names}
-    offset = [j for j, lobe in enumerate(problem.lobes) if lobe.offset or not (reads[j] & set(names))]
+    offset = [j for j in range(len(problem.lobes)) if adds_to_offset(problem, j, names)]
     width = 1 + len(names)
     columns = [k for k in range(width) if k or offset]
     for q, name in enumerate(outer):
@@ -105,14 +106,16 @@ def _moments(problem: Problem, columns: tuple, tree: dict, data: FitData):
 
 
 @functools.lru_cache(maxsize=64)
-def _program(structure: Problem) -> Program:
+def _program(structure: Problem):
     """The compiled moments of ``(trees (W, S) + shape, data with a material axis, materials (W,))``: row i of
-    ``trees`` on material ``materials[i]``, gathered on the device (as `pass_program`'s gathered pass)."""
+    ``trees`` on material ``materials[i]``, gathered on the device (as `pass_program`'s gathered pass); the first
+    call of each shape adds its seconds to `compile_seconds`."""
     columns = _columns(structure)
     per_point = jax.vmap(jax.vmap(lambda tree, data: _moments(structure, columns, tree, data), in_axes=(0, None)),
                          in_axes=(0, 0))
-    return Program(lambda trees, data, index: per_point(trees, jax.tree_util.tree_map(lambda a: a[index], data)),
-                   f"moments {structure!r}")
+    program = Program(lambda trees, data, index: per_point(trees, jax.tree_util.tree_map(lambda a: a[index], data)),
+                      f"moments {structure!r}")
+    return timed_first_calls(program, lambda trees, data, index: shape_key(trees, data))
 
 
 def _coefficients(problem: Problem, trees: dict) -> np.ndarray:

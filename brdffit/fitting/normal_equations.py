@@ -33,8 +33,8 @@ from ..models.model import evaluate_pair
 from .problem import BUCKET_CHUNK, FitData, Problem, chunk_data, physical_params, residuals_of
 from .programs import Program
 
-__all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "metric_sums_of", "meat_of",
-           "CHUNK_SAMPLES"]
+__all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "timed_first_calls",
+           "shape_key", "metric_sums_of", "meat_of", "CHUNK_SAMPLES"]
 
 CHUNK_SAMPLES = BUCKET_CHUNK  # padded data then splits into whole chunks
 
@@ -132,20 +132,34 @@ def pass_program(structure: Problem):
                 Program(lambda trees, data, index: per_material(trees, jax.tree_util.tree_map(lambda a: a[index],
                                                                                               data)),
                         f"gathered pass {structure!r}"))
-    seen = set()
 
     def fn(trees, data, materials=None):
-        program, args = (programs[0], (trees, data)) if materials is None else \
-            (programs[1], (trees, data, np.asarray(materials, dtype=np.int32)))
-        # The shapes that decide a compilation: every other leaf's shape follows from the values' and the
-        # problem's (a cheap key: this runs once per chunk of every pass).
-        key = (tuple(np.shape(v) for v in trees.values()), data.values.shape, str(data.values.dtype),
-               tuple(sorted(data.fixed)), materials is None)
-        if key in seen:
-            return program(*args)
+        if materials is None:
+            return programs[0](trees, data)
+        return programs[1](trees, data, np.asarray(materials, dtype=np.int32))
+
+    return timed_first_calls(fn, lambda trees, data, materials=None: shape_key(trees, data) + (materials is None,))
+
+
+def shape_key(trees: dict, data: FitData) -> tuple:
+    """The shapes that decide a pass's compilation: every other leaf's shape follows from the values' and the
+    problem's (a cheap key: it is computed at every call)."""
+    return (tuple(np.shape(v) for v in trees.values()), data.values.shape, str(data.values.dtype),
+            tuple(sorted(data.fixed)))
+
+
+def timed_first_calls(call, key):
+    """``call`` with the seconds of its first call for each ``key(*args)`` (compilation, or loading it from JAX's
+    persistent cache, and the call itself) added to `compile_seconds`."""
+    seen = set()
+
+    def fn(*args):
+        signature = key(*args)
+        if signature in seen:
+            return call(*args)
         start = time.perf_counter()
-        out = jax.block_until_ready(program(*args))
-        seen.add(key)
+        out = jax.block_until_ready(call(*args))
+        seen.add(signature)
         _COMPILE_SECONDS.value = compile_seconds() + time.perf_counter() - start
         return out
 

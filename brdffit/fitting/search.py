@@ -358,7 +358,7 @@ def _screened(problem: Problem, candidates: list[dict], data: FitData, screen: F
         rest = [int(i) for i in np.argsort(row, kind="stable") if i not in keep]
         more = SCREEN_KEEP - len(keep)
         keep += rest[:more]
-        if 0 < more < len(rest):  # the candidates the screen cannot tell from the last one kept go on too
+        if 0 < more < len(rest) and np.isfinite(row[rest[more - 1]]):  # and those the screen cannot tell from it
             last = row[rest[more - 1]]
             keep += [i for i in rest[more:] if row[i] <= last + SCREEN_TIE * abs(last)][:SCREEN_TIES - len(keep)]
         best.append(keep)

@@ -35,7 +35,7 @@ from ..models.model import evaluate_pair
 from .losses import get_loss
 from .problem import FitData, Problem
 
-__all__ = ["amplitude_basis", "amplitude_sums", "weights", "solve_box", "box_patterns", "project"]
+__all__ = ["amplitude_basis", "adds_to_offset", "amplitude_sums", "weights", "solve_box", "box_patterns", "project"]
 
 # Relative ridge added to the amplitude normal matrix: keeps the candidate systems solvable when a basis
 # function vanishes on the data (a lobe that no sample sees) or two coincide (lambert+lambert); far below any
@@ -55,8 +55,8 @@ def amplitude_basis(problem: Problem, params: dict, names: tuple, data: FitData)
     Each lobe is evaluated on its own: once with its amplitudes at 0 (its part of f₀) and once per amplitude at 1
     (the others at 0) for that amplitude's B. A channel's value depends only on that channel's amplitude, so
     ones in every channel give every channel's column at once. Lobes without such amplitudes go into f₀. A lobe
-    without an `offset` (`Lobe.offset`: most) is zero with its amplitudes at 0 and is not evaluated there: in a
-    search or a pass of Lambert + GGX that evaluation was a third of the GGX lobe's.
+    that is zero with those amplitudes at 0 (`adds_to_offset`) is not evaluated there: in a search or a pass of
+    Lambert + GGX that evaluation was a third of the GGX lobe's.
 
     Arguments:
         problem: the `Problem`.
@@ -77,7 +77,7 @@ def amplitude_basis(problem: Problem, params: dict, names: tuple, data: FitData)
         local = layout.local_params(params, j)
         mine = [slot for slot in layout.lobe_slots(j) if slot.name in names]
         zero = dict(local, **{slot.local: jnp.zeros(problem.channels) for slot in mine})
-        base = jnp.broadcast_to(lobe(zero, pair), shape) if lobe.offset or not mine else 0.0
+        base = jnp.broadcast_to(lobe(zero, pair), shape) if adds_to_offset(problem, j, names) else 0.0
         f0 = f0 + base
         for slot in mine:
             unit = dict(zero, **{slot.local: jnp.ones(problem.channels)})
@@ -85,6 +85,22 @@ def amplitude_basis(problem: Problem, params: dict, names: tuple, data: FitData)
     above = pair.above[..., None]
     basis = jnp.stack([columns[a] for a in names], axis=-1)
     return jnp.where(above, f0, 0.0), jnp.where(above[..., None], basis, 0.0)
+
+
+def adds_to_offset(problem: Problem, j: int, names: tuple) -> bool:
+    """Whether lobe ``j`` is not zero with the amplitudes ``names`` at 0, and so adds to f₀ (`amplitude_basis`):
+    it declares an offset (`Lobe.offset`, Ashikhmin-Shirley's), has none of those amplitudes, or has another
+    amplitude that keeps its value (a fixed one: a toon lobe's ``rho_shade`` or a second Lafortune lobe's ``ks``
+    fixed beside a free one, whose part the free amplitude's column held before, 2026-12-04).
+
+    Arguments:
+        problem: the `Problem`.
+        j: the lobe's index.
+        names: the projected amplitudes.
+    """
+    slots = problem.layout.lobe_slots(j)
+    return (problem.lobes[j].offset or not any(slot.name in names for slot in slots)
+            or any(slot.spec.linear and slot.name not in names for slot in slots))
 
 
 @functools.lru_cache(maxsize=64)
