@@ -212,8 +212,9 @@ def render() -> str:
         "",
         "A lobe is reciprocal when f(ωi, ωo) = f(ωo, ωi) for every parameter value; `Lobe.reciprocal` records it and "
         "`Model.reciprocal` is true when every lobe of a sum is. A lobe has an offset when part of it does not scale "
-        "with its linear amplitudes (`Lobe.offset`): the separable solve evaluates only such lobes at zero "
-        "amplitudes (docs/fitting.md); a test holds every lobe to its declaration.",
+        "with its linear amplitudes (`Lobe.offset`): the separable solve evaluates only such lobes, and lobes with "
+        "a fixed amplitude beside a free one, at zero amplitudes (docs/fitting.md); a test holds every lobe to its "
+        "declaration.",
         "",
         "| lobe | reciprocal | offset |",
         "|---|---|---|",
