@@ -26,7 +26,6 @@ a fixed amplitude beside a free one and with padded samples.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 
 import jax
@@ -37,7 +36,7 @@ from .losses import get_loss
 from .normal_equations import NormalEquations, shape_key, timed_first_calls
 from .problem import FitData, Problem
 from .programs import Program
-from .separable import adds_to_offset, amplitude_basis, weights
+from .separable import adds_to_offset, channel_grams, one_channel_basis, same_in_every_channel, weights
 
 __all__ = ["applies", "moment_sums"]
 
@@ -53,11 +52,9 @@ def applies(problem: Problem, fixed: dict) -> bool:
     """
     if not (problem.separable and problem.linear and problem.robust is None and get_loss(problem.loss).linear):
         return False
-    specs = problem.specs
-    if any(specs[name].colour for name in problem.outer):
+    if any(problem.specs[name].colour for name in problem.outer):
         return False
-    return all(np.all(np.asarray(value) == np.asarray(value)[..., :1]) for name, value in fixed.items()
-               if specs[name].colour)
+    return same_in_every_channel(problem, fixed)
 
 
 @functools.lru_cache(maxsize=64)
@@ -81,16 +78,13 @@ def _columns(problem: Problem) -> tuple:
 def _moments(problem: Problem, columns: tuple, tree: dict, data: FitData):
     """``(S (L, L, C), g (L, C), channel costs (C,))`` of one point on one material's data (the module doc)."""
     names, outer = problem.linear, problem.outer
-    colour = {spec.name for spec in problem.specs if spec.colour}
     params = dict(data.fixed, **tree)
-    first = {name: (value[..., :1] if name in colour else value) for name, value in params.items()}
-    one = dataclasses.replace(problem, channels=1)
 
     def functions(shape):
-        f0, basis = amplitude_basis(one, dict(first, **shape), names, data)
-        return jnp.concatenate([f0, basis[:, 0, :]], axis=1)  # (N, 1 + K)
+        f0, basis = one_channel_basis(problem, dict(params, **shape), names, data)
+        return jnp.concatenate([f0[:, None], basis], axis=1)  # (N, 1 + K)
 
-    at = {name: first[name] for name in outer}
+    at = {name: params[name] for name in outer}
     seeds = {name: jnp.stack([jnp.ones_like(value) if name == q else jnp.zeros_like(value) for q in outer])
              for name, value in at.items()}
     value, derivatives = jax.vmap(lambda seed: jax.jvp(functions, (at,), (seed,)), out_axes=(None, 0))(seeds)
@@ -100,9 +94,7 @@ def _moments(problem: Problem, columns: tuple, tree: dict, data: FitData):
     amplitudes = jnp.stack([params[name] for name in names], axis=-1)  # (C, K)
     w = weights(problem, data)  # (N, C), 0 where a value is missing
     r = w * (value[:, :1] + value[:, 1:] @ amplitudes.T - data.values)
-    scaled = (e[:, :, None] * (w * w)[:, None, :]).reshape(n, -1)  # (N, L·C)
-    s = (e.T @ scaled).reshape(e.shape[1], e.shape[1], -1)
-    return s, e.T @ (w * r), jnp.sum(r * r, axis=0)
+    return channel_grams(e, w * w), e.T @ (w * r), jnp.sum(r * r, axis=0)
 
 
 @functools.lru_cache(maxsize=64)

@@ -32,7 +32,7 @@ from ..params import bound_margin
 from .losses import get_loss
 from .problem import FitData, Problem, residual_fn, sample_pieces
 from .programs import Program
-from .separable import amplitude_sums, solve_box
+from .separable import amplitude_sums, same_in_every_channel, solve_box
 
 __all__ = ["search", "grid", "interior", "canonical", "search_range", "SEARCH_SAMPLES", "SCREEN_SAMPLES",
            "MAX_CANDIDATES", "POLISH_STARTS"]
@@ -231,8 +231,7 @@ def _channel_shared(problem: Problem, batches: list) -> bool:
     candidate of ``batches`` (`_batches`): then the amplitudes' basis is the same in every channel and is
     evaluated once (`brdffit.fitting.separable.amplitude_sums`). So it is in a search, which gives a colour
     parameter that is not linear one value for all channels; a caller's start or fixed values may not."""
-    names = [spec.name for spec in problem.specs if spec.colour and spec.name not in problem.linear]
-    return all(np.all(batch[name] == batch[name][..., :1]) for _, batch in batches for name in names)
+    return all(same_in_every_channel(problem, batch) for _, batch in batches)
 
 
 @functools.lru_cache(maxsize=64)

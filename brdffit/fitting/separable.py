@@ -35,7 +35,8 @@ from ..models.model import evaluate_pair
 from .losses import get_loss
 from .problem import FitData, Problem
 
-__all__ = ["amplitude_basis", "adds_to_offset", "amplitude_sums", "weights", "solve_box", "box_patterns", "project"]
+__all__ = ["amplitude_basis", "adds_to_offset", "amplitude_sums", "same_in_every_channel", "one_channel_basis",
+           "channel_grams", "weights", "solve_box", "box_patterns", "project"]
 
 # Relative ridge added to the amplitude normal matrix: keeps the candidate systems solvable when a basis
 # function vanishes on the data (a lobe that no sample sees) or two coincide (lambert+lambert); far below any
@@ -248,17 +249,36 @@ def amplitude_sums(problem: Problem, params: dict, names: tuple, data: FitData, 
     if not shared:
         _, _, weighted, target = _amplitude_system(problem, params, names, data)
         return (jnp.sum(target * target, axis=0),) + _normal_sums(weighted, target)
-    one = dataclasses.replace(problem, channels=1)
+    f0, basis = one_channel_basis(problem, params, names, data)
+    squared = jnp.square(weights(problem, data))  # (N, C)
+    residual = data.values - f0[:, None]
+    gram = jnp.transpose(channel_grams(basis, squared), (2, 0, 1))
+    return jnp.sum(squared * residual * residual, axis=0), gram, (basis.T @ (squared * residual)).T
+
+
+def same_in_every_channel(problem: Problem, values: dict) -> bool:
+    """Whether every colour value in ``values`` (name -> host array, leading axes allowed) but the projected
+    amplitudes' is the same in all channels: then f₀ and the amplitudes' basis are too, since a lobe evaluates a
+    channel from that channel's values alone (`one_channel_basis`)."""
+    specs, linear = problem.specs, set(problem.linear)
+    return all(np.all(np.asarray(value) == np.asarray(value)[..., :1]) for name, value in values.items()
+               if specs[name].colour and name not in linear)
+
+
+def one_channel_basis(problem: Problem, params: dict, names: tuple, data: FitData):
+    """`amplitude_basis` of channel 0 alone, evaluated for one channel: ``(f0 (N,), basis (N, K))``, every
+    channel's where `same_in_every_channel` holds of ``params``."""
     colour = {spec.name for spec in problem.specs if spec.colour}
     first = {name: (value[..., :1] if name in colour else value) for name, value in params.items()}
-    f0, basis = amplitude_basis(one, first, names, data)  # (N, 1), (N, 1, K)
-    squared = jnp.square(weights(problem, data))  # (N, C)
-    residual = data.values - f0
-    b = basis[:, 0, :]
-    k = b.shape[-1]
-    products = (b[:, :, None] * b[:, None, :]).reshape(b.shape[0], k * k)
-    gram = jnp.transpose((products.T @ squared).reshape(k, k, -1), (2, 0, 1))
-    return jnp.sum(squared * residual * residual, axis=0), gram, (b.T @ (squared * residual)).T
+    f0, basis = amplitude_basis(dataclasses.replace(problem, channels=1), first, names, data)
+    return f0[:, 0], basis[:, 0, :]
+
+
+def channel_grams(functions, squared):
+    """Σ_n squared[n, c] e_n e_nᵀ of functions ``(N, L)`` that every channel shares, for each channel's squared
+    weights ``(N, C)``: ``(L, L, C)``, one matrix product."""
+    n, count = functions.shape
+    return (functions.T @ (functions[:, :, None] * squared[:, None, :]).reshape(n, -1)).reshape(count, count, -1)
 
 
 def _amplitude_system(problem: Problem, params: dict, names: tuple, data: FitData):
