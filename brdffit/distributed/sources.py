@@ -75,6 +75,11 @@ def _holds_material(obj) -> bool:
     return isinstance(obj, h5py.Group) and all(isinstance(obj.get(d), h5py.Dataset) for d in _MATERIAL_DATASETS)
 
 
+def _absolute(group: str) -> str:
+    """A group's name as the inspection keeps it (``"/measurements"``)."""
+    return "/" + group.strip("/")
+
+
 def error_text(err: BaseException) -> str:
     """The error column's text of an exception: ``"FormatError: <path>: line 3: ..."``."""
     return f"{type(err).__name__}: {err}"
@@ -85,8 +90,7 @@ def _read_hdf5(f, path: str, sources: list[Source], captured: dict) -> list[Read
     or the list of its material groups; a group's datasets as the inspection kept them (``captured``: group name
     -> `brdffit.io.hdf5.read_hdf5_many`'s contents)."""
     def group(name: str):
-        name = "/" + name.strip("/")
-        return captured[name] if name in captured else f[name]
+        return captured.get(_absolute(name)) or f[name]
 
     reads = []
     for source in sources:
@@ -97,8 +101,7 @@ def _read_hdf5(f, path: str, sources: list[Source], captured: dict) -> list[Read
                 reads.append(Read(source, read_measurements_group(group(source.group), path)))
                 continue
             # /measurements, where the file has it, is the file's material: no need to visit the others
-            own = captured.get("/" + MEASUREMENTS_GROUP.strip("/"))
-            own = f.get(MEASUREMENTS_GROUP) if own is None else own
+            own = captured.get(_absolute(MEASUREMENTS_GROUP)) or f.get(MEASUREMENTS_GROUP)
             groups = [MEASUREMENTS_GROUP] if _holds_material(own) else material_groups(f)
             if not groups:
                 raise FormatError(path, f"no group holds a material (datasets {', '.join(_MATERIAL_DATASETS)})")
@@ -140,7 +143,7 @@ def read_sources(sources, read_options: dict | None = None) -> list[Read]:
             reads[source] = Read(source, error=error_text(err))
     # Each file read once, by the child that inspects it; the batch's files in one child (brdffit.io.hdf5).
     def capture(path):
-        return {"/" + (source.group or MEASUREMENTS_GROUP).strip("/") for source in by_file[str(path)]}
+        return {_absolute(source.group or MEASUREMENTS_GROUP) for source in by_file[str(path)]}
 
     def read(f, path, captured):
         return _read_hdf5(f, str(path), by_file[str(path)], captured)
