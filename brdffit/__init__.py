@@ -20,6 +20,9 @@ import os as _os
 import sys as _sys
 
 from ._lazy import exports as _exports
+from ._memory import cap_malloc_arenas as _cap_malloc_arenas
+
+_cap_malloc_arenas()  # under `ulimit -v`, before JAX starts its threads (brdffit._memory)
 
 # 64-bit JAX: through the environment when JAX is not imported yet (it reads JAX_ENABLE_X64 on import), else at
 # once.

@@ -14,6 +14,7 @@ import functools
 import json
 import logging
 import math
+import os
 import signal
 import threading
 import time
@@ -26,6 +27,8 @@ from jax.scipy.special import gammaln
 
 from .fitting.result import FitResult
 from .fitting.losses import loss_epsilon, residual_scale
+from .io.hdf5 import is_lock_conflict, open_h5_waiting
+from .io.locking import LockTimeout, locked
 from .models.model import evaluate
 from .params import ParamSpec
 from .fitting.problem import Problem, flatten_free, make_fit_data, physical_params, residual_fn
@@ -39,8 +42,13 @@ QUANTILES = (2.5, 16.0, 50.0, 84.0, 97.5)
 _LOG_SIGMA_RANGE = (-30.0, 10.0)
 
 
+class ChainMoved(RuntimeError):
+    """Another process stored a step of the chain after this one read where the chain stood (`StepBackend`)."""
+
+
 class StepBackend(emcee.backends.HDFBackend):
-    """emcee's HDF5 backend, with every step committed by its last write, so that a killed run resumes exactly.
+    """emcee's HDF5 backend, with every step committed by its last write, so that a killed run resumes exactly,
+    and with the steps of concurrent runs of one chain never mixed.
 
     emcee's ``save_step`` adds the step's acceptances to ``accepted`` and writes the new random state before it
     counts the step in ``iteration``; a process killed (or interrupted) between those writes redoes the step when
@@ -49,7 +57,75 @@ class StepBackend(emcee.backends.HDFBackend):
     ``iteration``, written last, says which of the two is current: an unfinished step leaves the current one
     untouched and the redone step writes exactly what the first attempt would have. emcee's own ``accepted`` field
     is set (not added to) each step, for readers without this class.
+
+    Concurrent processes (``brdffit posterior`` run twice on one result): every open of the file holds the lock of
+    its folder (`brdffit.io.locking.locked`; shared to read, exclusive to write), so no one reads a step half
+    written and `update_hdf5` (the posterior's summary) never copies the file in the middle of one. A step is
+    stored only where the chain still stands where this process read it (`resume_point`); where another process
+    stored a step meanwhile, `save_step` raises `ChainMoved` and stores nothing, and `posterior` goes on from the
+    step stored last. The chain stays one Markov chain, each step drawn from the one stored before it.
     """
+
+    expected: int | None = None  # the stored iteration this process's next step follows (None: not checked)
+
+    @contextlib.contextmanager
+    def _opened(self, mode: str):
+        with locked(self.filename, shared=mode == "r"):
+            f = open_h5_waiting(self.filename, mode)
+            try:
+                if not self.dtype_set and self.name in f and "chain" in f[self.name]:
+                    self.dtype = f[self.name]["chain"].dtype
+                    self.dtype_set = True
+                yield f
+            finally:
+                f.close()
+
+    @property
+    def initialized(self):
+        """Whether the file holds the chain's group (emcee's check, with a lock that could not be had an error, not
+        an answer: emcee's sampler empties a chain it finds uninitialised)."""
+        if not os.path.exists(self.filename):
+            return False
+        try:
+            with self.open() as f:
+                return self.name in f
+        except OSError as err:
+            if isinstance(err, LockTimeout) or is_lock_conflict(err):
+                raise
+            return False
+
+    def open(self, mode="r"):
+        """The file, open for a ``with`` block that holds its folder's lock (emcee's ``open`` opens it bare)."""
+        if self.read_only and mode != "r":
+            raise RuntimeError("The backend has been loaded in read-only mode. Set `read_only = False` to make "
+                               "changes.")
+        return self._opened(mode)
+
+    def prepare(self, nwalkers: int, ndim: int, fresh: bool) -> None:
+        """Create the chain's group where there is none, or empty it with ``fresh``, in one locked step (emcee's
+        sampler would create it unlocked, after its own check: two processes could both create it)."""
+        with locked(self.filename):
+            if fresh or not self.initialized:
+                self.reset(nwalkers, ndim)
+
+    def resume_point(self):
+        """Where the chain stands: the stored iteration and its last state (None before the first step), read
+        together; the next step is stored only where the chain is still there (`save_step`)."""
+        with locked(self.filename, shared=True):
+            iteration = self.iteration
+            state = self.get_last_sample() if iteration else None
+        self.expected = iteration
+        return iteration, state
+
+    def grow(self, ngrow, blobs):
+        """emcee's ``grow`` by ``ngrow`` rows after the step this process continues (`resume_point`), never
+        shrinking the stored rows (another run of the chain may have grown it further)."""
+        with locked(self.filename):
+            with self.open() as f:
+                g = f[self.name]
+                rows, iteration = g["chain"].shape[0], int(g.attrs["iteration"])
+            base = iteration if self.expected is None else self.expected
+            super().grow(max(base + int(ngrow), rows) - iteration, blobs)
 
     @staticmethod
     def _slot(iteration: int) -> str:
@@ -72,11 +148,23 @@ class StepBackend(emcee.backends.HDFBackend):
         return elements if len(elements) else None
 
     def save_step(self, state, accepted):
-        """Store one step (emcee's ``Backend.save_step``); ``iteration`` is the last field written."""
+        """Store one step (emcee's ``Backend.save_step``); ``iteration`` is the last field written.
+
+        Raises:
+            ChainMoved: the stored chain is no longer where this process read it (`resume_point`); nothing is
+                stored.
+        """
+        with locked(self.filename):
+            self._save_step(state, accepted)
+
+    def _save_step(self, state, accepted):
         self._check(state, accepted)
         with self.open("a") as f:
             g = f[self.name]
             iteration = int(g.attrs["iteration"])
+            if self.expected is not None and iteration != self.expected:
+                raise ChainMoved(f"{self.filename}: the chain {self.name} holds {iteration} steps, not the "
+                                 f"{self.expected} this process continued")
             total = self._current(g)["accepted"][...] + accepted
             g["chain"][iteration, :, :] = state.coords
             g["log_prob"][iteration, :] = state.log_prob
@@ -90,6 +178,8 @@ class StepBackend(emcee.backends.HDFBackend):
                 after.attrs[f"random_state_{i}"] = v
             g["accepted"][...] = total
             g.attrs["iteration"] = iteration + 1
+        if self.expected is not None:
+            self.expected = iteration + 1
 
 
 @contextlib.contextmanager
@@ -463,20 +553,21 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
     backend = None
     if store is not None:
         backend = StepBackend(str(store), name=f"posteriors/{run_name}/chain")
-        if backend.initialized and not resume:
-            backend.reset(nwalkers, ndim)
-        if backend.initialized and backend.iteration > 0 and backend.shape != (nwalkers, ndim):
-            raise ValueError(f"{store}: the stored chain has shape {backend.shape}, this run needs "
-                             f"{(nwalkers, ndim)}; pass resume=False or another name")
+        with locked(store):
+            if backend.initialized and backend.iteration > 0 and backend.shape != (nwalkers, ndim) and resume:
+                raise ValueError(f"{store}: the stored chain has shape {backend.shape}, this run needs "
+                                 f"{(nwalkers, ndim)}; pass resume=False or another name")
+            backend.prepare(nwalkers, ndim, fresh=not resume)
     sampler = emcee.EnsembleSampler(nwalkers, ndim, log_prob_numpy, vectorize=True, backend=backend)
-    already = backend.iteration if (backend is not None and backend.initialized) else 0
-    if already == 0:
+
+    def fresh_start():
         sampler.random_state = np.random.RandomState(seed).get_state()
-        start = _initial_ball(fit_result, free, labels, flat0, lowers, uppers, nwalkers, ndim, p, data, problem,
-                              seed)
-    else:
-        start = backend.get_last_sample()
+        return _initial_ball(fit_result, free, labels, flat0, lowers, uppers, nwalkers, ndim, p, data, problem,
+                             seed)
+
+    already, start = backend.resume_point() if backend is not None else (0, None)
     if already == 0:
+        start = fresh_start()
         initial = log_prob_numpy(start)
         if np.any(np.isnan(initial)):
             raise ValueError("the initial log probability is NaN for some walkers: check the data for NaN sigma "
@@ -491,10 +582,18 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
     if remaining:
         try:
             with _interrupt_between_steps() as asked:
-                for step, _ in enumerate(sampler.sample(start, iterations=remaining), start=1):
-                    bar.update(step)
-                    if asked:
+                stored, left = already, remaining
+                while left:
+                    try:
+                        for step, _ in enumerate(sampler.sample(start, iterations=left), start=1):
+                            bar.update(min(max(stored + step - already, 0), remaining))
+                            if asked:
+                                break
                         break
+                    except ChainMoved:  # another process stored steps meanwhile: go on from the last one stored
+                        stored, start = backend.resume_point()
+                        start = fresh_start() if stored == 0 else start
+                        left = max(nsteps - stored, 0)
             if asked:
                 raise KeyboardInterrupt
         except KeyboardInterrupt:
@@ -505,8 +604,10 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
     bar.close(f"({nwalkers} walkers)")
     wall = time.perf_counter() - t0
 
-    chain = sampler.get_chain()
-    lp_chain = sampler.get_log_prob()
+    with locked(store, shared=True) if backend is not None else contextlib.nullcontext():
+        chain = sampler.get_chain()  # one chain: another process may store steps after it
+        lp_chain = sampler.get_log_prob()
+        accepted = sampler.acceptance_fraction
     steps = chain.shape[0]
     emcee_log = logging.getLogger("emcee.autocorr")
     level = emcee_log.level
@@ -525,7 +626,7 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
     after = chain[burn_n:]
     ess = (after.shape[0] * nwalkers) / tau
     r_hat = _split_r_hat(_to_reported(after, p)) if after.shape[0] > 1 else np.full(ndim, np.nan)
-    acceptance = float(np.mean(sampler.acceptance_fraction))
+    acceptance = float(np.mean(accepted))
     warnings = []
     if steps < 50 * tau.max():
         warnings.append(f"the chain ({steps} steps) is shorter than 50 autocorrelation times "

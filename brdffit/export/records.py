@@ -228,15 +228,17 @@ def record(result_path, export, to: str, out=None) -> Path | None:
         brdffit.io.FormatError: the existing ``exports.json`` cannot be read; it is left as it is.
     """
     from ..io._common import atomic_path
+    from ..io.locking import locked
 
     path = exports_path(result_path)
     if path is None:
         return None
-    earlier = _load(path)
-    new = ExportRecord.of(export, to, out)
-    kept = [r for r in earlier if (r.target, r.source) != (new.target, new.source)]
-    text = json.dumps({"format": FORMAT, "version": VERSION, "exports": [r.to_dict() for r in kept + [new]]},
-                      indent=2)
-    with atomic_path(path) as tmp:
-        tmp.write_text(text + "\n", encoding="utf-8")
+    with locked(path):  # concurrent exports into one folder: each reads what the one before it wrote
+        earlier = _load(path)
+        new = ExportRecord.of(export, to, out)
+        kept = [r for r in earlier if (r.target, r.source) != (new.target, new.source)]
+        text = json.dumps({"format": FORMAT, "version": VERSION, "exports": [r.to_dict() for r in kept + [new]]},
+                          indent=2)
+        with atomic_path(path) as tmp:
+            tmp.write_text(text + "\n", encoding="utf-8")
     return path

@@ -1,10 +1,12 @@
 """What every reader and writer shares: the file error, the Git LFS check, opening only regular files of a bounded
-size, bounded metadata JSON, and atomic replacement of a file."""
+size and reading them into memory of their size, the message for running out of memory, bounded metadata JSON, and
+atomic replacement of a file."""
 
 from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import json
 import os
 import re
@@ -15,7 +17,7 @@ from pathlib import Path
 
 __all__ = ["FormatError", "atomic_path", "decode_text", "remove_abandoned", "check_not_lfs_pointer", "LFS_PREFIX",
            "MAX_FILE_BYTES", "open_regular", "read_file_bytes", "read_head", "parse_meta_json", "MAX_META_CHARS",
-           "MAX_META_DEPTH"]
+           "MAX_META_DEPTH", "memory_guard", "memory_guarded", "memory_limit", "out_of_memory"]
 
 LFS_PREFIX = b"version https://git-lfs"
 
@@ -130,16 +132,100 @@ def read_file_bytes(path) -> bytes:
         Its content.
 
     Raises:
-        FileNotFoundError: "<path>: no such file". FormatError: not a regular file, too large (`open_regular`), or a
-            Git LFS pointer.
+        FileNotFoundError: "<path>: no such file". FormatError: not a regular file, too large (`open_regular`), a
+            Git LFS pointer, or larger than the memory limit allows (`memory_guard`: the message names the limit).
     """
     path = Path(path)
     with open_regular(path) as fh:
-        data = fh.read(MAX_FILE_BYTES + 1)  # a file that grew after the check is still read only this far
+        size = os.fstat(fh.fileno()).st_size
+        with memory_guard(path, f"reading its {size:,} bytes"):
+            data = _read_sized(fh, size)
     if len(data) > MAX_FILE_BYTES:
         raise FormatError(path, f"larger than the {MAX_FILE_BYTES:,} bytes a reader takes")
     check_not_lfs_pointer(path, data[:64])
     return data
+
+
+_GROWN_CHUNK = 1 << 24  # what is read at a time of a file that grew after its size was taken
+
+
+def _read_sized(fh, size: int) -> bytes:
+    """The bytes of an open file whose size was ``size`` (fstat), read into a buffer of that size.
+
+    ``fh.read(n)`` allocates ``n`` bytes before it reads, so the request is the file's size (plus one byte, to see
+    whether it grew), never the 2 GiB bound: a 4 KB table under ``ulimit -v`` 2 GiB once failed with MemoryError
+    here. A file that grew since is read on in 16 MiB pieces, up to one byte past `MAX_FILE_BYTES`.
+    """
+    data = fh.read(min(size, MAX_FILE_BYTES) + 1)
+    if len(data) <= size:
+        return data
+    parts, total = [data], len(data)
+    while total <= MAX_FILE_BYTES:
+        chunk = fh.read(min(_GROWN_CHUNK, MAX_FILE_BYTES + 1 - total))
+        if not chunk:
+            break
+        parts.append(chunk)
+        total += len(chunk)
+    return b"".join(parts)
+
+
+def _limit_words(value: int) -> str:
+    return f"{value / (1 << 30):.3g} GiB" if value >= 1 << 30 else f"{value / (1 << 20):.3g} MiB"
+
+
+def memory_limit() -> str:
+    """The memory limit this process runs under, in words, for a message about running out of memory.
+
+    Returns:
+        The smaller of the address-space limit (``RLIMIT_AS``, what ``ulimit -v`` sets) and the data-segment limit
+        (``RLIMIT_DATA``, ``ulimit -d``) where one is set, e.g. ``"the address-space limit (ulimit -v) of 2 GiB"``;
+        else the machine's memory (``"the memory available to the process"``).
+    """
+    try:
+        import resource
+    except ImportError:  # not a POSIX system
+        return "the memory available to the process"
+    limits = []
+    for name, what, flag in (("RLIMIT_AS", "address-space", "-v"), ("RLIMIT_DATA", "data-segment", "-d")):
+        number = getattr(resource, name, None)
+        if number is None:
+            continue
+        soft = resource.getrlimit(number)[0]
+        if soft != resource.RLIM_INFINITY:
+            limits.append((soft, f"the {what} limit (ulimit {flag}) of {_limit_words(soft)}"))
+    return min(limits)[1] if limits else "the memory available to the process"
+
+
+def out_of_memory(what: str | None = None) -> str:
+    """The one-line message for a MemoryError: what ran out and the limit it reached (`memory_limit`)."""
+    doing = f" {what}" if what else ""
+    return (f"out of memory{doing}: more memory is needed than {memory_limit()} allows; raise the limit or give "
+            "a smaller input")
+
+
+@contextlib.contextmanager
+def memory_guard(path, what: str):
+    """Turn a MemoryError raised inside into a `FormatError` that names the file and the memory limit.
+
+    Arguments:
+        path: the file being read (named by the message).
+        what: what was being done, e.g. ``"reading the file"``, ``"parsing the table"``.
+    """
+    try:
+        yield
+    except MemoryError:
+        raise FormatError(path, out_of_memory(what)) from None
+
+
+def memory_guarded(what: str):
+    """Decorate a reader ``f(path, ...)`` so that a MemoryError in it is a `FormatError` (`memory_guard`)."""
+    def decorate(reader):
+        @functools.wraps(reader)
+        def guarded(path, *args, **kwargs):
+            with memory_guard(path, what):
+                return reader(path, *args, **kwargs)
+        return guarded
+    return decorate
 
 
 _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
@@ -196,7 +282,8 @@ def decode_text(path, data: bytes, kind: str) -> str:
     if nul >= 0:
         raise FormatError(path, f"binary data (a NUL byte at offset {nul}), not {kind}")
     try:
-        return data.decode("utf-8-sig")
+        with memory_guard(path, "decoding its text"):
+            return data.decode("utf-8-sig")
     except UnicodeDecodeError as err:
         raise FormatError(path, f"not UTF-8 text (byte {err.object[err.start]:#04x} at offset {err.start})") from None
 

@@ -13,7 +13,9 @@ Schema (format_version "1"; docs/formats.md is the reference)::
     /posteriors/<name>      reserved for posterior chains (written with `update_hdf5`)
 
 Every write goes to a temporary file in the target's directory that is renamed into place, so a failed write never
-damages an existing file. Arrays are stored bit for bit, so a round trip is exact.
+damages an existing file. Arrays are stored bit for bit, so a round trip is exact. An update (`update_hdf5`) holds
+the folder's lock (`brdffit.io.locking`) from its read to its rename, and a read holds it shared, so that concurrent
+processes lose no group and read no chain step half written.
 
 Reading an untrusted file is bounded (`inspect_hdf5`): before the file is opened here, a forked child process opens
 it, reads every attribute and dataset and checks that each dataset's declared size is below `MAX_DATASET_BYTES`;
@@ -29,6 +31,7 @@ inspection read, never opened here (`read_hdf5_many`). The signature may follow 
 from __future__ import annotations
 
 import contextlib
+import errno
 import gc
 import json
 import math
@@ -45,11 +48,13 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..measurements import MeasurementError, Measurements
-from ._common import FormatError, atomic_path, check_not_lfs_pointer, parse_meta_json, read_head
+from ._common import (FormatError, atomic_path, check_not_lfs_pointer, memory_guarded, out_of_memory, parse_meta_json,
+                      read_head)
+from .locking import LOCK_TIMEOUT_S, locked
 
 __all__ = ["FORMAT_VERSION", "MEASUREMENTS_GROUP", "read_hdf5", "write_hdf5", "update_hdf5", "read_hdf5_group",
            "write_measurements_group", "read_measurements_group", "is_hdf5", "inspect_hdf5", "inspect_hdf5_many",
-           "open_hdf5", "read_hdf5_many",
+           "open_hdf5", "open_h5_waiting", "read_hdf5_many",
            "MAX_DATASET_BYTES", "MAX_ATTRIBUTE_BYTES", "INSPECT_TIMEOUT_S"]
 
 FORMAT_VERSION = "1"
@@ -305,6 +310,8 @@ def _child_inspects(paths: list, write_end: int, reader=None) -> None:
                 refused = False
             except FormatError as err:
                 message = err.problem.encode("utf-8", "replace")[:4096]
+            except MemoryError:  # the child has the parent's limits: say which one the file's contents reached
+                message = out_of_memory("reading its HDF5 data").encode("utf-8", "replace")
             except BaseException as err:  # noqa: BLE001 - whatever libhdf5 raises, the parent reports it
                 message = f"cannot be read as HDF5 (truncated or damaged?): {err}".encode("utf-8", "replace")[:4096]
             _write_all(write_end, bytes([refused]) + len(message).to_bytes(4, "big") + message
@@ -452,11 +459,37 @@ def _check_head(path: Path) -> None:
         raise FormatError(path, "not an HDF5 file (no HDF5 signature at the start or after a user block)")
 
 
+def is_lock_conflict(err: OSError) -> bool:
+    """Whether an h5py open failed because another process has the file open for writing (libhdf5's own lock)."""
+    return err.errno in (errno.EAGAIN, errno.EWOULDBLOCK) or "unable to lock file" in str(err)
+
+
+def open_h5_waiting(path, mode: str = "r", timeout: float | None = None):
+    """``h5py.File(path, mode)``, waiting while another process holds libhdf5's lock on the file.
+
+    libhdf5 locks a file while it is open (shared to read, exclusive to write) and fails at once where another
+    process's lock is in the way; brdffit's processes hold a file open for milliseconds (a chain step, a read), so
+    the open is tried again until ``timeout`` (default `brdffit.io.locking.LOCK_TIMEOUT_S`) has passed.
+
+    Raises:
+        OSError: what h5py raises, other than the lock's failure, or the lock's failure after ``timeout``.
+    """
+    deadline = time.monotonic() + (LOCK_TIMEOUT_S if timeout is None else float(timeout))
+    pause = 0.001
+    while True:
+        try:
+            return _h5py().File(path, mode)
+        except OSError as err:
+            if not is_lock_conflict(err) or time.monotonic() >= deadline:
+                raise
+        time.sleep(pause)
+        pause = min(2 * pause, 0.05)
+
+
 def _open_inspected(path: Path):
     """Open a file that has just passed `inspect_hdf5` and check brdffit's ``format_version``."""
-    h5py = _h5py()
     try:
-        f = h5py.File(path, "r")
+        f = open_h5_waiting(path, "r")
     except OSError as err:
         raise FormatError(path, f"cannot be opened as HDF5 (truncated or damaged?): {err}") from None
     try:
@@ -482,9 +515,10 @@ def open_hdf5(path):
     `inspect_hdf5`, with brdffit's ``format_version``. The caller closes the returned ``h5py.File``.
     """
     path = Path(path)
-    _check_head(path)
-    inspect_hdf5(path)
-    return _open_inspected(path)
+    with locked(path, shared=True):  # no chain step half written (posterior.StepBackend writes in place)
+        _check_head(path)
+        inspect_hdf5(path)
+        return _open_inspected(path)
 
 
 def read_hdf5_many(paths, capture, read, timeout: float | None = None):
@@ -627,6 +661,7 @@ def read_hdf5(path, group: str = MEASUREMENTS_GROUP) -> Measurements:
     return read_hdf5_group(path, group, lambda g: read_measurements_group(g, path))
 
 
+@memory_guarded("reading the HDF5 file")
 def read_hdf5_group(path, group_name: str, read_fn: Callable[[Any], Any]):
     """Open a brdffit HDF5 file read-only, check its format version, and return ``read_fn(file[group_name])``.
 
@@ -634,7 +669,7 @@ def read_hdf5_group(path, group_name: str, read_fn: Callable[[Any], Any]):
     """
     h5py = _h5py()
     name = group_name.strip("/")
-    with open_hdf5(path) as f:
+    with locked(path, shared=True), open_hdf5(path) as f:
         try:
             if name not in f or not isinstance(f[name], h5py.Group):
                 groups = []
@@ -698,14 +733,24 @@ def update_hdf5(path, group_name: str, write_fn: Callable[[Any], Any]):
             ignored).
         write_fn: called with the new h5py Group; its return value is returned.
 
+    The whole copy holds the lock of the file's folder (`brdffit.io.locking.locked`), so that two processes
+    updating one file (two `FitResult.save`, a posterior's summary while another posterior appends chain steps)
+    each keep what the other wrote.
+
     Raises:
         FormatError: ``path`` exists but is not a brdffit HDF5 file.
+        brdffit.io.locking.LockTimeout: another process held the lock for `LOCK_TIMEOUT_S`.
     """
-    h5py = _h5py()
     parts = [p for p in str(group_name).split("/") if p]
     if not parts:
         raise ValueError(f"group_name must name a group below the root, got {group_name!r}")
     path = Path(path)
+    with locked(path):  # another process's update meanwhile would be lost (this one copies the file it read)
+        return _update_locked(path, parts, write_fn)
+
+
+def _update_locked(path: Path, parts: list, write_fn):
+    h5py = _h5py()
     source = open_hdf5(path) if path.exists() else None
     try:
         with atomic_path(path, suffix=".h5") as tmp:

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..measurements import MeasurementError, Measurements
-from ._common import FormatError, atomic_path, decode_text, parse_meta_json, read_file_bytes
+from ._common import FormatError, atomic_path, decode_text, memory_guarded, parse_meta_json, read_file_bytes
 
 __all__ = ["read_table", "write_table", "ANGLE_COLUMNS", "META_PREFIX"]
 
@@ -269,6 +269,7 @@ def _where_mask(table: _Table, where: Mapping) -> tuple[np.ndarray, dict]:
     return keep, record
 
 
+@memory_guarded("reading the table")
 def read_table(path, *, columns: Mapping | None = None, values=None, sigma=None, where: Mapping | None = None,
                channel_column=None, channels: Sequence[str] | None = None, degrees: bool = True,
                delimiter: str | None = None, negative: str = "error", meta: Mapping | None = None) -> Measurements:
