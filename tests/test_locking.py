@@ -1,8 +1,7 @@
-"""Records written by concurrent commands are never lost or torn (issue 41): the folder lock
+"""Records written by concurrent commands are never lost or torn: the folder lock
 (`brdffit.io.locking.locked`) and what holds it (`update_hdf5`, ``exports.json``, a `brdffit fit` output folder, a
 posterior chain), tested with processes racing."""
 
-import inspect
 import json
 import os
 import shutil
@@ -174,9 +173,6 @@ def test_racing_updates_of_one_result_file_keep_every_group(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------ exports.json
-@pytest.mark.skipif("locked(" not in inspect.getsource(records.record),
-                    reason="brdffit.export.records.record does not lock exports.json yet (issue 41: the change to "
-                           "export/records.py is described in its report)")
 def test_racing_exports_keep_every_record(tmp_path):
     folder = tmp_path / "plastic.brdffit"
     folder.mkdir()
@@ -223,9 +219,6 @@ def complete_result(out: Path) -> str:
 
 
 @pytest.mark.slow
-@pytest.mark.skipif("check" not in inspect.signature(cli.staged_folder).parameters,
-                    reason="brdffit fit does not check its output folder again under the lock yet (issue 41: the "
-                           "change to cli.py is described in its report)")
 def test_two_fits_into_one_folder_without_force_write_one_and_refuse_the_other(tmp_path):
     out = tmp_path / "plastic.brdffit"
     runs = [brdffit("fit", PLASTIC, "--model", model, "--no-report", "--quiet", "--out", out)

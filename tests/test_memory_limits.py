@@ -1,9 +1,8 @@
-"""Memory proportional to the input (issue 41): a reader asks for memory of the file's size, never for the 2 GiB it
+"""Memory proportional to the input: a reader asks for memory of the file's size, never for the 2 GiB it
 may read at most; every command of docs/cli.md runs under an address-space limit of 2 GiB (``ulimit -v 2097152``,
 set with ``resource.setrlimit(RLIMIT_AS)`` in the child) on the shipped and the shared files; and a read that
 reaches the limit exits 2 with one line that names the limit, never a traceback."""
 
-import inspect
 import os
 import resource
 import subprocess
@@ -159,9 +158,6 @@ def test_a_read_that_reaches_the_limit_exits_2_naming_it(tmp_path, suffix):
     assert "the address-space limit (ulimit -v) of 1 GiB" in lines[0]
 
 
-@pytest.mark.skipif("MemoryError" not in inspect.getsource(cli.main),
-                    reason="brdffit.cli.main does not map MemoryError to exit 2 yet (issue 41: the change to "
-                           "cli.py is described in its report)")
 def test_a_memory_error_anywhere_in_a_command_exits_2_naming_the_limit(monkeypatch, capsys):
     def exhausted(args):
         raise MemoryError
