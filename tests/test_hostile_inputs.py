@@ -78,12 +78,12 @@ def special_files(tmp_path) -> dict:
 
 @pytest.mark.parametrize("reader", sorted(READERS))
 def test_every_reader_refuses_what_is_not_a_regular_file(tmp_path, deadline, reader):
+    # A reader that waited on the FIFO would block forever: `deadline` fails the test after 20 s instead (the four
+    # files take milliseconds), so no wall-clock bound is asserted here.
     for path, problem in special_files(tmp_path).items():
-        start = time.perf_counter()
         with pytest.raises(FormatError) as info:
             READERS[reader](path)
         assert info.value.path == str(path) and info.value.problem.startswith(problem), (reader, str(info.value))
-        assert time.perf_counter() - start < 1.0  # answered at once: the FIFO is never waited on
 
 
 def test_a_dangling_link_says_where_it_points(tmp_path):
@@ -162,21 +162,36 @@ def test_zeroed_heap_bytes_are_answered_in_bounded_time(tmp_path, monkeypatch):
     start = time.perf_counter()
     with pytest.raises(FormatError, match=r"zeroed.h5: reading its HDF5 metadata did not finish within 2 s"):
         bio.load(path)
-    assert time.perf_counter() - start < 5.0
+    # A hang guard: without the inspection's timeout libhdf5 loops forever on this file. Typical: 2.0 s (the 2 s
+    # timeout); the bound is 15 times that, for a busy host (the message above says which timeout ended it).
+    assert time.perf_counter() - start < 30.0
 
 
-def test_the_inspection_costs_milliseconds(tmp_path):
+def test_the_inspection_is_a_fork_not_a_new_interpreter(tmp_path, monkeypatch):
     path = tmp_path / "m.h5"
     bio.save(small(n=20_000, values=np.full((20_000, 3), 0.2)), path)
     bio.load(path)
+    forks = []
+    real_fork = os.fork
+
+    def counting_fork():
+        forks.append(1)
+        return real_fork()
+
+    def no_interpreter(*args, **kwargs):
+        raise AssertionError("the inspection started a process that would import brdffit again (>= 1 s)")
+
+    monkeypatch.setattr(os, "fork", counting_fork)
+    monkeypatch.setattr(subprocess, "Popen", no_interpreter)
     start = time.perf_counter()
     for _ in range(5):
         hdf5.inspect_hdf5(path)
     per_file = (time.perf_counter() - start) / 5
-    # Measured 17-30 ms with JAX loaded on an idle host (the fork copies the page tables), 277 ms with the host's
-    # two cores busy. The bound guards the design (a fork, not a new interpreter that imports brdffit: >= 1 s),
-    # not a speed target (those live in scripts/bench_*.py), so it leaves room for a loaded CI machine.
-    assert per_file < 0.75, per_file
+    # The design (one fork a file, which costs milliseconds) is checked by counting; the time is only a hang guard:
+    # 16-30 ms a file with JAX loaded on an idle host (the fork copies the page tables), 277 ms with the host's two
+    # cores busy; 5 s is 18 times the busy figure. Speed targets live in scripts/bench_*.py.
+    assert len(forks) == 5
+    assert per_file < 5.0, per_file
 
 
 def unknown_encoding_file(path) -> Path:
@@ -286,8 +301,10 @@ def test_zero_samples_and_all_missing_files_are_refused(tmp_path, capsys):
     missing = tmp_path / "missing.binary"
     merl.write_merl(merl.MerlTable(np.full((3, *merl.DIMS), np.nan)), missing)
     assert np.all(np.frombuffer(missing.read_bytes()[12:], "<f8") == -1.0)  # every cell marked "no value"
+    with pytest.raises(MeasurementError, match=r"missing.binary: values: no valid samples: every value is missing"):
+        bio.load(missing)  # the default pairs all read NaN
     with pytest.raises(MeasurementError, match=r"missing.binary: values: no valid samples: there are none"):
-        bio.load(missing)
+        bio.load(missing, sampling="grid")  # no cell holds a value
 
 
 @pytest.mark.parametrize("rows, weights, message", [

@@ -84,7 +84,7 @@ def tables():
 
 @pytest.fixture(scope="module")
 def samples(tables):
-    return {name: table.to_measurements() for name, table in tables.items()}
+    return {name: table.grid_measurements() for name, table in tables.items()}
 
 
 def _unit(theta, phi):
@@ -259,7 +259,7 @@ def test_lookup_agrees_with_mitsuba_on_an_anisotropic_file(mitsuba, tmp_path):
     # values as well, at the middle azimuth and θi > 0. At the ends of the range (−π, −π/2 in float32, just outside
     # it) the fold mirrors ωo, and at θi = 0 lookup takes φi = 0 while each tabulated φi has its own slice: a real
     # file's symmetry makes both harmless, this random one does not.
-    m = table.to_measurements()
+    m = table.grid_measurements()
     middle = m.phi_i == np.float64(np.float32(-3 * math.pi / 4)) + 2 * math.pi
     distinct = _distinct_nodes(table) & middle & (m.theta_i > 0)
     assert distinct.sum() >= 12  # of 2 incidences x 25 nodes, some below the horizon
@@ -312,12 +312,12 @@ def test_meta_and_load(tables, samples):
         assert m.channels == ("R", "G", "B") and np.all(m.weights > 0)
         np.testing.assert_array_equal(np.unique(m.theta_i), table.theta_i[:-1])
     assert tables["paper_white_rgb.bsdf"].description == "White A4 paper (160 gsm)"
-    loaded = bio.load(DATA / "rgl-epfl" / "paper_white_rgb.bsdf")
+    loaded = bio.load(DATA / "rgl-epfl" / "paper_white_rgb.bsdf", sampling="grid")
     np.testing.assert_array_equal(loaded.values, samples["paper_white_rgb.bsdf"].values)
     np.testing.assert_array_equal(loaded.weights, samples["paper_white_rgb.bsdf"].weights)
     with pytest.raises(TypeError, match="unexpected keyword argument 'subsample'"):
         bio.load(DATA / "rgl-epfl" / "paper_white_rgb.bsdf", subsample=10)
-    forced = bio.load(DATA / "rgl-epfl" / "paper_white_rgb.bsdf", format="rgl", negative="missing")
+    forced = bio.load(DATA / "rgl-epfl" / "paper_white_rgb.bsdf", format="rgl", negative="missing", sampling="grid")
     np.testing.assert_array_equal(forced.values, loaded.values)  # no negative values in this file
     with pytest.raises(ValueError, match="does not write them"):
         bio.save(loaded, Path("never-written.bsdf"))
@@ -382,7 +382,7 @@ def test_negative_values_clipped_counted_or_missing(tables, samples):
     count = clipped.meta["read"]["negative values clipped to 0"]
     raw = (table.rgb[:, :-1] < 0).sum()  # the file's negative node values at the measured incidences
     assert 0 < count <= raw
-    missing = table.to_measurements(negative="missing")
+    missing = table.grid_measurements(negative="missing")
     assert np.isnan(missing.values).sum() == count == missing.meta["read"]["negative values read as missing"]
     np.testing.assert_array_equal(clipped.values[np.isnan(missing.values)], 0.0)
     np.testing.assert_array_equal(clipped.values[~np.isnan(missing.values)], missing.values[~np.isnan(missing.values)])
@@ -405,7 +405,7 @@ def test_normal_incidence_azimuth_is_zero(synthetic):
     for phi_i in (0.7, math.pi, 4.0):
         np.testing.assert_array_equal(table.lookup(0.0, phi_i, theta_o, phi_o), at_zero)
     assert not np.allclose(table.lookup(1e-3, 2.0, theta_o, phi_o), at_zero, rtol=1e-3)  # the table does see φi
-    m = table.to_measurements()
+    m = table.grid_measurements()
     assert np.all(m.phi_i[m.theta_i == 0] == 0)
 
 
@@ -425,7 +425,10 @@ def test_lookup_speed(tables):
     angles = _random_pairs(np.random.default_rng(1), 100_000)
     start = time.perf_counter()
     table.lookup(*angles)
-    assert time.perf_counter() - start < 2.0  # well under a second on an idle core
+    # A guard against a lookup that loops over the pairs in Python, not a speed target: the 100,000 pairs take
+    # 0.15-0.18 s on an idle core, and one lookup call a pair 38 s (0.38 ms a call). The bound is some 30 times
+    # the typical time, so that a host busy with other work does not fail it.
+    assert time.perf_counter() - start < 5.0
 
 
 # ------------------------------------------------------------------------------------------------ bad files

@@ -7,7 +7,9 @@ extension; the format modules can also be used directly:
 - `merl` — the MERL binary BRDF tables (Matusik et al. 2003): read, look up, convert, and write from any model;
 - `hdf5` — brdffit's own HDF5 files (measurements, later fits and posteriors);
 - `alta` — the text data files of the ALTA BRDF library (``#DIM``, ``#PARAM_IN``, ... header; read and write);
-- `rgl` — RGL-EPFL ``.bsdf`` measured BRDFs (Dupuy & Jakob 2018): read, look up, convert to weighted samples.
+- `rgl` — RGL-EPFL ``.bsdf`` measured BRDFs (Dupuy & Jakob 2018): read, look up, convert to samples;
+- `tabulated` — how a tabulated file (MERL, RGL-EPFL) becomes the samples a fit is given: its lookup at direction
+  pairs uniform in solid angle, or its grid.
 
 A file that cannot be read as its format raises `FormatError` naming the file and the problem (line and column
 where relevant); numbers that break the rules of `Measurements` raise `brdffit.MeasurementError` naming the file.
@@ -92,8 +94,11 @@ def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa
             RGL-EPFL ``.bsdf`` file (recognised by its ``tensor_file`` magic).
         format: force ``"table"``, ``"merl"``, ``"hdf5"``, ``"alta"`` or ``"rgl"``.
         **options: passed to the reader: `read_table` (``columns``, ``values``, ``sigma``, ``where``,
-            ``channel_column``, ``degrees``, ...), `MerlTable.to_measurements` (``subsample``, ``seed``),
-            `read_hdf5` (``group``), `read_alta` (``channels``) or `RglTable.to_measurements` (``negative``).
+            ``channel_column``, ``degrees``, ...), `MerlTable.to_measurements` (``sampling``, ``pairs``, ``seed``,
+            ``max_theta``, ``subsample``), `read_hdf5` (``group``), `read_alta` (``channels``) or
+            `RglTable.to_measurements` (``sampling``, ``pairs``, ``seed``, ``max_theta``, ``negative``). A tabulated
+            file (MERL, RGL-EPFL) is read by default as its own interpolation at quasi-random direction pairs
+            uniform in solid angle (`brdffit.io.tabulated`); ``sampling="grid"`` gives its nodes.
 
     Returns:
         `brdffit.Measurements`.
@@ -110,11 +115,7 @@ def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa
     if format == "table":
         return read_table(path, **options)
     if format == "merl":
-        subsample = options.pop("subsample", None)
-        seed = options.pop("seed", 0)
-        if options:
-            raise TypeError(f"unknown option(s) for a MERL file: {', '.join(options)} (use subsample=, seed=)")
-        return read_merl(path).to_measurements(subsample=subsample, seed=seed)
+        return read_merl(path).to_measurements(**options)
     if format == "hdf5":
         return read_hdf5(path, **options)
     if format == "alta":

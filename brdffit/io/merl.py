@@ -39,6 +39,7 @@ import numpy as np
 from ..arrays import jitted
 from ..measurements import MeasurementError, Measurements
 from ._common import FormatError, atomic_path, read_file_bytes
+from .tabulated import DEFAULT_MAX_THETA, DEFAULT_PAIRS, DEFAULT_SAMPLING, check_sampling, over_directions
 
 __all__ = ["MerlTable", "read_merl", "write_merl", "looks_like_merl", "DIMS", "SCALES", "theta_h_index",
            "theta_d_index", "phi_d_index", "theta_h_centre", "theta_d_centre", "phi_d_centre", "cell_weights",
@@ -119,6 +120,13 @@ def cell_angles(phi_h: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     return out
 
 
+def _clamped_cell(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The lower of the two cell centres around continuous coordinate ``x`` (0 .. n−2) and the fraction towards
+    the upper one, clamped to [0, 1] beyond the first and last centres."""
+    lower = np.clip(np.floor(x), 0, n - 2).astype(np.intp)
+    return lower, np.clip(x - lower, 0.0, 1.0)
+
+
 def _above_horizon(theta_i, theta_o) -> np.ndarray:
     return (theta_i < _HALF_PI) & (theta_o < _HALF_PI)
 
@@ -183,27 +191,90 @@ class MerlTable:
             out[rows] = f if channels == 3 else np.repeat(f, 3, axis=1)
         return cls(out.T.reshape(3, *DIMS))
 
-    def lookup(self, theta_i, phi_i, theta_o, phi_o) -> np.ndarray:
-        """The tabulated f_r at arbitrary directions: the value of the cell that contains them (no interpolation).
+    def lookup(self, theta_i, phi_i, theta_o, phi_o, *, interpolation: str = "nearest") -> np.ndarray:
+        """The tabulated f_r at arbitrary directions.
 
         Arguments:
             theta_i, phi_i, theta_o, phi_o: angles in radians, broadcastable.
+            interpolation: ``"nearest"`` (default) the value of the cell that contains them, as MERL's reference
+                code reads it; ``"linear"`` trilinear between the eight nearest cell centres in the cells' own
+                coordinates (√θh, θd, and φd periodic with period π), clamped at the first and last centres of θh
+                and θd: a continuous function of the directions, what a fit over directions is given.
 
         Returns:
-            f_r in 1/sr, shape ``broadcast(...) + (3,)``; NaN where the cell is missing, 0 where ωi or ωo lies
+            f_r in 1/sr, shape ``broadcast(...) + (3,)``; NaN where a cell used is missing, 0 where ωi or ωo lies
             below the horizon (docs/conventions.md).
         """
         from ..geometry import to_half_diff
 
+        if interpolation not in ("nearest", "linear"):
+            raise ValueError(f"interpolation must be 'nearest' or 'linear', got {interpolation!r}")
         theta_i, phi_i, theta_o, phi_o = np.broadcast_arrays(*(np.asarray(a, dtype=float)
                                                                for a in (theta_i, phi_i, theta_o, phi_o)))
         th, _, td, pd = (np.asarray(a, dtype=float) for a in jitted(to_half_diff)(theta_i, phi_i, theta_o, phi_o))
-        i, j, k = theta_h_index(th), theta_d_index(td), phi_d_index(pd)
-        out = np.moveaxis(self.data[:, i, j, k], 0, -1)
+        if interpolation == "nearest":
+            out = np.moveaxis(self.data[:, theta_h_index(th), theta_d_index(td), phi_d_index(pd)], 0, -1)
+        else:
+            out = self._trilinear(th, td, pd)
         below = ~((np.cos(theta_i) > 0) & (np.cos(theta_o) > 0))
         return np.where(below[..., None], 0.0, out)
 
-    def to_measurements(self, subsample: int | None = None, seed: int = 0, phi_h: float = 0.0) -> Measurements:
+    def _trilinear(self, theta_h, theta_d, phi_d) -> np.ndarray:
+        """Trilinear interpolation of the cells at (θh, θd, φd) (`lookup`), shape ``theta_h.shape + (3,)``."""
+        # continuous cell coordinates whose integers are the centres (theta_h_centre, theta_d_centre, phi_d_centre)
+        x = np.sqrt(np.clip(theta_h, 0.0, _HALF_PI) / _HALF_PI) * DIMS[0] - 0.5
+        y = np.asarray(theta_d) / _HALF_PI * DIMS[1] - 0.5
+        z = np.mod(np.asarray(phi_d), math.pi) / math.pi * DIMS[2] - 0.5
+        i0, fx = _clamped_cell(x, DIMS[0])
+        j0, fy = _clamped_cell(y, DIMS[1])
+        k0 = np.floor(z).astype(np.intp)
+        fz = z - k0
+        out = np.zeros(np.shape(theta_h) + (3,))
+        for di, wx in ((0, 1 - fx), (1, fx)):
+            for dj, wy in ((0, 1 - fy), (1, fy)):
+                for dk, wz in ((0, 1 - fz), (1, fz)):
+                    cell = self.data[:, i0 + di, j0 + dj, np.mod(k0 + dk, DIMS[2])]
+                    out += np.moveaxis(cell, 0, -1) * (wx * wy * wz)[..., None]
+        return out
+
+    def to_measurements(self, sampling: str = DEFAULT_SAMPLING, *, pairs: int = DEFAULT_PAIRS, seed: int = 0,
+                        max_theta: float = DEFAULT_MAX_THETA, subsample: int | None = None,
+                        phi_h: float | None = None) -> Measurements:
+        """The table as the samples a fit is given (`brdffit.io.tabulated`).
+
+        Arguments:
+            sampling: ``"directions"`` (default) the table's trilinear interpolation (`lookup`) at ``pairs``
+                quasi-random direction pairs uniform in solid angle with θi, θo ≤ ``max_theta``; ``"grid"`` one sample per cell centre weighted
+                by the cell measure (`grid_measurements`, which ``subsample`` and ``phi_h`` are for).
+            pairs, max_theta: the direction pairs (``"directions"`` only): how many, the largest polar angle in
+                radians (80° by default).
+            seed: the pairs' scrambling seed, or the seed of a ``"grid"`` subsample.
+
+        Returns:
+            `Measurements`, channels ``("R", "G", "B")``, NaN where a cell is missing.
+
+        Raises:
+            ValueError: an unknown sampling, or ``subsample`` / ``phi_h`` with ``"directions"``. MeasurementError:
+                no value above the horizon (naming the file).
+        """
+        check_sampling(sampling, pairs, max_theta)
+        if sampling == "grid":
+            return self.grid_measurements(subsample=subsample, seed=seed, phi_h=0.0 if phi_h is None else phi_h)
+        if subsample is not None or phi_h is not None:
+            raise ValueError("subsample and phi_h choose cells of the grid: give them with sampling='grid' (the "
+                             "default sampling draws `pairs` direction pairs)")
+        try:
+            return over_directions(functools.partial(self.lookup, interpolation="linear"), pairs=pairs, seed=seed, max_theta_i=float(max_theta),
+                                   max_theta_o=float(max_theta), isotropic=True, channels=CHANNELS,
+                                   meta=self._meta()).check_informative()
+        except MeasurementError as err:
+            raise err.with_file(self.source or "MERL table") from None
+
+    def _meta(self) -> dict:
+        """What every reading of the table records: source, format, instrument."""
+        return {"source": self.source, "format": "merl", "instrument": "MERL BRDF table (Matusik et al. 2003)"}
+
+    def grid_measurements(self, subsample: int | None = None, seed: int = 0, phi_h: float = 0.0) -> Measurements:
         """The table as `Measurements`: one sample per cell at the cell centre, weighted by the cell measure.
 
         Arguments:
@@ -231,9 +302,7 @@ class MerlTable:
             if int(subsample) < len(rows):
                 rows = np.sort(np.random.default_rng(seed).choice(rows, size=int(subsample), replace=False))
         meta = {
-            "source": self.source,
-            "format": "merl",
-            "instrument": "MERL BRDF table (Matusik et al. 2003)",
+            **self._meta(),
             "convention": "cell centres in Rusinkiewicz half/difference angles, phi_h = "
                           f"{float(phi_h)!r}; weights = cell measure in (wi, wo) space (docs/formats.md)",
             "cells": {"present_above_horizon": n_valid,

@@ -34,10 +34,14 @@ divides by cos θo (docs/conventions.md: f_r without the cosine factor).
 
 **Negative values.** Some films hold small negative rgb values (ringing of the colour fit). pbrt-v4 and powitacq
 clip the interpolated value to 0, Mitsuba keeps it: `RglTable.lookup` clips by default (``negative="keep"`` keeps
-them), `RglTable.to_measurements` clips (``negative="missing"`` makes them NaN); the counts go to ``meta["read"]``.
+them), `RglTable.to_measurements` and `RglTable.grid_measurements` clip (``negative="missing"`` makes them NaN); the counts go to ``meta["read"]``.
 
-**Samples and weights.** `RglTable.to_measurements` gives one sample per node of the rgb grid and per measured
-incidence: the node s is mapped through the inverse of the warp to u(m), hence m and ωo = 2 (ωi·m) m − ωi. Its
+**What a fit is given.** `RglTable.to_measurements` by default evaluates `RglTable.lookup` at quasi-random direction
+pairs uniform in solid angle (`brdffit.io.tabulated`: the nodes below sit where the warp puts them, so a fit to them
+is not a fit over directions). ``sampling="grid"`` gives the nodes themselves (`RglTable.grid_measurements`).
+
+**Grid samples and weights.** `RglTable.grid_measurements` gives one sample per node of the rgb grid and per
+measured incidence: the node s is mapped through the inverse of the warp to u(m), hence m and ωo = 2 (ωi·m) m − ωi. Its
 weight is the solid angle it stands for: |dωo / ds| times the node's cell of the sample square by the trapezoid
 rule (¼, ½ or 1 times 1/((h−1)(w−1)) at corners, edges, inside). The Jacobian of s -> ωo is
 
@@ -72,6 +76,7 @@ import numpy as np
 
 from ..measurements import MeasurementError, Measurements
 from ._common import FormatError, read_file_bytes
+from .tabulated import DEFAULT_MAX_THETA, DEFAULT_PAIRS, DEFAULT_SAMPLING, check_sampling, over_directions
 
 __all__ = ["RglTable", "read_rgl", "read_tensor_file", "looks_like_rgl", "direction_to_unit", "MAGIC", "DTYPES"]
 
@@ -405,7 +410,41 @@ class RglTable:
         flip = np.stack([sx, sy, np.ones_like(sx)], axis=1)
         return wi * flip, wo * flip
 
-    def to_measurements(self, *, negative: str = "clip") -> Measurements:
+    def to_measurements(self, sampling: str = DEFAULT_SAMPLING, *, pairs: int = DEFAULT_PAIRS, seed: int = 0,
+                        max_theta: float = DEFAULT_MAX_THETA, negative: str = "clip") -> Measurements:
+        """The table as the samples a fit is given (`brdffit.io.tabulated`).
+
+        Arguments:
+            sampling: ``"directions"`` (default) the file's interpolation (`lookup`) at ``pairs`` quasi-random
+                direction pairs uniform in solid angle, θi up to the largest measured incidence (and ``max_theta``),
+                θo up to ``max_theta``; ``"grid"`` the file's own nodes with their solid-angle weights
+                (`grid_measurements`).
+            pairs, seed, max_theta: the direction pairs (``"directions"`` only): how many, the scrambling seed,
+                the largest polar angle in radians (80° by default).
+            negative: ``"clip"`` (default) a negative value becomes 0; ``"missing"`` makes it NaN.
+
+        Returns:
+            `Measurements`, channels ``R, G, B``.
+        """
+        check_sampling(sampling, pairs, max_theta)
+        _check_negative_samples(negative)
+        if sampling == "grid":
+            return self.grid_measurements(negative=negative)
+        measured = self.theta_i[self.theta_i < _HALF_PI - 1e-6]
+        try:
+            return over_directions(
+                functools.partial(self.lookup, negative=negative), pairs=pairs, seed=seed,
+                max_theta_i=min(float(max_theta), float(measured[-1])), max_theta_o=float(max_theta),
+                isotropic=self.isotropic, channels=CHANNELS, meta=self._meta()).check_informative()
+        except MeasurementError as err:
+            raise err.with_file(self.path) from None
+
+    def _meta(self) -> dict:
+        """What every reading of the file records: source, format, description, instrument."""
+        return {"source": self.path, "format": "rgl", "description": self.description,
+                "instrument": "RGL-EPFL adaptive-parameterisation gonio-photometer (Dupuy & Jakob 2018)"}
+
+    def grid_measurements(self, *, negative: str = "clip") -> Measurements:
         """One sample per node of the rgb grid and per measured incidence, weighted by its solid angle.
 
         Arguments:
@@ -419,9 +458,7 @@ class RglTable:
             lies at or below the horizon are dropped, and so is the incidence θi = 90°; ``meta["read"]`` counts
             them.
         """
-        if negative not in NEGATIVE_SAMPLES:
-            raise ValueError(f"negative must be one of {', '.join(NEGATIVE_SAMPLES)} (Measurements hold f_r >= 0; "
-                             f"RglTable.lookup(..., negative='keep') gives the raw values), got {negative!r}")
+        _check_negative_samples(negative)
         h, w = self.rgb.shape[-2:]
         s2, s1 = (a.reshape(-1) for a in np.meshgrid(np.linspace(0, 1, h), np.linspace(0, 1, w), indexing="ij"))
         cell = np.outer(_trapezoid(h), _trapezoid(w)).reshape(-1) / ((h - 1) * (w - 1))
@@ -447,10 +484,7 @@ class RglTable:
                               nodes["weights"][keep]))
         theta_i, phi_i, theta_o, phi_o, values, weights = (np.concatenate(column) for column in zip(*parts))
         meta = {
-            "source": self.path,
-            "format": "rgl",
-            "description": self.description,
-            "instrument": "RGL-EPFL adaptive-parameterisation gonio-photometer (Dupuy & Jakob 2018)",
+            **self._meta(),
             "convention": "one sample per rgb grid node mapped through the vndf warp; weights = solid angle of the "
                           "node (trapezoid rule in the sample square times |d omega_o / ds| = 4 sigma / D); "
                           "phi_i = 0 at normal incidence (docs/formats.md)",
@@ -484,6 +518,13 @@ class RglTable:
             values = self._rgb_at(s1, s2, slices, mix) * (factor / wo[:, 2])[:, None]
             weights = np.where(ndf > 0, cell * 4.0 * sigma / ndf, np.inf)  # |dωo/ds| = 4 σ(ωi) / D(m)
         return {"wo": wo, "values": values, "weights": weights}
+
+
+def _check_negative_samples(negative: str) -> None:
+    """Refuse a ``negative`` option that samples cannot hold."""
+    if negative not in NEGATIVE_SAMPLES:
+        raise ValueError(f"negative must be one of {', '.join(NEGATIVE_SAMPLES)} (Measurements hold f_r >= 0; "
+                         f"RglTable.lookup(..., negative='keep') gives the raw values), got {negative!r}")
 
 
 def _corner(rgb: np.ndarray, slices: np.ndarray, j: np.ndarray, i: np.ndarray) -> np.ndarray:
