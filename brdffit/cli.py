@@ -13,10 +13,12 @@ from pathlib import Path
 from typing import NamedTuple
 
 from . import __version__
+from .criteria import CRITERIA
 from .distributed import DEFAULT_BATCH
 from .export.records import EXPORTS_FILE
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_IMPLAUSIBLE = 3  # `brdffit export` refused a renderer material of an implausible fit (--force exports it)
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command stopped by Ctrl-C
 DEFAULT_MODEL = "auto"
 
@@ -185,6 +187,7 @@ class _TableOption(NamedTuple):
     parse: Callable | None = None  # the option's text -> the keyword's value
     repeat: bool = False
     switched: object = None
+    formats: tuple = ("table",)  # the file formats (brdffit.io.detect_format) the option applies to
 
     @property
     def dest(self) -> str:
@@ -221,10 +224,52 @@ TABLE_OPTIONS = (
 TABLE_GROUP = "instrument tables (CSV/TSV/text files only; the options of brdffit.io.read_table)"
 
 
+def _sampling(text: str) -> str:
+    from .io.tabulated import SAMPLINGS
+
+    if text not in SAMPLINGS:
+        raise argparse.ArgumentTypeError(f"{text!r}: choose {' or '.join(SAMPLINGS)}")
+    return text
+
+
+def _max_theta(text: str) -> float:
+    import math
+
+    try:
+        degrees = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give an angle in degrees") from None
+    if not 0 < degrees <= 90:
+        raise argparse.ArgumentTypeError(f"{text!r}: give an angle in (0, 90] degrees")
+    return math.radians(degrees)
+
+
+# The options of a tabulated file's reading (`brdffit.io.tabulated`: MerlTable / RglTable.to_measurements).
+TABULATED_OPTIONS = (
+    _TableOption("--sampling", "sampling", "directions|grid",
+                 "what the fit is given: the file's interpolation at importance-weighted direction pairs over the directions "
+                 "(directions, the default) or the file's own grid nodes with their weights (grid)", _sampling,
+                 formats=("merl", "rgl")),
+    _TableOption("--pairs", "pairs", "N", "the number of direction pairs of --sampling directions (default 8192)",
+                 bounded(int, 1), formats=("merl", "rgl")),
+    _TableOption("--max-theta", "max_theta", "DEG",
+                 "the largest polar angle of the direction pairs, degrees (default 80; the incidences also stop at "
+                 "the file's largest measured one)", _max_theta, formats=("merl", "rgl")),
+)
+TABULATED_GROUP = "tabulated files (MERL .binary, RGL-EPFL .bsdf; brdffit.io.tabulated)"
+READ_OPTIONS = TABLE_OPTIONS + TABULATED_OPTIONS
+
+
 def _add_table_options(p) -> None:
-    """Give a command that reads measurements the options of `brdffit.io.read_table`."""
-    group = p.add_argument_group(TABLE_GROUP)
-    for option in TABLE_OPTIONS:
+    """Give a command that reads measurements the options of `brdffit.io.read_table` and of a tabulated file's
+    reading."""
+    for title, options in ((TABLE_GROUP, TABLE_OPTIONS), (TABULATED_GROUP, TABULATED_OPTIONS)):
+        group = p.add_argument_group(title)
+        _add_options(group, options)
+
+
+def _add_options(group, options) -> None:
+    for option in options:
         if option.metavar is None:
             group.add_argument(option.flag, dest=option.dest, action="store_true", help=option.help)
         else:
@@ -233,9 +278,9 @@ def _add_table_options(p) -> None:
 
 
 def _table_options(args) -> dict:
-    """The `brdffit.io.read_table` keywords of the table options given on the command line."""
+    """The reader keywords of the reading options (table and tabulated) given on the command line."""
     options = {}
-    for option in TABLE_OPTIONS:
+    for option in READ_OPTIONS:
         given = getattr(args, option.dest, None)
         if option.metavar is None:
             if given:
@@ -261,10 +306,10 @@ def _cell(text: str) -> str:
 
 def table_options_doc() -> str:
     """The Markdown table of the table options (docs/cli.md holds it; a test checks it is current)."""
-    rows = ["| option | meaning |", "|---|---|"]
-    for option in TABLE_OPTIONS:
+    rows = ["| option | files | meaning |", "|---|---|---|"]
+    for option in READ_OPTIONS:
         usage = option.flag if option.metavar is None else f"{option.flag} {option.metavar}"
-        rows.append(f"| `{_cell(usage)}` | {_cell(option.help)} |")
+        rows.append(f"| `{_cell(usage)}` | {', '.join(option.formats)} | {_cell(option.help)} |")
     return "\n".join(rows) + "\n"
 
 
@@ -283,12 +328,14 @@ def _load(path, args):
         if not options:
             return io.load(path)
         kind = io.detect_format(path)  # a missing path, a directory, a FIFO, ... is refused here
-        if kind != "table":
-            flags = [o.flag for o in TABLE_OPTIONS if o.keyword in options]
-            verb = "apply" if len(flags) > 1 else "applies"
-            raise UsageError(f"{path} is a {kind} file; {', '.join(flags)} {verb} to instrument tables (CSV/TSV/text) "
+        misplaced = [o for o in READ_OPTIONS if o.keyword in options and kind not in o.formats]
+        if misplaced:
+            verb = "apply" if len(misplaced) > 1 else "applies"
+            where = ("instrument tables (CSV/TSV/text)" if misplaced[0].formats == ("table",)
+                     else "tabulated files (MERL, RGL-EPFL)")
+            raise UsageError(f"{path} is a {kind} file; {', '.join(o.flag for o in misplaced)} {verb} to {where} "
                              "only: read it without")
-        return io.load(path, format="table", **options)
+        return io.load(path, format=kind, **options)
     except io.FormatError as exc:
         # read_table names a missing angle column "angle theta_i: no column ..."; say how to name it here.
         if not exc.problem.startswith("angle ") or "no column" not in exc.problem:
@@ -339,6 +386,15 @@ def _check_output_folder(out: Path, force: bool) -> None:
                          "--out")
 
 
+def _check_still_free(out: Path) -> None:
+    """Refuse, at the end of a fit without --force, a result that another process wrote into ``out`` meanwhile."""
+    earlier = _earlier_result(out)
+    if earlier:
+        raise UsageError(f"while this fit ran, another process wrote a result into {out} ({', '.join(earlier[:4])}"
+                         f"{', ...' if len(earlier) > 4 else ''}); this fit's result was not written: pass --force "
+                         "to replace that one, or choose another --out")
+
+
 def _exchange(a: Path, b: Path) -> bool:
     """Swap two paths in one atomic step (Linux renameat2 with RENAME_EXCHANGE); False where it is unavailable."""
     import ctypes
@@ -363,7 +419,7 @@ def _remove_abandoned(out: Path) -> None:
 
 
 @contextlib.contextmanager
-def staged_folder(out: Path):
+def staged_folder(out: Path, check=None):
     """Yield a new, empty folder beside ``out`` to write a result into; on success it takes ``out``'s place.
 
     The folder holds either the complete earlier result or the complete new one at every moment: the new files are
@@ -371,6 +427,10 @@ def staged_folder(out: Path):
     (renameat2 RENAME_EXCHANGE; where the system lacks it, two renames leave a moment without ``out``); the earlier
     result is deleted only then. On failure the staging folder is deleted and ``out`` is untouched. A staging
     folder left by a killed run (``.<name>.new-<pid>-*``) is deleted by the next run.
+
+    The exchange holds the lock of ``out``'s parent folder (`brdffit.io.locking.locked`), so that two processes
+    finishing into one folder take turns; ``check``, when given, runs under that lock just before it (a fit
+    without --force refuses there a result that another process wrote into ``out`` while it ran).
     """
     import shutil
     import tempfile
@@ -384,15 +444,28 @@ def staged_folder(out: Path):
     try:
         os.chmod(stage, 0o777 & ~umask)  # what mkdir would have given the folder (mkdtemp makes it private)
         yield stage
-        if not out.exists():
-            os.rename(stage, out)
-        elif not _exchange(stage, out):
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}{STAGE_MARK}{os.getpid()}-", dir=out.parent))
-            os.rename(out, old / out.name)
-            os.rename(stage, out)
-            shutil.rmtree(old, ignore_errors=True)
+        from .io.locking import locked
+
+        with locked(out):
+            if check is not None:
+                check()
+            _commit(stage, out)
     finally:
         shutil.rmtree(stage, ignore_errors=True)  # after an exchange it holds the earlier result
+
+
+def _commit(stage: Path, out: Path) -> None:
+    """Put the complete folder ``stage`` in ``out``'s place (`staged_folder`)."""
+    import shutil
+    import tempfile
+
+    if not out.exists():
+        os.rename(stage, out)
+    elif not _exchange(stage, out):
+        old = Path(tempfile.mkdtemp(prefix=f".{out.name}{STAGE_MARK}{os.getpid()}-", dir=out.parent))
+        os.rename(out, old / out.name)
+        os.rename(stage, out)
+        shutil.rmtree(old, ignore_errors=True)
 
 
 def _cmd_models(args) -> int:
@@ -549,7 +622,7 @@ def _cmd_fit(args) -> int:
         from .select import DEFAULT_CANDIDATES
 
         _check_fixed(_parse_fixed(args.fixed), DEFAULT_CANDIDATES)
-        selection = select(measurements, DEFAULT_CANDIDATES, criterion="bic", progress=_progress(args),
+        selection = select(measurements, DEFAULT_CANDIDATES, criterion="auto", progress=_progress(args),
                            **_fit_options(args))
         result = selection.result
     elif args.lobes is None:
@@ -559,7 +632,7 @@ def _cmd_fit(args) -> int:
     elif args.lobes == "auto":
         candidates = [_with_lobes(args.model, k) for k in range(1, args.max_lobes + 1)]
         _check_fixed(_parse_fixed(args.fixed), candidates)
-        selection = select(measurements, candidates, criterion="bic", progress=_progress(args),
+        selection = select(measurements, candidates, criterion="auto", progress=_progress(args),
                            **_fit_options(args))
         result = selection.result
     else:
@@ -571,13 +644,15 @@ def _cmd_fit(args) -> int:
         result = fit(measurements, _with_lobes(args.model, k), multistart=args.multistart, progress=_progress(args),
                      **_fit_options(args))
     final = out
-    with staged_folder(final) as out:  # the new files appear in `final` together, replacing the earlier ones
+    still_free = None if args.force else lambda: _check_still_free(final)  # another fit may have finished first
+    with staged_folder(final, check=still_free) as out:  # the new files appear in `final` together, replacing it
         h5 = out / "result.h5"
         io.save(measurements, h5)
         result.save(h5)
         summary = result.to_dict()
         (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
-        (out / "summary.txt").write_text(result.summary() + "\n")
+        verdict = selection.verdict() + "\n" if selection is not None else ""
+        (out / "summary.txt").write_text(verdict + result.summary() + "\n")
         files = [h5, out / "result.json", out / "summary.txt"]
         posterior_summary = None
         if args.posterior:
@@ -598,11 +673,15 @@ def _cmd_fit(args) -> int:
                           "files": files}))
     elif not args.quiet:
         if selection is not None:
+            print(selection.verdict())
             print(selection.summary())
         print(result.summary())
         if posterior_summary is not None:
             print(post.table())
         print(f"wrote {', '.join(files)}")
+    if not result.plausibility().ok:
+        print(f"brdffit fit: warning: the chosen fit {result.spec} is IMPLAUSIBLE (its summary says why); "
+              "`brdffit export` refuses it for a renderer unless --force", file=sys.stderr)
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
 
 
@@ -718,6 +797,12 @@ def _cmd_export(args) -> int:
     from .export import TARGETS, export, export_details
 
     result = FitResult.load(args.result, args.name)
+    if TARGETS[args.to].renderer and not args.force and not result.plausibility().ok:
+        why = "; ".join(c.message for c in result.plausibility().checks if c.level == "implausible")
+        print(f"brdffit export: {args.result}: the fit {result.spec} is IMPLAUSIBLE ({why}); a renderer would show "
+              "a material that reflects more light than it receives. Refit with another model, or give --force to "
+              "export it anyway", file=sys.stderr)
+        return EXIT_IMPLAUSIBLE
     enable_compilation_cache()
     # The fit option's export to a renderer is recorded beside the result, for its report.
     recorded = args.fit and TARGETS[args.to].renderer
@@ -993,6 +1078,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", help="which fit in the file (default: the first)")
     p.add_argument("--material", default="material", help="material name in the output (default 'material')")
     p.add_argument("--out", help="output file (default: print to stdout)")
+    p.add_argument("--force", action="store_true",
+                   help=f"export a renderer material of an IMPLAUSIBLE fit (refused otherwise, exit {EXIT_IMPLAUSIBLE})")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "render", "render a sphere (or plane) preview of a fit, a MERL table or measured data",
              ["brdffit render data/synthetic/plastic.brdffit/result.h5 --out plastic.png",
@@ -1021,7 +1108,8 @@ def build_parser() -> argparse.ArgumentParser:
               "'lambert+lafortune;lambert+lafortune(lobes=2)' --criterion cv"], _cmd_select)
     p.add_argument("file", help=MEASUREMENT_FILE)
     p.add_argument("--candidates", help="model specs separated by ';' (default: the standard candidate list)")
-    p.add_argument("--criterion", default="bic", choices=["aic", "bic", "cv"], help="selection criterion")
+    p.add_argument("--criterion", default="auto", choices=CRITERIA,
+                   help="selection criterion: auto (bic where the data state their σ, else heldout), heldout, aic, bic, cv")
     p.add_argument("--folds", type=bounded(int, 2), default=5, help="folds of --criterion cv (default 5)")
     _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print the selection as one JSON object")
@@ -1072,6 +1160,11 @@ def main(argv=None) -> int:
     except (UsageError, FileNotFoundError, IsADirectoryError, KeyError, ValueError) as exc:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"brdffit {args.command}: error: {message}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except MemoryError:  # one line naming the limit that was reached (ulimit -v), never a traceback
+        from .io._common import out_of_memory
+
+        print(f"brdffit {args.command}: error: {out_of_memory()}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as exc:  # one line, no traceback; what was kept is said by the exception, if anything
         # `fit` writes its folder as a whole (staged_folder): an interrupted fit leaves the earlier folder as it was.

@@ -19,6 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 import jax
 import numpy as np
 
+from .criteria import CRITERIA, DEFAULT_MARGIN, HELDOUT_MARGIN, resolve_criterion
 from .fitting.api import fit
 from .fitting.result import FitResult
 from .fitting.losses import loss_epsilon
@@ -28,7 +29,8 @@ from .fitting.problem import Problem, make_fit_data, residuals_at
 from .fitting.status import information_criteria
 from .progress import Progress
 
-__all__ = ["select", "Selection", "DEFAULT_CANDIDATES", "CRITERIA", "DEFAULT_MARGIN"]
+__all__ = ["select", "Selection", "DEFAULT_CANDIDATES", "CRITERIA", "DEFAULT_MARGIN", "HELDOUT_MARGIN",
+           "resolve_criterion"]
 
 # The standard candidates (docs/model-selection.md says why each is here): diffuse alone, one specular lobe of
 # each family, GGX with a dielectric's Fresnel term (η bounds ks·F where the data cannot separate ks from f0),
@@ -47,10 +49,6 @@ DEFAULT_CANDIDATES = (
     "lambert+lafortune(lobes=2)",
     "lambert+lafortune(lobes=3)",
 )
-CRITERIA = ("aic", "bic", "cv")
-# ΔAIC or ΔBIC within which a simpler model counts as good as the best (Kass & Raftery 1995: < 2 is "not worth
-# more than a bare mention").
-DEFAULT_MARGIN = 2.0
 # Timed evaluations of a candidate's residual program for its ``cost_ns`` (the best is kept: a shared host's load
 # only ever adds time).
 _COST_REPEATS = 5
@@ -69,6 +67,10 @@ SCREEN_SAMPLES = 4096
 # uncoupled and each within 1, could reach 2 towards grazing; more is a lobe the data never constrained.
 EXTRAPOLATION_ALBEDO = 2.0
 SCREEN_SLACK = 10.0
+# What a user can do when no candidate is plausible (the verdict's advice).
+IMPLAUSIBLE_ADVICE = ("What to do: check the values' units (f_r in 1/sr without the cosine; a reflectance factor is π f_r); a material with "
+                      "a lobe none of the candidates has (retro-reflection, a sharp peak, a sheen) needs a model "
+                      "with that lobe: fit one with --model. A renderer export of this fit is refused unless forced.")
 _LAFORTUNE = re.compile(r"^(?P<base>.*?)\+?lafortune(?:\((?P<options>[^)]*)\))?$")
 
 
@@ -83,7 +85,8 @@ class Selection:
             the data's for a candidate that screening ruled out), ``verdict`` (why it was or was not chosen by
             the criterion), and with a scene ``scene_error``.
         chosen: the chosen spec (the scene's choice when a scene was given, else the criterion's).
-        criterion: ``"aic"``, ``"bic"`` or ``"cv"``; margin: the margin used.
+        criterion: ``"heldout"``, ``"aic"``, ``"bic"`` or ``"cv"``; margin: the margin used; holdout: the fraction
+            of the rows held out.
         best: the candidate with the best score.
         chosen_by_criterion: the criterion's choice (equals ``chosen`` without a scene).
         chosen_by_scene: the scene's choice, or None.
@@ -103,6 +106,7 @@ class Selection:
     results: dict
     warnings: list
     scene_results: dict = dataclasses.field(default_factory=dict)
+    holdout: float = 0.2
 
     @property
     def result(self) -> FitResult:
@@ -110,6 +114,30 @@ class Selection:
         if self.chosen_by_scene is not None:
             return self.scene_results[self.chosen]
         return self.results[self.chosen]
+
+    def verdict(self) -> str:
+        """The answer to "is this good?", in the first lines of a summary and a report: the chosen model, its error
+        on the held-out rows (absolute, in the loss's units, and relative to Lambert's), its plausibility, and what
+        to do when no candidate was plausible."""
+        rows = {row["spec"]: row for row in self.table}
+        chosen = rows[self.chosen_by_criterion]
+        error = chosen["heldout_error"]
+        line = f"verdict: {self.chosen}: held-out error {error:.4g}"
+        lambert = rows.get("lambert")
+        if lambert is not None and self.chosen_by_criterion != "lambert" and lambert["heldout_error"] > 0:
+            line += f", {error / lambert['heldout_error']:.2f}x Lambert's {lambert['heldout_error']:.4g}"
+        line += f" (the fit to the other rows, on {self.holdout:.0%} of the rows it did not see)"
+        checks = self.result.plausibility()
+        if checks.ok:
+            return line + "; plausible"
+        why = "; ".join(f"{c.name}: {c.message}" for c in checks.checks if c.level == "implausible")
+        return (line + f"; IMPLAUSIBLE ({why}).\nNo plausible candidate predicts these data within the margin of "
+                f"the best (the warnings below name the closest plausible one, if any). {IMPLAUSIBLE_ADVICE}")
+
+    @property
+    def plausible(self) -> bool:
+        """Whether the chosen fit passes every plausibility check (`FitResult.plausibility`)."""
+        return self.result.plausibility().ok
 
     def summary(self) -> str:
         """The table as text, with the choice and the rule that made it."""
@@ -125,7 +153,8 @@ class Selection:
                 line += f"{row['scene_error']:>11.4g}"
             lines.append(line + f"  {row['status']}")
         rule = {"aic": f"ΔAIC <= {self.margin:g}", "bic": f"ΔBIC <= {self.margin:g}",
-                "cv": "CV error within one standard error"}[self.criterion]
+                "cv": "CV error within one standard error",
+                "heldout": f"held-out error within {self.margin:.0%} of the best, plausible first"}[self.criterion]
         lines.append(f"best by {self.criterion}: {self.best}; simplest with {rule}: {self.chosen_by_criterion}")
         if self.chosen_by_scene is not None:
             lines.append(f"cheapest within the scene tolerance: {self.chosen_by_scene}")
@@ -243,17 +272,22 @@ def _each_candidate(candidates, work, bar, message):
 def _verdict(row: dict, chosen: dict, best: dict, threshold: float, criterion: str, usable: list,
              implausible: dict) -> str:
     """Why a candidate was or was not chosen, in words."""
-    name = {"aic": "ΔAIC", "bic": "ΔBIC", "cv": "CV error"}[criterion]
+    name = {"aic": "ΔAIC", "bic": "ΔBIC", "cv": "CV error", "heldout": "held-out error"}[criterion]
     if row is chosen:
-        return "chosen: the simplest candidate within " + ("one standard error of the best CV error"
-                                                            if criterion == "cv" else "the margin of the best")
+        if row["spec"] in implausible:
+            return "chosen although IMPLAUSIBLE: no plausible candidate came within the margin of the best"
+        return "chosen: the simplest " + ("plausible " if criterion == "heldout" else "") + "candidate within " + (
+            "one standard error of the best CV error" if criterion == "cv" else "the margin of the best")
     if row["spec"] in implausible:
-        return f"not eligible: implausible beyond the data ({implausible[row['spec']]})"
+        why = implausible[row["spec"]]
+        return f"not eligible: {why}" if criterion == "heldout" else f"not eligible: implausible beyond the data ({why})"
     if row not in usable:
         return f"not eligible: its fit ended {row['status']}"
     if row["score"] > threshold:
-        gap = (f"{name} {row['score'] - best['score']:+.4g}" if criterion != "cv"
-               else f"{name} {row['score']:.4g} against {best['score']:.4g}")
+        gap = {"cv": f"{name} {row['score']:.4g} against {best['score']:.4g}",
+               "heldout": f"{name} {row['score']:.4g} against {best['score']:.4g} "
+                          f"({row['score'] / best['score'] - 1:+.1%})"}.get(
+            criterion, f"{name} {row['score'] - best['score']:+.4g}")
         return f"worse than {best['spec']}: {gap}, beyond the " + ("standard error" if criterion == "cv" else "margin")
     if row["n_params"] > chosen["n_params"]:
         return f"as good, but {row['n_params']} parameters against {chosen['n_params']}"
@@ -269,11 +303,18 @@ def _implausibility(result: FitResult) -> str:
     return ""
 
 
+def _implausible_where_measured(result: FitResult) -> str:
+    """Why a fit is IMPLAUSIBLE (`FitResult.plausibility`: an albedo above 1 where the data were measured, or a
+    ks·F above 1), in words; empty when no check says so."""
+    return "; ".join(f"IMPLAUSIBLE {c.name}: {c.message}" for c in result.plausibility().checks
+                     if c.level == "implausible")
+
+
 def _simplest(rows: list[dict], eligible) -> dict:
     return min((r for r in rows if eligible(r)), key=lambda r: (r["n_params"], r["cost_ns"]))
 
 
-def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", *, loss: str = "cosine",
+def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto", *, loss: str = "cosine",
            margin: float | None = None, folds: int = 5, holdout: float = 0.2, scene=None,
            tolerance: float | None = None, scene_metric: str = "relative", reference: str = "data", seed: int = 0,
            screen: bool = True, plausible: bool = True, progress: bool = False, **fit_options) -> Selection:
@@ -282,13 +323,16 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
     Arguments:
         measurements: `brdffit.Measurements`.
         candidates: spec strings (default `DEFAULT_CANDIDATES`).
-        criterion: ``"aic"``, ``"bic"`` (default) or ``"cv"`` (``folds``-fold cross-validated loss RMSE).
+        criterion: ``"auto"`` (default: `resolve_criterion`), ``"heldout"`` (the loss RMSE on the held-out rows
+            of a fit to the others: prediction of unseen directions), ``"aic"``, ``"bic"`` or ``"cv"``
+            (``folds``-fold cross-validated loss RMSE).
         loss: the fits' loss (same for all candidates, so scores compare).
-        margin: ΔAIC/ΔBIC within which a simpler model is preferred (default 2); ignored for ``cv``, which uses
-            the one-standard-error rule.
+        margin: ΔAIC/ΔBIC within which a simpler model is preferred (default 2), or for ``heldout`` the fraction
+            of the best held-out error (default `HELDOUT_MARGIN`); ignored for ``cv``, which uses the
+            one-standard-error rule.
         folds: folds of the ``cv`` criterion.
-        holdout: fraction of samples held out (seeded) to report each candidate's held-out error with
-            ``aic``/``bic``.
+        holdout: fraction of samples held out (seeded): the ``heldout`` criterion's test rows, and each
+            candidate's reported held-out error with ``aic``/``bic``.
         scene: a `brdffit.scene.Scene`: with ``tolerance``, choose the cheapest candidate whose error in the
             scene is at most ``tolerance``. Each candidate is judged at its best for the scene: fitted to the
             reference at the scene's directions (radiance-weighted cosine loss, starting from its full-data fit),
@@ -302,7 +346,10 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
         screen: with ``aic``/``bic``, fit every candidate to the training rows first (at most `SCREEN_SAMPLES` of
             them) and refit to all the data only the candidates that can still be chosen (docs/model-selection.md);
             False fits every candidate to all the data and again with the held-out rows masked.
-        plausible: leave out fits that conserve energy where the data were measured but whose directional
+        plausible: with ``heldout``, prefer plausible fits (`FitResult.plausibility` has no IMPLAUSIBLE check:
+            albedo ≤ 1 over the measured incidences, ks·F ≤ 1): an implausible one is chosen only when no
+            plausible one is within the margin, with a warning. With the other criteria, leave out fits that
+            conserve energy where the data were measured but whose directional
             albedo exceeds `EXTRAPOLATION_ALBEDO` beyond the data's largest θi (`brdffit.properties.plausibility`)
             while a converged candidate remains; such a candidate's verdict says so.
         progress: show a progress line on stderr, one update per candidate (and per scene refit).
@@ -312,8 +359,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
         A `Selection`; ``.chosen`` is the chosen spec, ``.table`` the per-candidate rows.
     """
     measurements.check_informative()  # no information, no selection (named in the error)
-    if criterion not in CRITERIA:
-        raise ValueError(f"criterion must be one of {', '.join(CRITERIA)}, got {criterion!r}")
+    criterion = resolve_criterion(criterion, measurements)
     candidates = list(candidates)
     if not candidates:
         raise ValueError("select needs at least one candidate")
@@ -321,28 +367,31 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
         raise ValueError("a scene needs a tolerance (e.g. tolerance=0.05 for a 5% relative radiance error)")
     if reference not in ("data", "best"):
         raise ValueError(f"reference must be 'data' or 'best', got {reference!r}")
-    margin = DEFAULT_MARGIN if margin is None else float(margin)
+    margin = (HELDOUT_MARGIN if criterion == "heldout" else DEFAULT_MARGIN) if margin is None else float(margin)
     rng = np.random.default_rng(seed)
     valid_rows = np.flatnonzero(np.any(np.isfinite(measurements.values), axis=1))
     order = rng.permutation(valid_rows)
     fold_rows = np.array_split(order, folds) if criterion == "cv" else [order[: int(round(holdout * len(order)))]]
     options = dict(loss=loss, seed=seed, **fit_options)
     train_rows = np.setdiff1d(valid_rows, fold_rows[0])
-    screen = screen and criterion != "cv"
+    screen = (screen and criterion != "cv") or criterion == "heldout"  # heldout: the screening fits are its test
     done: dict[str, FitResult] = {}
     warnings = []
     bar = Progress("select", len(candidates) * (2 if scene is not None else 1), enabled=progress, unit="fits")
     if screen:
         if len(train_rows) >= 2 * SCREEN_SAMPLES:  # a subsample of the training rows, in a smaller compiled shape
-            screen_data = measurements.take(np.sort(rng.choice(train_rows, SCREEN_SAMPLES, replace=False)))
+            seen = np.sort(rng.choice(train_rows, SCREEN_SAMPLES, replace=False))
+            screen_data = measurements.take(seen)
         else:  # all the training rows, the held-out ones masked: the refits reuse the screening's programs
-            screen_data = _masked(measurements, fold_rows[0])
-        rows, screened = _screened_rows(candidates, measurements, screen_data, fold_rows[0], criterion, margin,
-                                        options, done, bar)
+            seen, screen_data = train_rows, _masked(measurements, fold_rows[0])
+        rows, screened = _screened_rows(candidates, measurements, screen_data, seen, fold_rows[0], options, done,
+                                        bar)
+        if criterion != "heldout":
+            _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar)
     else:
         rows, screened = _fitted_rows(candidates, measurements, fold_rows, options, done, bar), None
     for row in rows:
-        row["score"] = row["heldout_error"] if criterion == "cv" else row[criterion]
+        row["score"] = row["heldout_error"] if criterion in ("cv", "heldout") else row[criterion]
     finite = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r["score"])]
     if not finite:
         raise ValueError("no candidate produced a finite score; check the data and candidates")
@@ -353,7 +402,11 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
         warnings.append("no candidate's fit converged: the choice is among unconverged fits (raise max_steps, "
                         "or check the data)")
     implausible: dict[str, str] = {}
-    while True:
+    if criterion == "heldout":
+        best, threshold, chosen = _choose_by_heldout(usable, margin, plausible, done, implausible, warnings)
+        done[chosen["spec"]] = fit(measurements, chosen["spec"], init=done[chosen["spec"]].model, **options)
+        chosen.update(_full_fit_fields(done[chosen["spec"]], train_error=False))
+    while criterion != "heldout":
         best = min(usable, key=lambda r: r["score"])
         if criterion == "cv":
             se = best["heldout_se"] if math.isfinite(best["heldout_se"]) else 0.0
@@ -381,7 +434,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
             _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar,
                               excluded=set(implausible))
             for row in rows:
-                row["score"] = row["heldout_error"] if criterion == "cv" else row[criterion]
+                row["score"] = row["heldout_error"] if criterion in ("cv", "heldout") else row[criterion]
             usable = [r for r in rows if r["status"] in _CONVERGED and math.isfinite(r["score"])
                       and r["spec"] not in implausible] or usable
     for row in rows:
@@ -417,13 +470,44 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "bic", 
     bar.close(f"chose {by_scene or chosen['spec']}")
     return Selection(table=rows, chosen=by_scene or chosen["spec"], criterion=criterion, margin=margin,
                      best=best["spec"], chosen_by_criterion=chosen["spec"], chosen_by_scene=by_scene,
-                     results=done, warnings=warnings, scene_results=scene_results)
+                     results=done, warnings=warnings, scene_results=scene_results, holdout=holdout)
 
 
-def _full_fit_fields(result: FitResult) -> dict:
-    """A row's entries that a fit to all the data determines."""
-    return {"train_error": float(np.sqrt(result.cost / max(result.n_samples, 1))), "aic": result.aic,
-            "bic": result.bic, "status": result.status, "samples": result.n_samples}
+def _choose_by_heldout(usable, margin, plausible, done, implausible, warnings):
+    """The ``heldout`` choice: the simplest plausible candidate whose held-out error is within ``margin`` (a
+    fraction) of the best; ``implausible`` gets the reason of every candidate passed over as IMPLAUSIBLE, and
+    ``warnings`` a line when nothing plausible is within the margin.
+
+    Returns:
+        ``(best, threshold, chosen)``: the best row, the largest error within the margin, the chosen row.
+    """
+    best = min(usable, key=lambda r: r["score"])
+    threshold = best["score"] * (1.0 + margin)
+    within = sorted((r for r in usable if r["score"] <= threshold), key=lambda r: (r["n_params"], r["cost_ns"]))
+    for row in within:
+        why = _implausible_where_measured(done[row["spec"]]) if plausible else ""
+        if not why:
+            return best, threshold, row
+        implausible[row["spec"]] = why
+    chosen = within[0]
+    others = [r for r in usable if r["spec"] not in implausible
+              and not _implausible_where_measured(done[r["spec"]])]
+    closest = (f"; the most accurate plausible candidate is {min(others, key=lambda r: r['score'])['spec']} "
+               f"(held-out error {min(r['score'] for r in others):.4g} against {best['score']:.4g})"
+               if others else "; no candidate is plausible")
+    warnings.append(f"no plausible candidate predicts the held-out directions within {margin:.0%} of the best: "
+                    f"{chosen['spec']} is chosen although IMPLAUSIBLE{closest}. No candidate model represents "
+                    "these data at this amplitude (check their units, or fit a model with the lobe they need)")
+    return best, threshold, chosen
+
+
+def _full_fit_fields(result: FitResult, *, train_error: bool = True) -> dict:
+    """A row's entries that a fit to all the data determines (``train_error=False`` keeps the row's training
+    error, that of the fit its held-out error comes from)."""
+    fields = {"aic": result.aic, "bic": result.bic, "status": result.status, "samples": result.n_samples}
+    if train_error:
+        fields["train_error"] = float(np.sqrt(result.cost / max(result.n_samples, 1)))
+    return fields
 
 
 def _fitted_rows(candidates, measurements, fold_rows, options, done, bar):
@@ -457,14 +541,14 @@ def _fitted_rows(candidates, measurements, fold_rows, options, done, bar):
     return rows
 
 
-def _screened_rows(candidates, measurements, screen_data, held, criterion, margin, options, done, bar):
+def _screened_rows(candidates, measurements, screen_data, seen, held, options, done, bar):
     """The table of a screened selection: every candidate fitted to ``screen_data`` (training rows only: a
-    subsample, or all the data with the held-out rows masked) and scored on all the data at that fit; those that
-    can still be chosen refitted to all the data from there.
+    subsample, or all the data with the held-out rows masked) and scored on all the data at that fit.
 
-    A row's ``heldout_error`` is its screening fit's error on the held-out rows ``held``, which that fit never
-    saw; ``aic``/``bic``/``train_error``/``status``/``samples`` are those of the reported fit (``done[spec]``): the
-    full-data fit where one was made, else the screening fit scored on all the data."""
+    A row's ``train_error`` and ``heldout_error`` are its screening fit's error on the rows it was fitted to
+    (``seen``) and on the held-out rows ``held``, which that fit never saw; ``aic``/``bic``/``status``/``samples``
+    are those of the reported fit (``done[spec]``): the full-data fit where one is made later
+    (`_refit_contenders`, or the ``heldout`` criterion's choice), else the screening fit scored on all the data."""
     screened: dict[str, FitResult] = {}
     rows = []
     n_values = int(np.isfinite(measurements.values).sum())
@@ -479,11 +563,10 @@ def _screened_rows(candidates, measurements, screen_data, held, criterion, margi
         cost_ns = _cost_ns(evaluation)
         cost = float(np.nansum(r ** 2))
         aic, bic = information_criteria(result.loss, cost, n_values, result.n_params)
-        rows.append({"spec": spec, "n_params": result.n_params, "train_error": float(np.sqrt(cost / max(n_values, 1))),
+        rows.append({"spec": spec, "n_params": result.n_params, "train_error": _rms(r[seen]),
                      "heldout_error": _rms(r[held]), "heldout_se": math.nan, "aic": aic,
                      "bic": bic, "cost_ns": cost_ns, "status": result.status,
                      "samples": result.n_samples})
-    _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar)
     return rows, screened
 
 
@@ -510,7 +593,7 @@ def _refit_contenders(rows, measurements, screened, criterion, margin, options, 
             for row, future in zip(todo, futures):
                 bar.update(len(rows) - 1, f"fitting {row['spec']} to all {measurements.n} samples")
                 done[row["spec"]] = future.result()
-                row.update(_full_fit_fields(done[row["spec"]]))
+                row.update(_full_fit_fields(done[row["spec"]], train_error=False))
 
 
 def _scene_measurements(scene, values, channels):

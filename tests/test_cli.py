@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from brdffit import FitResult, Measurements, io, synth
-from brdffit.cli import EXIT_BAD_INPUT, EXIT_NOT_CONVERGED, EXIT_OK, main
+from brdffit.cli import EXIT_BAD_INPUT, EXIT_IMPLAUSIBLE, EXIT_NOT_CONVERGED, EXIT_OK, main
 
 ROOT = Path(__file__).resolve().parents[1]
 PLASTIC = ROOT / "data" / "synthetic" / "plastic.h5"
@@ -194,7 +194,14 @@ def test_export_command_writes_renderer_materials(tmp_path, capsys):
     assert main(["fit", str(PLASTIC), "--model", "lambert+ggx", "--no-report", "--out", str(out),
                  "--quiet"]) == EXIT_OK
     xml_path = tmp_path / "plastic.xml"
-    assert main(["export", str(out / "result.h5"), "--to", "mitsuba", "--out", str(xml_path), "--quiet"]) == EXIT_OK
+    # lambert+ggx on the plastic is IMPLAUSIBLE (ks·F ≈ 1.4: its Schlick f0 trades off against ks): a renderer
+    # material of it is refused, with the reason on stderr and nothing written, unless forced
+    assert main(["export", str(out / "result.h5"), "--to", "mitsuba", "--out", str(xml_path)]) == EXIT_IMPLAUSIBLE
+    assert "IMPLAUSIBLE" in capsys.readouterr().err and not xml_path.exists()
+    assert main(["export", str(out / "result.h5"), "--to", "json"]) == EXIT_OK  # brdffit's own JSON is no renderer
+    capsys.readouterr()
+    assert main(["export", str(out / "result.h5"), "--to", "mitsuba", "--out", str(xml_path), "--quiet",
+                 "--force"]) == EXIT_OK
     import xml.etree.ElementTree as ET
 
     bsdf = ET.fromstring(xml_path.read_text().split("-->")[-1].strip())
@@ -202,12 +209,12 @@ def test_export_command_writes_renderer_materials(tmp_path, capsys):
     alpha = next(e for e in bsdf.iter() if e.get("name") == "alpha")
     fitted = FitResult.load(out / "result.h5")
     assert float(alpha.get("value")) == pytest.approx(float(fitted.params["alpha"]), rel=1e-6)
-    assert main(["export", str(out / "result.h5"), "--to", "pbrt"]) == EXIT_OK
+    assert main(["export", str(out / "result.h5"), "--to", "pbrt", "--force"]) == EXIT_OK
     assert "\"mix\"" in capsys.readouterr().out
     ward = tmp_path / "ward"
     assert main(["fit", str(PLASTIC), "--model", "lambert+ward", "--no-report", "--out", str(ward),
                  "--quiet"]) == EXIT_OK
-    assert main(["export", str(ward / "result.h5"), "--to", "mitsuba"]) == EXIT_BAD_INPUT
+    assert main(["export", str(ward / "result.h5"), "--to", "mitsuba", "--force"]) == EXIT_BAD_INPUT
     assert "ward" in capsys.readouterr().err
 
 
@@ -478,8 +485,8 @@ def test_info_on_a_merl_file(tmp_path, capsys):
     data[1, 0] = np.nan  # G missing in the first θh row
     path = tmp_path / "m.binary"
     io.write_merl(MerlTable(data), path)
-    info = _info([str(path)], capsys)
-    m = io.load(path)
+    info = _info([str(path), "--sampling", "grid"], capsys)  # the cells themselves (the default draws pairs)
+    m = io.load(path, sampling="grid")
     assert info["samples"] == m.n and info["format"] == "merl" and info["channels"] == ["R", "G", "B"]
     assert info["missing"] == int(np.isnan(m.values).sum()) > 0
     assert info["missing"] == int(np.isnan(m.values[:, 1]).sum())  # only G has holes
@@ -519,12 +526,13 @@ def test_info_on_the_other_readers_formats(kind, name, incidences, capsys):
         pytest.skip(f"{path} is absent (../shared/data)")
     if kind not in io.FORMATS:
         pytest.skip(f"brdffit.io does not read the {kind} format yet")
-    info = _info([str(path)], capsys)
-    m = io.load(path)
+    grid = ["--sampling", "grid"] if kind == "rgl" else []  # the file's own incidences (the default draws pairs)
+    info = _info([str(path), *grid], capsys)
+    m = io.load(path, **({"sampling": "grid"} if grid else {}))
     assert info["format"] == kind and info["samples"] == m.n and info["incidences"] == incidences
     assert info["read"] == m.meta.get("read", {}) and info["read"]
     assert info["missing"] == int(np.isnan(m.values).sum())
-    assert main(["info", str(path)]) == EXIT_OK
+    assert main(["info", str(path), *grid]) == EXIT_OK
     text = capsys.readouterr().out
     assert f"incidences: {incidences} (theta_i " in text
     for key in info["read"]:

@@ -226,6 +226,8 @@ def _run_info(run_info) -> list[str]:
 def _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths, report_warnings=(),
             exports=ExportLog(None)):
     b = [("h1", f"BRDF fit report: {fit_result.spec}")]
+    if selection is not None:  # the answer to "is this good?" first
+        b.extend(("p", "**" + line + "**" if i == 0 else line) for i, line in enumerate(selection.verdict().split("\n")))
     b.append(("p", f"{measurements.n} samples × {measurements.n_channels} channels "
                    f"({', '.join(map(str, measurements.channels))}); loss {fit_result.loss}, solver "
                    f"{fit_result.solver}, channel mode {fit_result.channel_mode}; status **{fit_result.status}** "
