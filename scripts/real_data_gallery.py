@@ -5,13 +5,21 @@ files, the ALTA retro-reflective tape) this runs exactly what a user runs, ``brd
 (the table options only where the file needs them to be read), as a subprocess with an empty compilation cache, and
 times it. From its output folder it takes the chosen fit and the selection table, then measures:
 
-- the held-out error on directions the fit did not use, cosine-weighted (‖(f_m − f_d) cosθi‖ / ‖f_d cosθi‖) and
-  relative (RMS and median of |f_m − f_d| / f_d over f_d > 0):
-  RGL-EPFL: the default fit against the file's own interpolation (`RglTable.lookup`) at `HELDOUT_PAIRS` direction
-  pairs drawn uniformly in solid angle with seed `HELDOUT_SEED` (the fit saw only the sample-grid nodes);
+- the held-out (test) error on directions the fit did not use, cosine-weighted (‖(f_m − f_d) cosθi‖ / ‖f_d cosθi‖)
+  and relative (RMS and median of |f_m − f_d| / f_d over f_d > 0):
+  RGL-EPFL: the default fit against the file's own interpolation (`RglTable.lookup`, ``negative="clip"``) at
+  `TEST_PAIRS` direction pairs uniform in solid angle with θi, θo <= 80° (`reference_fit.uniform_pairs` with
+  ``default_rng(TEST_SEED)``; the default fit draws its own quasi-random pairs from the file, never these);
   tables and ALTA: the chosen model refitted to the training rows of the selection's own split (NumPy
   ``default_rng(SPLIT_SEED).permutation`` of the valid rows, the first `SPLIT_FRACTION` held out, as
   `brdffit.select` draws it), starting from the default fit's values, and scored on the held-out rows;
+- the same error of the independent reference fitter (scripts/reference_fit.py, NumPy/SciPy only: the best of
+  Lambert + {GGX, Cook-Torrance, Blinn-Phong, Ward}), fitted to training data disjoint from the test data
+  (RGL-EPFL: the protocol's `reference_fit.TRAIN_PAIRS` pairs of ``default_rng(reference_fit.TRAIN_SEED)``;
+  tables: the same training rows) and scored on the same test pairs or rows, and the ratio default / reference,
+  against the accuracy target (ratio <= `TARGET_EACH` on every material, median <= `TARGET_MEDIAN`); for RGL-EPFL
+  also the issue's protocol figure on `reference_fit.TEST_PAIRS` pairs of ``default_rng(TEST_SEED)`` and its
+  spread over `SPREAD_SEEDS` seeds;
 - the Mitsuba 3 export of the default fit (`brdffit.export.export_details`, ``fit=True`` only where a lobe has no
   Mitsuba equivalent), loaded with ``mitsuba.load_string``, its stated deviation, and what Mitsuba evaluates
   against the held-out data;
@@ -28,6 +36,7 @@ at load averages 3-10)::
     .venv/bin/python scripts/real_data_gallery.py                 # every material
     .venv/bin/python scripts/real_data_gallery.py --only paper_white ptfe-0.532um   # some, the others kept
     .venv/bin/python scripts/real_data_gallery.py --markdown-only  # docs/real-data.md from gallery.json
+    .venv/bin/python scripts/real_data_gallery.py --rescore        # the stored fits' errors and references again
 """
 
 from __future__ import annotations
@@ -56,11 +65,21 @@ IMAGES = ROOT / "docs" / "images" / "real-data"
 DOC = ROOT / "docs" / "real-data.md"
 BRDFFIT = Path(sys.executable).with_name("brdffit")
 
-HELDOUT_PAIRS = 10_000
-HELDOUT_SEED = 17
-# RGL held-out pairs have θi, θo <= 80°: the files measure incidences up to 78.5° and interpolate beyond towards
-# a horizon row, where lookup's division by cosθo gives values up to ~900 1/sr at θo = 89.9° (paper_white).
-HELDOUT_MAX_THETA_DEG = 80.0
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import reference_fit as ref  # noqa: E402  (scripts/reference_fit.py: the independent reference fitter)
+
+# RGL test pairs: uniform in solid angle with θi, θo <= 80° (reference_fit's protocol): the files measure
+# incidences up to 78.5° and interpolate beyond towards a horizon row, where lookup's division by cosθo gives
+# values up to ~900 1/sr at θo = 89.9° (paper_white). 100,000 pairs, not the protocol's 2,000: on the peaked
+# materials the error on 2,000 pairs depends on how many fall near the mirror direction and varies by tens of
+# percent between seeds (each row stores that spread, `SPREAD_SEEDS`).
+TEST_PAIRS = 100_000
+TEST_SEED = ref.TEST_SEED                 # 202
+TEST_MAX_THETA_DEG = ref.MAX_THETA_DEG    # 80
+PROTOCOL_PAIRS = ref.TEST_PAIRS           # 2,000: the issue's protocol figure, uniform_pairs(2000, default_rng(202))
+SPREAD_SEEDS = 40                         # the protocol figure over seeds 0..39: how much 2,000 pairs vary
+TEST_SPREAD_SEEDS = 5                     # the test error over seeds 202..206 of 100,000 pairs: how much those vary
+TARGET_EACH, TARGET_MEDIAN = 1.0, 0.8     # default / reference <= 1.0 on every material, median <= 0.8
 SPLIT_SEED = 0          # brdffit.select's default seed and held-out fraction: the same rows it holds out
 SPLIT_FRACTION = 0.2
 MITSUBA_PAIRS = 2_000   # held-out points evaluated through Mitsuba (one scalar eval each)
@@ -107,13 +126,10 @@ def load_measurements(entry: dict):
 
 
 # ------------------------------------------------------------------------------------------------ held-out data
-def uniform_pairs(n: int, seed: int, max_theta: float = math.pi / 2):
-    """(θi, φi, θo, φo) of n direction pairs uniform in solid angle on the cap θ <= max_theta (radians)."""
-    rng = np.random.default_rng(seed)
-    u = rng.random((4, n))
-    low = math.cos(max_theta)
-    return (np.arccos(low + (1 - low) * u[0]), 2 * np.pi * u[1], np.arccos(low + (1 - low) * u[2]),
-            2 * np.pi * u[3])
+def test_pairs(n: int = TEST_PAIRS, seed: int = TEST_SEED, max_theta_deg: float = TEST_MAX_THETA_DEG):
+    """(θi, φi, θo, φo) of n direction pairs uniform in solid angle on θ <= max_theta_deg for both directions:
+    `reference_fit.uniform_pairs` with ``numpy.random.default_rng(seed)``."""
+    return ref.uniform_pairs(n, np.random.default_rng(seed), max_theta_deg)
 
 
 def split_rows(measurements, seed: int = SPLIT_SEED, fraction: float = SPLIT_FRACTION) -> np.ndarray:
@@ -139,18 +155,101 @@ def errors(f_model, f_data, cos_i) -> dict:
             "values": int(ok.sum())}
 
 
+def training_rows(measurements, seed: int = SPLIT_SEED, fraction: float = SPLIT_FRACTION) -> np.ndarray:
+    """The other valid rows of the split: what the ``train`` refit and the reference are fitted to."""
+    valid = np.flatnonzero(np.any(np.isfinite(measurements.values), axis=1))
+    return np.setdiff1d(valid, split_rows(measurements, seed, fraction))
+
+
+def _angles_at(measurements, rows):
+    return tuple(np.asarray(a, float)[rows] for a in (measurements.theta_i, measurements.phi_i,
+                                                      measurements.theta_o, measurements.phi_o))
+
+
 def heldout_points(row: dict, measurements, max_theta_deg: float | None = None):
     """(θi, φi, θo, φo), the measured f_r there, and the held-out rows (None for RGL)."""
-    if row["kind"] == "rgl":         # the file's own interpolation at random pairs
+    if row["kind"] == "rgl":         # the file's own interpolation (negative="clip") at the test pairs
         from brdffit.io.rgl import read_rgl
 
-        cap = math.radians(HELDOUT_MAX_THETA_DEG if max_theta_deg is None else max_theta_deg)
-        angles = uniform_pairs(HELDOUT_PAIRS, HELDOUT_SEED, cap)
+        angles = test_pairs(max_theta_deg=TEST_MAX_THETA_DEG if max_theta_deg is None else max_theta_deg)
         return angles, read_rgl(DATA / row["file"]).lookup(*angles), None
     rows = split_rows(measurements)
-    angles = tuple(np.asarray(a, float)[rows] for a in (measurements.theta_i, measurements.phi_i,
-                                                        measurements.theta_o, measurements.phi_o))
-    return angles, np.asarray(measurements.values, float)[rows], rows
+    return _angles_at(measurements, rows), np.asarray(measurements.values, float)[rows], rows
+
+
+def reference(row: dict, measurements, scored, angles, f_data, rows) -> dict:
+    """The independent reference (`reference_fit.fit_reference`) fitted to training data disjoint from the test
+    data, its error on the same test pairs or rows as ``scored`` (the default fit, or the ``train`` refit of a
+    split material), and the ratio of the two; for RGL-EPFL also the issue's protocol figure (2,000 pairs) and
+    its spread over `SPREAD_SEEDS` seeds of 2,000 pairs, for both fits."""
+    t0 = time.perf_counter()
+    if rows is None:                 # RGL-EPFL: the protocol's training pairs, looked up in the file
+        from brdffit.io.rgl import read_rgl
+
+        table = read_rgl(DATA / row["file"])
+        train_angles = ref.uniform_pairs(ref.TRAIN_PAIRS, np.random.default_rng(ref.TRAIN_SEED))
+        f_train, weights = table.lookup(*train_angles), None
+        training = {"kind": "rgl-lookup", "pairs": ref.TRAIN_PAIRS, "seed": ref.TRAIN_SEED,
+                    "max_theta_deg": ref.MAX_THETA_DEG}
+    else:                            # the split's training rows, with the measurement's weights and angles
+        train_rows = training_rows(measurements)
+        train_angles = _angles_at(measurements, train_rows)
+        f_train = np.asarray(measurements.values, float)[train_rows]
+        weights = None if measurements.weights is None else np.asarray(measurements.weights, float)[train_rows]
+        training = {"kind": "split", "rows": int(len(train_rows)), "weights": weights is not None}
+    fit = ref.fit_reference(*train_angles, f_train, weights)
+    fit_s = time.perf_counter() - t0
+    test = errors(fit.predict(*angles), f_data, np.cos(angles[0]))
+    default_error = row["heldout"]["cosine"]
+    out = {"model": fit.model, "shape": fit.shape_dict, "rho_d": fit.rho_d.tolist(), "ks": fit.ks.tolist(),
+           "training": training, "fit_s": fit_s,
+           "train_error": ref.cosine_error(fit.predict(*train_angles), f_train, train_angles[0]),
+           "test": test, "test_error": test["cosine"], "default_test_error": default_error,
+           "default_fit": row["heldout"]["fit"], "ratio": default_error / test["cosine"]}
+    if rows is None:
+        def both(pairs, f):
+            d = errors(np.asarray(scored.predict(*pairs)), f, np.cos(pairs[0]))["cosine"]
+            r = errors(fit.predict(*pairs), f, np.cos(pairs[0]))["cosine"]
+            return d, r
+
+        pairs = test_pairs(PROTOCOL_PAIRS, TEST_SEED)
+        d, r = both(pairs, table.lookup(*pairs))
+        out["protocol"] = {"pairs": PROTOCOL_PAIRS, "seed": TEST_SEED, "default": d, "reference": r,
+                           "ratio": d / r}
+        per_seed = [test_pairs(PROTOCOL_PAIRS, seed) for seed in range(SPREAD_SEEDS)]
+        stacked = tuple(np.concatenate([p[k] for p in per_seed]) for k in range(4))
+        f_all = table.lookup(*stacked)
+        f_default, f_reference = np.asarray(scored.predict(*stacked)), fit.predict(*stacked)
+        d_s, r_s = [], []
+        for k in range(SPREAD_SEEDS):
+            part = slice(k * PROTOCOL_PAIRS, (k + 1) * PROTOCOL_PAIRS)
+            cos_k = np.cos(stacked[0][part])
+            d_s.append(errors(f_default[part], f_all[part], cos_k)["cosine"])
+            r_s.append(errors(f_reference[part], f_all[part], cos_k)["cosine"])
+        ratios = np.asarray(d_s) / np.asarray(r_s)
+        out["protocol_spread"] = {"pairs": PROTOCOL_PAIRS, "seeds": [0, SPREAD_SEEDS - 1], "percentiles": [5, 50, 95],
+                                  "default": np.percentile(d_s, [5, 50, 95]).tolist(),
+                                  "reference": np.percentile(r_s, [5, 50, 95]).tolist(),
+                                  "ratio": np.percentile(ratios, [5, 50, 95]).tolist()}
+        seeds = range(TEST_SEED, TEST_SEED + TEST_SPREAD_SEEDS)
+        spread = [both(pairs, table.lookup(*pairs)) for pairs in (test_pairs(TEST_PAIRS, seed) for seed in seeds)]
+        out["test_spread"] = {"pairs": TEST_PAIRS, "seeds": [seeds[0], seeds[-1]],
+                              "default": [min(d for d, _ in spread), max(d for d, _ in spread)],
+                              "reference": [min(r for _, r in spread), max(r for _, r in spread)],
+                              "ratio": [min(d / r for d, r in spread), max(d / r for d, r in spread)]}
+    return out
+
+
+def target(rows: list[dict]) -> dict:
+    """Issue 36's target over the rows: ratio (default fit's test error / the reference's) <= `TARGET_EACH` on
+    every material and median <= `TARGET_MEDIAN`. Rows without a reference count as failing."""
+    ratios = {r["name"]: (r["reference"]["ratio"] if "reference" in r else None) for r in rows}
+    known = [v for v in ratios.values() if v is not None]
+    median = float(np.median(known)) if known else math.nan
+    over = {name: v for name, v in ratios.items() if v is None or not v <= TARGET_EACH}
+    return {"each": TARGET_EACH, "median_target": TARGET_MEDIAN, "ratios": ratios, "median": median,
+            "over": over, "median_holds": bool(median <= TARGET_MEDIAN),
+            "holds": bool(not over and median <= TARGET_MEDIAN)}
 
 
 def score(row: dict, measurements) -> None:
@@ -165,19 +264,22 @@ def score(row: dict, measurements) -> None:
     angles, f_data, rows = heldout_points(row, measurements)
     cos_i = np.cos(angles[0])
     if rows is None:
-        h = {"kind": "rgl-lookup", "pairs": HELDOUT_PAIRS, "seed": HELDOUT_SEED,
-             "max_theta_deg": HELDOUT_MAX_THETA_DEG, "fit": "default",
+        scored = default
+        h = {"kind": "rgl-lookup", "pairs": TEST_PAIRS, "seed": TEST_SEED,
+             "max_theta_deg": TEST_MAX_THETA_DEG, "fit": "default",
              **errors(default.predict(*angles), f_data, cos_i)}
         whole, f_whole, _ = heldout_points(row, measurements, 90.0)
         h["whole_hemisphere"] = errors(default.predict(*whole), f_whole, np.cos(whole[0]))
         h["whole_hemisphere"]["largest_value"] = float(np.max(f_whole))
     else:
-        train = FitResult.load(h5, "train")
-        h = {**row.get("heldout", {}), "kind": "split", "seed": SPLIT_SEED, "fraction": SPLIT_FRACTION,
+        scored = train = FitResult.load(h5, "train")
+        h = {**{k: v for k, v in row.get("heldout", {}).items() if k == "train_s"}, "kind": "split",
+             "seed": SPLIT_SEED, "fraction": SPLIT_FRACTION,
              "rows": int(len(rows)), "fit": "train", "train_status": train.status,
              **errors(train.predict(*angles), f_data, cos_i)}
         h["default_on_same_rows"] = errors(default.predict(*angles), f_data, cos_i)
     row["heldout"] = h
+    row["reference"] = reference(row, measurements, scored, angles, f_data, rows)
     n = min(MITSUBA_PAIRS, len(cos_i))
     wi, wo = _directions(*(a[:n] for a in angles))
     text = (ROOT / "docs" / row["mitsuba"]["file"]).read_text()
@@ -404,23 +506,52 @@ def markdown(gallery: dict) -> str:
         "One row per real measurement in `../shared/data` (see its README): NIST's sintered PTFE at each wavelength "
         "of its CSV, the five RGL-EPFL materials and CEA's retro-reflective tape (ALTA data). Each row is what "
         "`brdffit fit FILE` gives with no fit options (table options only where the file needs them to be read): "
-        "model selection by BIC over `brdffit.select.DEFAULT_CANDIDATES`, the chosen model fitted with the cosine "
-        "loss. Nothing here was tuned per material.",
+        "model selection over `brdffit.select.DEFAULT_CANDIDATES` by the criterion `auto` (none of these files "
+        "states σ, so: the error on held-out directions, the simplest plausible candidate within 5% of the best; "
+        "docs/model-selection.md), the chosen model fitted with the cosine loss; an RGL-EPFL file read as its "
+        "interpolation at importance-weighted direction pairs (docs/formats.md). Nothing here was tuned per "
+        "material.",
         "",
-        "**Held-out error**, on directions the fit did not use, over all channels: *cosine* is "
-        "‖(f_fit − f_data) cosθi‖ / ‖f_data cosθi‖ (the relative error in reflected radiance), *relative* the RMS "
-        "and the median of |f_fit − f_data| / f_data over f_data > 0.",
-        f"- RGL-EPFL: the default fit against the file's own interpolation (`RglTable.lookup`, as Mitsuba's "
-        f"`measured` plugin reads the file) at {HELDOUT_PAIRS:,} direction pairs uniform in solid angle with "
-        f"θi, θo ≤ {HELDOUT_MAX_THETA_DEG:g}° (seed {HELDOUT_SEED}); the fit saw only the sample-grid nodes. The "
-        "files measure incidences up to 78.5° and only interpolate beyond, towards a horizon row, where the "
-        "lookup's division by cosθo gives values of hundreds of 1/sr at θo → 90°: on the whole hemisphere "
-        "those few pairs dominate every norm (the details give that number too).",
+        "**Held-out error**, on directions the fit did not use (the test set, disjoint from every fit's training "
+        "data), over all channels: *cosine* is ‖(f_fit − f_data) cosθi‖ / ‖f_data cosθi‖ (the relative error in "
+        "reflected radiance), *relative* the RMS and the median of |f_fit − f_data| / f_data over f_data > 0.",
+        f"- RGL-EPFL: the default fit against the file's own interpolation (`RglTable.lookup` with its default "
+        f"`negative=\"clip\"`, the values a renderer reads) at {TEST_PAIRS:,} direction pairs uniform in solid "
+        f"angle with θi, θo ≤ {TEST_MAX_THETA_DEG:g}° (`reference_fit.uniform_pairs({TEST_PAIRS}, "
+        f"numpy.random.default_rng({TEST_SEED}))`). The default fit never sees them: `brdffit fit FILE` draws its "
+        "own quasi-random direction pairs from the file. The files measure incidences up to 78.5° and only "
+        "interpolate beyond, towards a horizon row, where the lookup's division by cosθo gives values of "
+        "hundreds of 1/sr at θo → 90°: on the whole hemisphere those few pairs dominate every norm (the details "
+        "give that number too).",
         f"- PTFE and the tape: the chosen model refitted to the training rows of the selection's own split "
         f"(`numpy.random.default_rng({SPLIT_SEED}).permutation` of the valid rows, the first "
         f"{SPLIT_FRACTION:.0%} held out, as `brdffit.select` draws them), starting from the default fit's values "
         "(as the selection's cross-validation does), scored on the held-out rows. The default fit itself saw "
         "every row; its error on the same rows is in the details.",
+        "",
+        "**Reference**: the same error of `scripts/reference_fit.py`, a fitter written apart from the engine "
+        "(NumPy and SciPy only; none of brdffit's models, fitting or selection code): of Lambert plus one lobe of "
+        "GGX or Cook-Torrance (each with Schlick's f0), Blinn-Phong or Ward, the one with the lowest training cost, "
+        "each found by a grid over the lobe's shape with the amplitudes solved by bounded linear least squares, "
+        "then refined. It is fitted to training data disjoint from the test data and scored on the same test "
+        "pairs or rows as the default fit; *ratio* is the default fit's test error over the reference's (below 1: "
+        "the default fit is the better one).",
+        f"- RGL-EPFL: the reference is fitted to the lookup at the protocol's {ref.TRAIN_PAIRS:,} training pairs "
+        f"(`uniform_pairs({ref.TRAIN_PAIRS}, default_rng({ref.TRAIN_SEED}))`, θ ≤ {ref.MAX_THETA_DEG:g}°). The "
+        f"test set has {TEST_PAIRS:,} pairs, not the protocol's {PROTOCOL_PAIRS:,}: on the peaked materials "
+        f"(satin_rosaline, cc_ibiza_sunset, cg_sunflower) the error on {PROTOCOL_PAIRS:,} pairs depends on how "
+        "many fall near the mirror direction, and varies by tens of percent between seeds"
+        + _spread_example(rows) + ". The issue's protocol figure "
+        f"(`uniform_pairs({PROTOCOL_PAIRS}, default_rng({TEST_SEED}))`), each fit's spread over "
+        f"{SPREAD_SEEDS} seeds of {PROTOCOL_PAIRS:,} pairs, and its range over seeds {TEST_SEED}–"
+        f"{TEST_SEED + TEST_SPREAD_SEEDS - 1} of {TEST_PAIRS:,} pairs (where a sharp peak still moves it) are in "
+        "each row's details.",
+        "- PTFE and the tape: the reference is fitted to the same training rows as the refit (with the "
+        "measurement's angles, and its weights where it has any: these files have none) and scored on the same "
+        "held-out rows.",
+        "",
+        f"**Target**: ratio ≤ {TARGET_EACH:.1f} on every material and median ≤ {TARGET_MEDIAN:.1f}. "
+        + target_line(rows),
         "",
         "**Parameters**: value ± the fit's standard error (`FitResult.stderr`) and its sandwich standard error "
         "(`stderr_robust`, valid where the residual variance differs between samples); – where the stored value is "
@@ -438,14 +569,16 @@ def markdown(gallery: dict) -> str:
         f"average. Measured between {min(r['measured'] for r in rows)} and {max(r['measured'] for r in rows)}; "
         f"the last run: {gallery['load']}.",
         "",
-        "| material | chosen model | status | exit | held-out cosine | held-out relative RMS / median | "
-        "Mitsuba stated / vs data | time (s): command / selection |",
-        "|---|---|---|---|---|---|---|---|",
+        "| material | chosen model | status | exit | held-out cosine | reference | ratio | "
+        "held-out relative RMS / median | Mitsuba stated / vs data | time (s): command / selection |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        h, m = r["heldout"], r["mitsuba"]
+        h, m, f = r["heldout"], r["mitsuba"], r.get("reference")
         lines.append(f"| [{r['name']}](#{r['name'].replace('.', '')}) | `{r['model']}` | {r['status']} | "
-                     f"{r['exit_code']} | {h['cosine']:.3g} | {h['relative_rms']:.3g} / {h['relative_median']:.3g} | "
+                     f"{r['exit_code']} | {h['cosine']:.3g} | "
+                     + (f"{f['test_error']:.3g} | {_ratio(f['ratio'])} | " if f else "– | – | ")
+                     + f"{h['relative_rms']:.3g} / {h['relative_median']:.3g} | "
                      f"{m['stated_rms']:.3g} / {m['heldout']['cosine']:.3g} | {r['wall_s']:.1f} / "
                      f"{_g(r.get('selection_s'))} |")
     lines += ["", "## What does not hold", ""] + shortfalls(rows)
@@ -455,14 +588,17 @@ def markdown(gallery: dict) -> str:
               f"{sum(r['wall_s'] for r in rows) / 60 + 3:.0f} min here)",
               ".venv/bin/python scripts/real_data_gallery.py --only paper_white   # some rows; the others are kept",
               ".venv/bin/python scripts/real_data_gallery.py --markdown-only      # this page from gallery.json",
+              ".venv/bin/python scripts/real_data_gallery.py --rescore            # errors and references, no fits",
               "```",
               "",
               "The script writes [`real-data/gallery.json`](real-data/gallery.json) (every number on this page), the "
               "fits as `real-data/fits/<name>.h5` (`FitResult.load(path, \"default\")`; `\"train\"` for the split "
               "materials; parameters only, no measurements), their Mitsuba exports `real-data/fits/<name>.xml`, the "
               "pictures under `images/real-data/`, and this page. `tests/test_real_data.py` checks every stored fit "
-              "against the shared file (held-out errors, Mitsuba) and runs one default fit through the CLI; it skips "
-              "where `../shared/data` is absent.",
+              "against the shared file (held-out errors, Mitsuba), fits the reference afresh and checks its error and "
+              "the ratio, asserts the target (marked as an expected failure, naming the materials, while it does not "
+              "hold) and runs one default fit through the CLI; it skips where `../shared/data` is absent. "
+              "`--rescore` recomputes the errors and the references of the stored fits without fitting them again.",
               ""]
     for r in rows:
         h, m = r["heldout"], r["mitsuba"]
@@ -481,7 +617,8 @@ def markdown(gallery: dict) -> str:
         lines.append("")
         if h["kind"] == "rgl-lookup":
             w = h["whole_hemisphere"]
-            lines.append(f"Held-out ({h['pairs']:,} random pairs with θi, θo ≤ {h['max_theta_deg']:g}° against "
+            lines.append(f"Held-out ({h['pairs']:,} random pairs with θi, θo ≤ {h['max_theta_deg']:g}°, seed "
+                         f"{h['seed']}, against "
                          f"`RglTable.lookup`): cosine {h['cosine']:.4g}, relative RMS {h['relative_rms']:.4g}, median "
                          f"{h['relative_median']:.4g}. On the whole hemisphere (same seed, θ up to 90°, lookup values "
                          f"up to {w['largest_value']:.3g} 1/sr): cosine {w['cosine']:.4g}, relative RMS "
@@ -494,6 +631,7 @@ def markdown(gallery: dict) -> str:
                          f"{_g(h.get('train_s'))} s): cosine {h['cosine']:.4g}, relative RMS {h['relative_rms']:.4g}, "
                          f"median {h['relative_median']:.4g}. The default fit (which saw these rows) on them: "
                          f"cosine {d['cosine']:.4g}, relative RMS {d['relative_rms']:.4g}.")
+        lines += ["", reference_details(r.get("reference"))]
         lines += ["",
                   f"Mitsuba export ([{Path(m['file']).name}]({m['file']}), "
                   f"{'fit=True: ' if m['fit'] else ''}loads): stated deviation from the fit {m['stated_rms']:.3g}, "
@@ -516,9 +654,98 @@ def markdown(gallery: dict) -> str:
     return "\n".join(lines)
 
 
+def _shape_text(shape: dict) -> str:
+    names = {"alpha": "α", "f0": "f0", "m": "m", "n": "n"}
+    return ", ".join(f"{names.get(k, k)} = {v:.4g}" for k, v in shape.items())
+
+
+def _spread_example(rows: list[dict]) -> str:
+    """": e.g. satin_rosaline's reference ..." from a peaked material's stored spread, or nothing."""
+    for name in ("satin_rosaline", "cc_ibiza_sunset", "cg_sunflower"):
+        r = next((r for r in rows if r["name"] == name and "protocol_spread" in r.get("reference", {})), None)
+        if r:
+            s = r["reference"]["protocol_spread"]
+            return (f" (on {name}, over seeds {s['seeds'][0]}–{s['seeds'][1]}: the default fit's error "
+                    f"{s['default'][1]:.3g}, 5–95% [{s['default'][0]:.3g}, {s['default'][2]:.3g}], the reference's "
+                    f"{s['reference'][1]:.3g} [{s['reference'][0]:.3g}, {s['reference'][2]:.3g}], their ratio "
+                    f"{_ratio(s['ratio'][1])} [{_ratio(s['ratio'][0])}, {_ratio(s['ratio'][2])}])")
+    return ""
+
+
+def _ratio(v: float) -> str:
+    """A ratio to 3 decimals, or more where 3 would put it on the wrong side of a threshold of the target."""
+    for digits in range(3, 8):
+        text = f"{v:.{digits}f}"
+        if all((float(text) <= limit) == (v <= limit) for limit in (TARGET_EACH, TARGET_MEDIAN)):
+            return text
+    return text
+
+
+def target_verdict(rows: list[dict]) -> str:
+    """Whether the target holds, and where not."""
+    t = target(rows)
+    if t["holds"]:
+        return "It holds."
+    misses = []
+    over = {name: v for name, v in t["over"].items() if v is not None}
+    if over:
+        misses.append(f"over {TARGET_EACH:.1f} on " + ", ".join(f"{name} ({_ratio(v)})" for name, v in over.items()))
+    if not t["median_holds"]:
+        misses.append(f"the median {_ratio(t['median'])} > {TARGET_MEDIAN:.1f}")
+    missing = [name for name, v in t["over"].items() if v is None]
+    if missing:
+        misses.append(f"no reference measured on {', '.join(missing)} (`--rescore` measures it)")
+    return "It does not hold: " + "; ".join(misses) + "."
+
+
+def target_line(rows: list[dict]) -> str:
+    """The page's summary of the target: each material's ratio, the median, and whether it holds."""
+    if not rows:
+        return "No rows yet."
+    t = target(rows)
+    each = ", ".join(f"{name} {_ratio(v) if v is not None else '–'}" for name, v in t["ratios"].items())
+    measured = sum(v is not None for v in t["ratios"].values())
+    return (f"Ratio on each material: {each}; median {_ratio(t['median'])} over {measured} of {len(rows)} rows "
+            f"(each PTFE wavelength is a row). **{target_verdict(rows)}**")
+
+
+def reference_details(f: dict | None) -> str:
+    if not f:
+        return "Reference: not measured for this row (run the script with `--rescore`)."
+    training = (f"the protocol's {f['training']['pairs']:,} training pairs (seed {f['training']['seed']})"
+                if f["training"]["kind"] == "rgl-lookup" else
+                f"the same {f['training']['rows']:,} training rows")
+    text = (f"Reference (`scripts/reference_fit.py`): lambert+{f['model']} ({_shape_text(f['shape'])}; ρd = "
+            f"{', '.join(f'{v:.4g}' for v in f['rho_d'])}, ks = {', '.join(f'{v:.4g}' for v in f['ks'])}), fitted to "
+            f"{training} in {f['fit_s']:.1f} s (training error {f['train_error']:.4g}): test cosine "
+            f"{f['test_error']:.4g}, relative RMS {f['test']['relative_rms']:.4g}, median "
+            f"{f['test']['relative_median']:.4g}; the {'default fit' if f['default_fit'] == 'default' else 'refit'}'s "
+            f"{f['default_test_error']:.4g} on the same {'pairs' if f['training']['kind'] == 'rgl-lookup' else 'rows'}"
+            f": ratio {_ratio(f['ratio'])}.")
+    if "protocol" in f:
+        p, s = f["protocol"], f["protocol_spread"]
+        text += (f" The issue's protocol figure ({p['pairs']:,} pairs, `uniform_pairs({p['pairs']}, "
+                 f"default_rng({p['seed']}))`): default fit {p['default']:.4g}, reference {p['reference']:.4g}, ratio "
+                 f"{_ratio(p['ratio'])}. Over seeds {s['seeds'][0]}–{s['seeds'][1]} of {s['pairs']:,} pairs, median "
+                 f"and 5–95%: default fit {s['default'][1]:.3g} [{s['default'][0]:.3g}, {s['default'][2]:.3g}], reference "
+                 f"{s['reference'][1]:.3g} [{s['reference'][0]:.3g}, {s['reference'][2]:.3g}], ratio "
+                 f"{_ratio(s['ratio'][1])} [{_ratio(s['ratio'][0])}, {_ratio(s['ratio'][2])}].")
+    if "test_spread" in f:
+        s = f["test_spread"]
+        text += (f" Over seeds {s['seeds'][0]}–{s['seeds'][1]} of {s['pairs']:,} pairs, smallest–largest: default fit "
+                 f"{s['default'][0]:.3g}–{s['default'][1]:.3g}, reference {s['reference'][0]:.3g}–"
+                 f"{s['reference'][1]:.3g}, ratio {_ratio(s['ratio'][0])}–{_ratio(s['ratio'][1])}.")
+    return text
+
+
 def shortfalls(rows: list[dict]) -> list[str]:
     """Where the rows miss what issue 17 asks (≤ 60 s, converged, parameters determined, a faithful export)."""
     out = []
+    t = target(rows)
+    if rows and not t["holds"]:
+        out.append("- The reference target (ratio ≤ "
+                   f"{TARGET_EACH:.1f} on every material, median ≤ {TARGET_MEDIAN:.1f}): "
+                   + target_verdict(rows)[0].lower() + target_verdict(rows)[1:])
     slow = [r for r in rows if r["wall_s"] > 60.0]
     if slow:
         out.append(f"- Time: {len(slow)} of {len(rows)} commands took longer than 60 s here (issue 17 point 1): "
@@ -548,13 +775,20 @@ def shortfalls(rows: list[dict]) -> list[str]:
 
 
 # ------------------------------------------------------------------------------------------------ main
+def write_json(gallery: dict) -> None:
+    """gallery.json, with the target's state over its rows (`target`)."""
+    gallery["target"] = target(gallery["rows"])
+    OUT_JSON.write_text(json.dumps(gallery, indent=1) + "\n")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--only", nargs="+", metavar="NAME",
                         help="rows to (re)make, in this order; the others are kept")
     parser.add_argument("--markdown-only", action="store_true", help="rewrite docs/real-data.md from gallery.json")
     parser.add_argument("--rescore", action="store_true",
-                        help="recompute the held-out errors of the stored fits and exports (no fitting), then the page")
+                        help="recompute the held-out errors of the stored fits and exports and the references (no "
+                             "fitting by brdffit), then the page")
     args = parser.parse_args(argv)
     if not DATA.is_dir():
         print(f"{DATA} is absent: the shared real data are needed", file=sys.stderr)
@@ -566,7 +800,7 @@ def main(argv=None) -> int:
                 row.pop("stdout", None)     # written by the first version of this script; the page never showed it
                 score(row, load_measurements(row))
                 print(f"[{row['name']}] held-out cosine {row['heldout']['cosine']:.4g}", flush=True)
-        OUT_JSON.write_text(json.dumps(gallery, indent=1) + "\n")
+        write_json(gallery)
     elif not args.markdown_only:
         entries = materials()
         known = {e["name"] for e in entries}
@@ -590,7 +824,7 @@ def main(argv=None) -> int:
                                    f"(other jobs shared the cores), {time.perf_counter() - t0:.0f} s for "
                                    f"{k + 1} row(s) in all",
                            "rows": [previous[e["name"]] for e in entries if e["name"] in previous]}
-                OUT_JSON.write_text(json.dumps(gallery, indent=1) + "\n")
+                write_json(gallery)
                 DOC.write_text(markdown(gallery))
     DOC.write_text(markdown(gallery))
     print(f"wrote {DOC.relative_to(ROOT)}", flush=True)

@@ -1,12 +1,17 @@
 """Real measurements (../shared/data): the gallery's stored fits reproduce its numbers, their Mitsuba exports render
-what they state, and one default fit runs end to end through the CLI (issue 17, points 1 and 4; docs/real-data.md).
+what they state, the independent reference fitter (scripts/reference_fit.py) fitted afresh reproduces its numbers,
+the default fit meets the accuracy target against it (default / reference <= 1 on every material, median <= 0.8),
+and one default fit runs end to end through the CLI (docs/real-data.md).
 
-The held-out errors are recomputed here from their definitions on docs/real-data.md, not with the script's code:
-the stored parameters, the shared file and those definitions must give the page's numbers.
+The held-out errors are recomputed here from their definitions on docs/real-data.md, not with the gallery script's
+code: the stored parameters, the shared file, the reference fitter and those definitions must give the page's
+numbers.
 """
 
+import functools
 import json
 import re
+import sys
 import time
 from pathlib import Path
 
@@ -27,6 +32,12 @@ if not DATA.is_dir():
 
 ROWS = json.loads(GALLERY.read_text())["rows"] if GALLERY.exists() else []
 
+sys.path.insert(0, str(ROOT / "scripts"))
+import reference_fit as ref  # noqa: E402  (the independent reference fitter: NumPy/SciPy only)
+
+# Issue 36 point 4: the default fit's held-out error / the reference's <= 1.0 on every material, median <= 0.8.
+TARGET_EACH, TARGET_MEDIAN = 1.0, 0.8
+
 
 def _heldout_errors(f_model, f_data, cos_i) -> dict:
     """docs/real-data.md: ‖(f_m − f_d) cosθi‖ / ‖f_d cosθi‖, and RMS / median of |f_m − f_d| / f_d over f_d > 0."""
@@ -41,19 +52,57 @@ def _heldout_errors(f_model, f_data, cos_i) -> dict:
 def _heldout_data(row, measurements):
     """(θi, φi, θo, φo) and the measured values where the row's held-out error is taken."""
     h = row["heldout"]
-    if h["kind"] == "rgl-lookup":  # pairs uniform in solid angle on θ <= max: cosθ uniform on [cos max, 1]
-        u = np.random.default_rng(h["seed"]).random((4, h["pairs"]))
-        low = np.cos(np.radians(h["max_theta_deg"]))
-        cos_i, cos_o = low + (1 - low) * u[0], low + (1 - low) * u[2]
-        angles = (np.arccos(cos_i), 2 * np.pi * u[1], np.arccos(cos_o), 2 * np.pi * u[3])
-        return angles, io.read_rgl(DATA / row["file"]).lookup(*angles)
+    if h["kind"] == "rgl-lookup":  # pairs uniform in solid angle on θ <= max, the reference protocol's generator
+        angles = ref.uniform_pairs(h["pairs"], np.random.default_rng(h["seed"]), h["max_theta_deg"])
+        return angles, io.read_rgl(DATA / row["file"]).lookup(*angles)   # negative="clip", the default
+    rows = _split(row, measurements)[0]
+    return _at(measurements, rows), np.asarray(measurements.values, float)[rows]
+
+
+def _split(row, measurements):
+    """The held-out rows and the training rows of the selection's split (docs/real-data.md)."""
+    h = row["heldout"]
     valid = np.flatnonzero(np.any(np.isfinite(measurements.values), axis=1))
     order = np.random.default_rng(h["seed"]).permutation(valid)
-    rows = np.sort(order[: int(round(h["fraction"] * len(order)))])
+    held = int(round(h["fraction"] * len(order)))
+    rows = np.sort(order[:held])
     assert len(rows) == h["rows"]
-    angles = tuple(np.asarray(a, float)[rows] for a in (measurements.theta_i, measurements.phi_i,
-                                                        measurements.theta_o, measurements.phi_o))
-    return angles, np.asarray(measurements.values, float)[rows]
+    return rows, np.sort(order[held:])
+
+
+def _at(measurements, rows):
+    return tuple(np.asarray(a, float)[rows] for a in (measurements.theta_i, measurements.phi_i,
+                                                      measurements.theta_o, measurements.phi_o))
+
+
+@functools.lru_cache(maxsize=None)
+def _recomputed(name: str) -> dict:
+    """A row's test errors recomputed: the stored default fit (or the ``train`` refit of a split material) and the
+    reference fitted afresh to the training data (RGL-EPFL: the lookup at the protocol's training pairs; tables:
+    the split's training rows, with the measurement's weights), both scored on the row's held-out pairs or rows."""
+    row = next(r for r in ROWS if r["name"] == name)
+    measurements = io.load(DATA / row["file"], **row["load"])
+    angles, f_data = _heldout_data(row, measurements)
+    path = ROOT / "docs" / row["fit_file"]
+    scored = FitResult.load(path, row["heldout"]["fit"])
+    if row["heldout"]["kind"] == "rgl-lookup":
+        table = io.read_rgl(DATA / row["file"])
+        train = ref.uniform_pairs(ref.TRAIN_PAIRS, np.random.default_rng(ref.TRAIN_SEED))
+        fit = ref.fit_reference(*train, table.lookup(*train))
+        protocol = ref.uniform_pairs(ref.TEST_PAIRS, np.random.default_rng(ref.TEST_SEED))
+        f_protocol = table.lookup(*protocol)
+        extra = {"protocol_default": ref.cosine_error(np.asarray(scored.predict(*protocol)), f_protocol, protocol[0]),
+                 "protocol_reference": ref.cosine_error(fit.predict(*protocol), f_protocol, protocol[0])}
+    else:
+        train_rows = _split(row, measurements)[1]
+        weights = None if measurements.weights is None else np.asarray(measurements.weights, float)[train_rows]
+        fit = ref.fit_reference(*_at(measurements, train_rows), np.asarray(measurements.values, float)[train_rows],
+                                weights)
+        extra = {}
+    cos_i = np.cos(angles[0])
+    default = float(_heldout_errors(np.asarray(scored.predict(*angles)), f_data, cos_i)["cosine"])
+    reference = float(_heldout_errors(fit.predict(*angles), f_data, cos_i)["cosine"])
+    return {"model": fit.model, "default": default, "reference": reference, "ratio": default / reference, **extra}
 
 
 def test_the_gallery_has_a_row_per_shared_material():
@@ -87,6 +136,50 @@ def test_a_stored_fit_reproduces_its_gallery_numbers(row):
     line = next(s for s in page.splitlines() if s.startswith(f"| [{row['name']}]"))
     assert f"| {got['cosine']:.3g} |" in line
     assert f"| {got['relative_rms']:.3g} / {got['relative_median']:.3g} |" in line
+
+
+@pytest.mark.parametrize("row", ROWS, ids=[r["name"] for r in ROWS])
+def test_the_reference_fitted_afresh_reproduces_its_gallery_numbers(row):
+    # Issue 36 point 4: beside each held-out error, the reference's on the same held-out pairs or rows, fitted
+    # afresh here (NumPy/SciPy, about 1 s) to training data disjoint from them.
+    stored = row["reference"]
+    got = _recomputed(row["name"])
+    assert got["model"] == stored["model"]
+    assert got["default"] == pytest.approx(row["heldout"]["cosine"], rel=1e-6)
+    assert got["default"] == pytest.approx(stored["default_test_error"], rel=1e-6)
+    assert got["reference"] == pytest.approx(stored["test_error"], rel=1e-4)
+    assert got["ratio"] == pytest.approx(stored["ratio"], rel=1e-4)
+    if "protocol" in stored:   # the issue's protocol figure: 2,000 pairs of default_rng(202)
+        assert got["protocol_default"] == pytest.approx(stored["protocol"]["default"], rel=1e-6)
+        assert got["protocol_reference"] == pytest.approx(stored["protocol"]["reference"], rel=1e-4)
+    page = (ROOT / "docs" / "real-data.md").read_text()
+    line = next(s for s in page.splitlines() if s.startswith(f"| [{row['name']}]"))
+    assert f"| {row['heldout']['cosine']:.3g} | {stored['test_error']:.3g} | {stored['ratio']:.3f}" in line
+
+
+def _target_misses() -> str:
+    """The materials over the target in gallery.json, and the median (the reason of the expected failure)."""
+    ratios = {r["name"]: r.get("reference", {}).get("ratio", float("nan")) for r in ROWS}
+    over = [f"{name} {v:.4f}" for name, v in ratios.items() if not v <= TARGET_EACH]
+    median = float(np.median(list(ratios.values()))) if ratios else float("nan")
+    return (f"over {TARGET_EACH:g}: {', '.join(over) or 'none'}; median {median:.3g} "
+            f"({'>' if not median <= TARGET_MEDIAN else '<='} {TARGET_MEDIAN:g})")
+
+
+# The target does not hold with the stored fits of docs/real-data/gallery.json: default / reference = paper_white
+# 1.0002 (the same Cook-Torrance family, a hair worse), acrylic_felt_green 1.291, satin_rosaline 2.126; median 0.657
+# (the reason below names the materials over it from that file). Remove this mark when it holds (strict: an
+# unexpected pass fails); do not loosen the target.
+@pytest.mark.xfail(strict=True, reason=f"the accuracy target does not hold yet: {_target_misses()}")
+def test_the_default_fit_is_within_the_target_of_the_reference():
+    # Issue 36 point 4, on every shared material, from the recomputed errors (not the stored ones): the default
+    # fit's held-out error <= 1.0x the reference's on each, and the median ratio <= 0.8.
+    assert ROWS
+    ratios = {r["name"]: _recomputed(r["name"])["ratio"] for r in ROWS}
+    over = {name: round(v, 4) for name, v in ratios.items() if not v <= TARGET_EACH}
+    median = float(np.median(list(ratios.values())))
+    assert not over, f"default / reference > {TARGET_EACH:g} on {over}"
+    assert median <= TARGET_MEDIAN, f"median ratio {median:.3g} > {TARGET_MEDIAN:g}: {ratios}"
 
 
 @pytest.mark.parametrize("row", ROWS, ids=[r["name"] for r in ROWS])
