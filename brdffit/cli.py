@@ -247,14 +247,14 @@ def _max_theta(text: str) -> float:
 # The options of a tabulated file's reading (`brdffit.io.tabulated`: MerlTable / RglTable.to_measurements).
 TABULATED_OPTIONS = (
     _TableOption("--sampling", "sampling", "directions|grid",
-                 "what the fit is given: the file's interpolation at importance-weighted direction pairs over the directions "
+                 "what the fit is given: the file's interpolation at importance-weighted direction pairs "
                  "(directions, the default) or the file's own grid nodes with their weights (grid)", _sampling,
                  formats=("merl", "rgl")),
     _TableOption("--pairs", "pairs", "N", "the number of direction pairs of --sampling directions (default 8192)",
                  bounded(int, 1), formats=("merl", "rgl")),
     _TableOption("--max-theta", "max_theta", "DEG",
-                 "the largest polar angle of the direction pairs, degrees (default 80; the incidences also stop at "
-                 "the file's largest measured one)", _max_theta, formats=("merl", "rgl")),
+                 "the largest polar angle of the direction pairs, degrees (default 80)", _max_theta,
+                 formats=("merl", "rgl")),
 )
 TABULATED_GROUP = "tabulated files (MERL .binary, RGL-EPFL .bsdf; brdffit.io.tabulated)"
 READ_OPTIONS = TABLE_OPTIONS + TABULATED_OPTIONS
@@ -1079,7 +1079,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--material", default="material", help="material name in the output (default 'material')")
     p.add_argument("--out", help="output file (default: print to stdout)")
     p.add_argument("--force", action="store_true",
-                   help=f"export a renderer material of an IMPLAUSIBLE fit (refused otherwise, exit {EXIT_IMPLAUSIBLE})")
+                   help="export a renderer material of an IMPLAUSIBLE fit (refused otherwise, exit "
+                        f"{EXIT_IMPLAUSIBLE})")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "render", "render a sphere (or plane) preview of a fit, a MERL table or measured data",
              ["brdffit render data/synthetic/plastic.brdffit/result.h5 --out plastic.png",
@@ -1109,7 +1110,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file", help=MEASUREMENT_FILE)
     p.add_argument("--candidates", help="model specs separated by ';' (default: the standard candidate list)")
     p.add_argument("--criterion", default="auto", choices=CRITERIA,
-                   help="selection criterion: auto (bic where the data state their σ, else heldout), heldout, aic, bic, cv")
+                   help="selection criterion: auto (bic where the data state their σ, else heldout), heldout, aic, "
+                        "bic, cv (default auto)")
     p.add_argument("--folds", type=bounded(int, 2), default=5, help="folds of --criterion cv (default 5)")
     _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print the selection as one JSON object")

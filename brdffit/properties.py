@@ -630,13 +630,27 @@ def _energy(models, theta_max) -> Check:
                      f"max albedo {inside:.4g} ≤ 1 over the data's θi ≤ {math.degrees(theta_max):.0f}°, but "
                      f"{worst:.4g} at {at} (channel {channel}) beyond them: the fitted lobes, uncoupled, reflect "
                      "more than 1 towards grazing",
-                     "trust the model only within the measured angles, or choose a model whose Fresnel or "
-                     "energy coupling limits it at grazing (compare candidates with brdffit.select)", worst)
+                     "trust the model only within the measured angles, or fit one whose Fresnel term limits it at "
+                     "grazing (e.g. --model lambert+ggx(fresnel=dielectric))", worst)
     return Check("energy", "implausible",
                  f"max albedo {worst:.4g} at {at} (channel {channel}) > 1: the fit reflects more light than it "
-                 "receives",
-                 f"{cause}; check the data's units, fix f0 or bound the amplitude, or choose another model "
-                 "(brdffit.select)", worst)
+                 "receives", _energy_advice(models, cause), worst)
+
+
+def _energy_advice(models, cause: str) -> str:
+    """What to do about an albedo above 1, for this fit: fixing f0 only where the model has one, and a lobe the
+    model lacks where an amplitude is far beyond 1 (retro-reflection, a mirror peak)."""
+    names = {name for model in models for name in model.params}
+    largest = max((float(np.max(np.asarray(model.params[slot.name], dtype=float))) for model in models
+                   for slot in model.layout.slots if slot.spec.linear and math.isinf(slot.spec.upper)), default=0.0)
+    steps = ["check the data's units"]
+    if "f0" in names or any(n.startswith("eta") for n in names):
+        steps.append("fix f0 (0.04 for dielectrics) or use fresnel='dielectric'")
+    if largest > 100:
+        steps.append(f"an amplitude of {largest:.3g} says the data hold a lobe far sharper or stronger than this "
+                     "model reaches (a retro-reflector, a mirror): fit a model with that lobe, and trust this one "
+                     "only at the measured directions")
+    return f"{cause}; " + "; ".join(steps)
 
 
 def _specular(models, stderr) -> Check:
@@ -665,8 +679,10 @@ def _specular(models, stderr) -> Check:
     return Check("specular", "implausible",
                  f"largest ks·F {worst:.4g} ({label}, ± {err:.2g}) > 1: the specular term reflects more than the "
                  "light it receives where its Fresnel factor reaches 1 (towards grazing)",
-                 "ks trades off against f0/η or the roughness over the measured angles: fix f0 (0.04 for "
-                 "dielectrics), use fresnel='dielectric', or check the data's scale", worst)
+                 ("ks trades off against f0/η or the roughness over the measured angles: fix f0 (0.04 for "
+                  "dielectrics), use fresnel='dielectric', or check the data's scale" if "·F" in label
+                  else "this lobe has no Fresnel term to bound it: check the data's scale, or fit a model whose "
+                       "lobe the data's peak fits without an amplitude above 1"), worst)
 
 
 def _bound_advice(label: str, spec, value: float) -> str:
@@ -683,7 +699,8 @@ def _bound_advice(label: str, spec, value: float) -> str:
         return (f"{label} = {value:.3g} at its lower bound: sharper than these data resolve; sample the peak "
                 "more densely or accept a mirror-like lobe")
     return (f"{label} = {value:.3g} on its bound [{spec.lower:g}, {spec.upper:g}]: the optimum lies outside the "
-            "model's range; this model may not describe the material (compare others with brdffit.select)")
+            "model's range; this model may not describe the material (a selection's table, selection.json, shows "
+            "how the other candidates predict)")
 
 
 def _bounds(models, bounds_hit) -> Check:

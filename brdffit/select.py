@@ -122,11 +122,11 @@ class Selection:
         rows = {row["spec"]: row for row in self.table}
         chosen = rows[self.chosen_by_criterion]
         error = chosen["heldout_error"]
-        line = f"verdict: {self.chosen}: held-out error {error:.4g}"
+        line = (f"verdict: {self.chosen}: error on unseen directions {error:.4g} (loss RMS on the {self.holdout:.0%} "
+                "of rows held out from its fit)")
         lambert = rows.get("lambert")
         if lambert is not None and self.chosen_by_criterion != "lambert" and lambert["heldout_error"] > 0:
             line += f", {error / lambert['heldout_error']:.2f}x Lambert's {lambert['heldout_error']:.4g}"
-        line += f" (the fit to the other rows, on {self.holdout:.0%} of the rows it did not see)"
         checks = self.result.plausibility()
         if checks.ok:
             return line + "; plausible"

@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
-from brdffit import FitResult, Measurements, io, synth
+from brdffit import FitResult, Measurements, io, models, synth
 from brdffit.cli import EXIT_BAD_INPUT, EXIT_IMPLAUSIBLE, EXIT_NOT_CONVERGED, EXIT_OK, main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -537,3 +537,22 @@ def test_info_on_the_other_readers_formats(kind, name, incidences, capsys):
     assert f"incidences: {incidences} (theta_i " in text
     for key in info["read"]:
         assert f"\n    {key}: " in text
+
+
+def test_an_implausible_fit_warns_and_its_renderer_export_is_refused(tmp_path, capsys):
+    """Values 20 times a material's: the fit exits 0 (it converged) but says on stderr that it is IMPLAUSIBLE, and
+    `export` refuses a renderer material of it (exit 3, nothing written) unless --force."""
+    truth = models.get("lambert+ggx", rho_d=[0.6, 0.5, 0.4], ks=[0.5, 0.5, 0.5], alpha=0.3, f0=0.04)
+    data = synth.generate(truth, pattern="uniform", n=400, seed=2)
+    path = tmp_path / "bright.csv"
+    io.save(data.replace(values=data.values * 20.0, sigma=None), path)
+    out = tmp_path / "bright.brdffit"
+    assert main(["fit", str(path), "--model", "lambert+ggx", "--no-report", "--quiet", "--out", str(out)]) == EXIT_OK
+    assert "is IMPLAUSIBLE" in capsys.readouterr().err
+    xml = tmp_path / "bright.xml"
+    assert main(["export", str(out / "result.h5"), "--to", "mitsuba", "--out", str(xml)]) == EXIT_IMPLAUSIBLE
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--force" in err and not xml.exists()
+    assert main(["export", str(out / "result.h5"), "--to", "mitsuba", "--out", str(xml), "--force",
+                 "--quiet"]) == EXIT_OK
+    assert xml.is_file()

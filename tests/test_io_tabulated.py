@@ -139,13 +139,14 @@ def paper_white():
     return path
 
 
-def test_rgl_directions_are_the_lookup_within_the_measured_incidences(paper_white):
+def test_rgl_directions_are_the_lookup_within_max_theta(paper_white):
     table = bio.read_rgl(paper_white)
     m = bio.load(paper_white, pairs=2000, seed=5)
     np.testing.assert_allclose(m.values, table.lookup(m.theta_i, m.phi_i, m.theta_o, m.phi_o), rtol=1e-12)
-    measured = table.theta_i[table.theta_i < math.pi / 2 - 1e-6][-1]
-    assert m.theta_i.max() <= measured and m.theta_o.max() <= MAX + 1e-12
-    assert m.meta["sampling"]["max_theta_i_deg"] == pytest.approx(math.degrees(measured), abs=1e-5)
+    assert m.theta_i.max() <= MAX + 1e-12 and m.theta_o.max() <= MAX + 1e-12
+    assert m.meta["sampling"]["max_theta_i_deg"] == pytest.approx(80.0)
+    narrow = bio.load(paper_white, pairs=500, max_theta=math.radians(40))
+    assert narrow.theta_i.max() <= math.radians(40) + 1e-12 and narrow.theta_o.max() <= math.radians(40) + 1e-12
 
 
 @pytest.mark.parametrize("name", ["paper_white", "satin_rosaline"])

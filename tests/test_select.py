@@ -249,3 +249,84 @@ def test_the_real_retro_reflector_gets_a_converged_retro_lobe():
         measured = float(np.max(data.values[rows]))
         fitted = float(np.asarray(evaluate_dirs(model, wi[None], wi[None]))[0, 0])
         assert 1 / 1.5 < fitted / measured < 1.5, (theta, fitted, measured, selection.summary())
+
+
+# ------------------------------------------------------------------------------------- the heldout criterion
+def _without_sigma(data):
+    """Measurements as a measured file gives them: no stated σ."""
+    return data.replace(sigma=None)
+
+
+def test_auto_is_bic_with_sigma_and_heldout_without():
+    from brdffit.criteria import resolve_criterion
+
+    data = synth.generate(models.get("lambert", rho_d=0.5), pattern="uniform", n=50, noise="relative:0.01")
+    assert data.sigma is not None and resolve_criterion("auto", data) == "bic"
+    assert resolve_criterion("auto", _without_sigma(data)) == "heldout"
+    assert resolve_criterion("aic", _without_sigma(data)) == "aic"
+    with pytest.raises(ValueError, match="criterion must be one of"):
+        resolve_criterion("bayes", data)
+
+
+def test_heldout_chooses_the_truth_and_the_verdict_compares_with_lambert():
+    """GGX data without σ (a measured file): the held-out criterion chooses the true model over Lambert and over
+    bigger ones (within the margin the simplest), and the verdict gives its held-out error against Lambert's."""
+    truth = models.get("lambert+ggx", rho_d=[0.3, 0.2, 0.1], ks=[0.5, 0.5, 0.5], alpha=0.2, f0=0.04)
+    data = _without_sigma(synth.generate(truth, pattern="uniform", n=1500, noise="relative:0.01", seed=3))
+    candidates = ["lambert", "lambert+ggx", "lambert+ggx+ggx(share=f0)"]
+    selection = select(data, candidates)
+    assert selection.criterion == "heldout" and selection.margin == pytest.approx(0.05)
+    assert selection.chosen == "lambert+ggx", selection.summary()
+    rows = {r["spec"]: r for r in selection.table}
+    assert rows["lambert+ggx"]["heldout_error"] < 0.2 * rows["lambert"]["heldout_error"]
+    # each row's training and held-out errors come from the one fit to the training rows: the bigger model, which
+    # contains the truth, fits its training rows at least as well
+    assert rows["lambert+ggx+ggx(share=f0)"]["train_error"] <= rows["lambert+ggx"]["train_error"] * (1 + 1e-6)
+    verdict = selection.verdict()
+    ratio = rows["lambert+ggx"]["heldout_error"] / rows["lambert"]["heldout_error"]
+    assert verdict.startswith("verdict: lambert+ggx: error on unseen directions "), verdict
+    assert f"{ratio:.2f}x Lambert's" in verdict and verdict.endswith("; plausible")
+    assert selection.plausible and "verdict:" not in selection.summary()  # the verdict is printed once, before it
+
+
+def test_heldout_prefers_a_plausible_candidate_within_the_margin():
+    """The rule itself (`_choose_by_heldout`), on rows whose fits say whether they are plausible: the best is
+    implausible, a plausible one within 5% is chosen over it; beyond the margin the best stays chosen, with a
+    warning naming the closest plausible one."""
+    from types import SimpleNamespace
+
+    from brdffit.properties import Check, Plausibility
+    from brdffit.select import _choose_by_heldout
+
+    def fitted(level):
+        checks = (Check("energy", level, "max albedo 1.5" if level == "implausible" else "ok"),)
+        return SimpleNamespace(plausibility=lambda: Plausibility(checks))
+
+    def rows(errors):
+        return [{"spec": spec, "score": e, "n_params": k, "cost_ns": 1.0}
+                for (spec, k), e in zip((("small", 4), ("big", 8)), errors)]
+
+    done = {"small": fitted("implausible"), "big": fitted("ok")}
+    implausible, warnings = {}, []
+    best, threshold, chosen = _choose_by_heldout(rows([1.0, 1.04]), 0.05, True, done, implausible, warnings)
+    assert (best["spec"], chosen["spec"], threshold) == ("small", "big", pytest.approx(1.05))
+    assert "IMPLAUSIBLE energy: max albedo 1.5" in implausible["small"] and not warnings
+    implausible, warnings = {}, []
+    best, threshold, chosen = _choose_by_heldout(rows([1.0, 1.2]), 0.05, True, done, implausible, warnings)
+    assert chosen["spec"] == "small" and "small" in implausible
+    assert len(warnings) == 1 and "chosen although IMPLAUSIBLE" in warnings[0] and "big" in warnings[0]
+    # plausible=False: the criterion alone
+    assert _choose_by_heldout(rows([1.0, 1.04]), 0.05, False, done, {}, [])[2]["spec"] == "small"
+
+
+def test_data_no_candidate_can_fit_plausibly_give_an_implausible_verdict_and_advice():
+    """Values 20 times a material's (a reflectance factor read as f_r, and more): every fit reflects more than it
+    receives; the selection says so in its warning and its verdict, with what to do."""
+    truth = models.get("lambert+ggx", rho_d=[0.6, 0.5, 0.4], ks=[0.5, 0.5, 0.5], alpha=0.3, f0=0.04)
+    data = synth.generate(truth, pattern="uniform", n=600, seed=2)
+    data = _without_sigma(data.replace(values=data.values * 20.0))
+    selection = select(data, ["lambert", "lambert+ggx"])
+    assert not selection.plausible
+    verdict = selection.verdict()
+    assert "IMPLAUSIBLE" in verdict and "What to do: check the values' units" in verdict, verdict
+    assert any("no plausible candidate" in w for w in selection.warnings), selection.warnings

@@ -145,7 +145,7 @@ class FitResult:
         lines = [f"model {self.spec}  loss {self.loss}  solver {self.solver}  channel mode {self.channel_mode}",
                  f"status {self.status}  steps {self.steps}  compile {self.compile_time:.2f} s  "
                  f"run {self.run_time:.2f} s  init {self.init_time:.2f} s",
-                 f"{'parameter':<14}{'value':>14}{'± stderr':>14}{'(' + other_name + ')':>14}   bounds"]
+                 f"{'parameter':<14}{'value':>14}{'± ' + kind:>14}{'(' + other_name + ')':>14}   bounds"]
         others = self._flat_entries(other)[2]
         for label, value, err, alt in zip(*self._flat_entries(), others):
             name = label.split("[")[0]
@@ -153,10 +153,11 @@ class FitResult:
             note = " fixed" if name in self.fixed else (" AT BOUND" if label in self.bounds_hit else "")
             lines.append(f"{label:<14}{value:>14.6g}{err:>14.3g}{alt:>14.3g}   [{spec.lower:g}, {spec.upper:g}] "
                          f"{spec.unit}{note}")
-        lines.append(f"samples {self.n_samples}  free parameters {self.n_params}  dof {self.dof}  "
+        lines.append(f"{self._samples_words()}  free parameters {self.n_params}  dof {self.dof}  "
                      f"AIC {self.aic:.6g}  BIC {self.bic:.6g}")
         if self.noise_model is not None:
             lines.extend(self.noise_model.describe(self.loss))
+            lines.extend(self._stderr_spread())
         elif self.channel_mode == "independent":
             lines.append("noise: chosen channel by channel, not recorded in this merged result (stderr holds each "
                          "channel's choice)")
@@ -169,6 +170,26 @@ class FitResult:
         if plausibility:
             lines.extend(self.plausibility().lines())
         return "\n".join(lines)
+
+    def _samples_words(self) -> str:
+        """The data's size in words: samples × channels where every sample has all channels, else the values."""
+        channels = self.models[0].channels * len(self.models)
+        if channels > 1 and self.n_samples % channels == 0:
+            return f"samples {self.n_samples // channels:,} × {channels} channels"
+        return f"values {self.n_samples:,}" + (f" in {channels} channels" if channels > 1 else "")
+
+    def _stderr_spread(self) -> list[str]:
+        """A noise line where the Laplace and sandwich standard errors differ by more than 2x: the residuals do
+        not have one variance, which the noise model above accounts for (stderr follows it)."""
+        ratios = []
+        for name, laplace in self.stderr_laplace.items():
+            with np.errstate(invalid="ignore", divide="ignore"):
+                r = np.asarray(self.stderr_robust.get(name, np.nan), dtype=float) / np.asarray(laplace, dtype=float)
+            ratios.extend(np.abs(np.log(r[np.isfinite(r) & (r > 0)])).reshape(-1).tolist())
+        if not ratios or max(ratios) <= np.log(2.0):
+            return []
+        return [f"        Laplace and sandwich stderr differ by up to {np.exp(max(ratios)):.3g}x: the residuals' "
+                "variance varies between samples (the stderr column follows the noise model above)"]
 
     def _flat_entries(self, stderr: dict | None = None):
         labels, values, errors = [], [], []

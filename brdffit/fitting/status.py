@@ -123,16 +123,9 @@ def diagnose(problem: Problem, params: dict, cost: float, max_steps: bool, nonfi
 
 def warnings_of(problem: Problem, labels: list, uncertainty, hit: list, status: str, decrease: float,
                 cost: float, params: dict) -> list[str]:
-    """The human-readable warnings of a fit: non-uniform noise, undetermined or correlated parameters, bounds,
+    """The human-readable warnings of a fit: undetermined or correlated parameters, bounds,
     dead lobes (``params``: the physical values, to tell a lower bound from an upper one), a stall."""
     warnings = []
-    std, std_sandwich = uncertainty.stderr, uncertainty.stderr_robust
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = std_sandwich / std
-    if np.any(np.isfinite(ratio) & ((ratio > 2.0) | (ratio < 0.5))):
-        warnings.append("Laplace and sandwich standard errors differ by more than 2x: the loss's residuals do "
-                        "not have one variance (stderr follows the noise model chosen from the residuals; the "
-                        "summary's noise line says which)")
     if uncertainty.undetermined.any():
         names = [label for label, u in zip(labels, uncertainty.undetermined) if u]
         warnings.append(f"JᵀJ is singular: {', '.join(names)} not determined by these data (stderr = inf)")

@@ -416,8 +416,7 @@ class RglTable:
 
         Arguments:
             sampling: ``"directions"`` (default) the file's interpolation (`lookup`) at ``pairs`` quasi-random
-                direction pairs uniform in solid angle, θi up to the largest measured incidence (and ``max_theta``),
-                θo up to ``max_theta``; ``"grid"`` the file's own nodes with their solid-angle weights
+                direction pairs over the directions, θi and θo up to ``max_theta``; ``"grid"`` the file's own nodes with their solid-angle weights
                 (`grid_measurements`).
             pairs, seed, max_theta: the direction pairs (``"directions"`` only): how many, the scrambling seed,
                 the largest polar angle in radians (80° by default).
@@ -430,11 +429,10 @@ class RglTable:
         _check_negative_samples(negative)
         if sampling == "grid":
             return self.grid_measurements(negative=negative)
-        measured = self.theta_i[self.theta_i < _HALF_PI - 1e-6]
         try:
             return over_directions(
                 functools.partial(self.lookup, negative=negative), pairs=pairs, seed=seed,
-                max_theta_i=min(float(max_theta), float(measured[-1])), max_theta_o=float(max_theta),
+                max_theta_i=float(max_theta), max_theta_o=float(max_theta),
                 isotropic=self.isotropic, channels=CHANNELS, meta=self._meta()).check_informative()
         except MeasurementError as err:
             raise err.with_file(self.path) from None

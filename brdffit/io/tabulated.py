@@ -7,8 +7,9 @@ the tabulated incidences; MERL's cells shrink towards the specular peak. A least
 the error at the nodes, not the error a renderer shows, which is an integral over incoming and outgoing directions.
 
 The default sampling (``"directions"``) evaluates the file's own interpolation (its ``lookup``, what a renderer
-reads) at quasi-random direction pairs uniform in solid angle within the measured incidences: ωi with
-θi ≤ min(``max_theta``, the largest measured incidence) and ωo with θo ≤ ``max_theta``. Each direction is drawn as
+reads) at quasi-random direction pairs with θi, θo ≤ ``max_theta``: a renderer shows the table at every incidence,
+so between and beyond the measured incidences (an RGL-EPFL file measures up to 78.5° and interpolates towards a copy
+of that slice at 90°) it is the file's interpolation that a fit should follow. Each direction is drawn as
 cos θ = 1 − u (1 − cos θmax), φ = 2π v − π from a randomly shifted low-discrepancy point (`_kronecker`), so that
 the plain mean over the samples of any function g(ωi, ωo) is a quasi-Monte Carlo estimate of
 
