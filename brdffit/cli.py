@@ -250,7 +250,7 @@ TABULATED_OPTIONS = (
                  "what the fit is given: the file's interpolation at importance-weighted direction pairs "
                  "(directions, the default) or the file's own grid nodes with their weights (grid)", _sampling,
                  formats=("merl", "rgl")),
-    _TableOption("--pairs", "pairs", "N", "the number of direction pairs of --sampling directions (default 8192)",
+    _TableOption("--pairs", "pairs", "N", "the number of direction pairs of --sampling directions (default 16384)",
                  bounded(int, 1), formats=("merl", "rgl")),
     _TableOption("--max-theta", "max_theta", "DEG",
                  "the largest polar angle of the direction pairs, degrees (default 80)", _max_theta,
