@@ -1,5 +1,6 @@
 """The ``brdffit`` command line: a thin layer that parses arguments, calls one API function and prints or writes
-its result. Exit codes: 0 success, 1 a fit did not converge, 2 bad input or usage, 130 interrupted (docs/cli.md)."""
+its result. Exit codes: 0 success, 1 a fit did not converge, 2 bad input or usage, 130 interrupted (143: `brdffit
+posterior` stopped by SIGTERM) (docs/cli.md)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import argparse
 import contextlib
 import json
 import os
+import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -20,6 +22,7 @@ from .export.records import EXPORTS_FILE
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 EXIT_IMPLAUSIBLE = 3  # `brdffit export` refused a renderer material of an implausible fit (--force exports it)
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command stopped by Ctrl-C
+EXIT_TERMINATED = 143  # 128 + SIGTERM: `brdffit posterior` stopped by `kill` or a batch system, as by Ctrl-C
 DEFAULT_MODEL = "auto"
 
 
@@ -736,14 +739,37 @@ def _run_posterior(result, measurements, h5: Path, args):
     return post
 
 
+@contextlib.contextmanager
+def _terminate_as_interrupt():
+    """SIGTERM (what ``kill`` and batch systems send) stops the command as Ctrl-C does: it raises
+    `brdffit.posterior.Interrupted` (a KeyboardInterrupt), and while a chain samples it stops after the step in
+    progress (`brdffit.posterior.posterior`); `main` says so in one line and exits `EXIT_TERMINATED`. Where SIGTERM
+    is not at its default (ignored, or the handler of a program that calls `main`), or outside the main thread,
+    nothing changes."""
+    from .posterior import raise_interrupted
+
+    try:
+        taken = signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+        if taken:
+            signal.signal(signal.SIGTERM, raise_interrupted)
+    except ValueError:  # signal.signal outside the main thread
+        taken = False
+    try:
+        yield
+    finally:
+        if taken:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _cmd_posterior(args) -> int:
     from . import FitResult, io
 
-    enable_compilation_cache()
-    h5 = Path(args.result)
-    measurements = io.load(h5)
-    result = FitResult.load(h5, args.name)
-    post = _run_posterior(result, measurements, h5, args)
+    with _terminate_as_interrupt():
+        enable_compilation_cache()
+        h5 = Path(args.result)
+        measurements = io.load(h5)
+        result = FitResult.load(h5, args.name)
+        post = _run_posterior(result, measurements, h5, args)
     if args.json:
         print(json.dumps(post.to_dict()))
     elif not args.quiet:
@@ -1172,7 +1198,7 @@ def main(argv=None) -> int:
         # `fit` writes its folder as a whole (staged_folder): an interrupted fit leaves the earlier folder as it was.
         kept = "nothing was written; the output folder is as it was" if args.command == "fit" else str(exc)
         print(f"brdffit {args.command}: interrupted{': ' + kept if kept else ''}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return EXIT_TERMINATED if getattr(exc, "signum", signal.SIGINT) == signal.SIGTERM else EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

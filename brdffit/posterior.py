@@ -34,7 +34,8 @@ from .params import ParamSpec
 from .fitting.problem import Problem, flatten_free, make_fit_data, physical_params, residual_fn
 from .progress import Progress
 
-__all__ = ["posterior", "load_posterior", "Posterior", "StepBackend", "LIKELIHOODS", "PRIOR_FAMILIES"]
+__all__ = ["posterior", "load_posterior", "Posterior", "StepBackend", "Interrupted", "raise_interrupted", "LIKELIHOODS",
+           "PRIOR_FAMILIES"]
 
 LIKELIHOODS = ("gaussian", "student-t")
 PRIOR_FAMILIES = ("uniform", "loguniform", "normal", "lognormal")
@@ -182,29 +183,55 @@ class StepBackend(emcee.backends.HDFBackend):
             self.expected = iteration + 1
 
 
-@contextlib.contextmanager
-def _interrupt_between_steps():
-    """Make Ctrl-C (SIGINT) stop the sampling after the step in progress, which is stored whole.
+class Interrupted(KeyboardInterrupt):
+    """The sampling was stopped by a signal after the step in progress (the steps so far are stored whole where a
+    store was given). A KeyboardInterrupt, so that code that catches Ctrl-C catches it; ``signum`` names the signal:
+    SIGINT (Ctrl-C) or SIGTERM (what ``kill`` and batch systems send, where the handler is `raise_interrupted`). The
+    CLI exits with ``128 + signum``, as a shell reports a command that the signal ended."""
 
-    Yields a list that becomes non-empty when SIGINT arrives; a second SIGINT raises KeyboardInterrupt at once.
-    Outside the main thread, or where SIGINT is not Python's default handler, nothing changes.
+    def __init__(self, message: str = "", signum: int = signal.SIGINT):
+        super().__init__(message)
+        self.signum = int(signum)
+
+
+def raise_interrupted(signum, frame):
+    """A signal handler that raises `Interrupted` naming the signal: Python's SIGINT handler (which raises
+    KeyboardInterrupt) for another signal. ``brdffit posterior`` installs it for SIGTERM, so that SIGTERM stops it as
+    Ctrl-C does."""
+    raise Interrupted(signum=signum)
+
+
+@contextlib.contextmanager
+def _stop_between_steps():
+    """Make SIGINT and SIGTERM stop the sampling after the step in progress, which is stored whole.
+
+    A signal is taken over where its handler raises KeyboardInterrupt: Python's own for SIGINT
+    (``signal.default_int_handler``), and `raise_interrupted`. Any other disposition is left as it is: an ignored
+    SIGINT stays ignored (a shell without job control ignores SIGINT and SIGQUIT in the commands it starts in the
+    background, ``cmd &``, and Python keeps them ignored), a program's own handler stays its own, and SIGTERM's
+    default ends the process at once (the stored chain still resumes: `StepBackend`). Outside the main thread
+    nothing changes.
+
+    Yields a list that receives the number of the first signal; a second signal raises `Interrupted` at once.
     """
-    asked: list[bool] = []
-    previous = signal.getsignal(signal.SIGINT)
-    if threading.current_thread() is not threading.main_thread() or previous is not signal.default_int_handler:
-        yield asked
-        return
+    asked: list[int] = []
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+        previous = {s: h for s, h in previous.items() if h is signal.default_int_handler or h is raise_interrupted}
 
     def handler(signum, frame):
         if asked:
-            raise KeyboardInterrupt
-        asked.append(True)
+            raise Interrupted(signum=signum)
+        asked.append(signum)
 
-    signal.signal(signal.SIGINT, handler)
     try:
+        for signum in previous:
+            signal.signal(signum, handler)
         yield asked
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, before in previous.items():
+            signal.signal(signum, before)
 
 
 def _prior_term(spec: ParamSpec, user):
@@ -489,6 +516,9 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
     Raises:
         ValueError: bad arguments, a fit in independent channel mode, or a non-finite log probability at the
             start (emcee's own checks, e.g. walkers not linearly independent, also raise ValueError).
+        Interrupted: SIGINT (Ctrl-C), or SIGTERM where its handler is `raise_interrupted`, arrived while sampling
+            (in the main thread); the sampling stopped after the step in progress, and the message says how many
+            steps ``store`` holds.
     """
     if fit_result.model is None:
         raise ValueError("posterior needs a shared-shape fit; fit each channel separately for independent mode")
@@ -581,7 +611,7 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
     t0 = time.perf_counter()
     if remaining:
         try:
-            with _interrupt_between_steps() as asked:
+            with _stop_between_steps() as asked:
                 stored, left = already, remaining
                 while left:
                     try:
@@ -595,12 +625,13 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps
                         start = fresh_start() if stored == 0 else start
                         left = max(nsteps - stored, 0)
             if asked:
-                raise KeyboardInterrupt
-        except KeyboardInterrupt:
+                raise Interrupted(signum=asked[0])
+        except KeyboardInterrupt as stop:
+            signum = getattr(stop, "signum", signal.SIGINT)
             if backend is None:
-                raise KeyboardInterrupt("the chain was not stored (pass store= to keep and resume one)") from None
-            raise KeyboardInterrupt(f"{backend.iteration} of {nsteps} steps are stored in {store}; run the same "
-                                    "command again to continue the chain") from None
+                raise Interrupted("the chain was not stored (pass store= to keep and resume one)", signum) from None
+            raise Interrupted(f"{backend.iteration} of {nsteps} steps are stored in {store}; run the same command "
+                              "again to continue the chain", signum) from None
     bar.close(f"({nwalkers} walkers)")
     wall = time.perf_counter() - t0
 
