@@ -68,9 +68,12 @@ SCREEN_SAMPLES = 4096
 EXTRAPOLATION_ALBEDO = 2.0
 SCREEN_SLACK = 10.0
 # What a user can do when no candidate is plausible (the verdict's advice).
-IMPLAUSIBLE_ADVICE = ("What to do: check the values' units (f_r in 1/sr without the cosine; a reflectance factor is π f_r); a material with "
-                      "a lobe none of the candidates has (retro-reflection, a sharp peak, a sheen) needs a model "
-                      "with that lobe: fit one with --model. A renderer export of this fit is refused unless forced.")
+IMPLAUSIBLE_ADVICE = ("What to do: check the values' units (f_r in 1/sr without the cosine; a reflectance factor is "
+                      "π f_r); for a material a renderer can take as plausible, fit the chosen model with its "
+                      "amplitudes bounded by 1 (--model with 'bounded=true' on each specular lobe, e.g. "
+                      "'lambert+ggx(bounded=true)'; it predicts the data less well); a material with a lobe none of "
+                      "the candidates has (retro-reflection, a sheen) needs a model with that lobe. A renderer "
+                      "export of this fit is refused unless forced.")
 _LAFORTUNE = re.compile(r"^(?P<base>.*?)\+?lafortune(?:\((?P<options>[^)]*)\))?$")
 
 

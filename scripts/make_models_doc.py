@@ -20,6 +20,7 @@ import sys
 from brdffit import models
 from brdffit.models import fresnel, microfacet
 from brdffit.models.cook_torrance import FRESNEL_MODES
+from brdffit.models.lobe import COMMON_OPTIONS
 
 OUTPUT = pathlib.Path(__file__).resolve().parent.parent / "docs" / "models.md"
 
@@ -144,7 +145,7 @@ def _lobe_section(name: str) -> list[str]:
     out = [f"## `{name}`", "", f"Reference: {cls.reference}.", "", "```", EQUATIONS[name], "```", ""]
     if name in NOTES:
         out += [NOTES[name], ""]
-    fields = [f for f in dataclasses.fields(cls) if f.name != "share"]  # every lobe's option, described once
+    fields = [f for f in dataclasses.fields(cls) if f.name not in COMMON_OPTIONS]  # every lobe's, described once
     if fields:
         out += ["Options:", "", "| option | default | values |", "|---|---|---|"]
         out += [f"| `{f.name}` | `{f.default!r}` | {OPTION_VALUES.get(f.name, '')} |" for f in fields]
@@ -184,6 +185,11 @@ def render() -> str:
         "`\"lambert+ggx+ggx(share=f0)\"` is two GGX lobes with one Fresnel term: `rho_d, ks, alpha, f0, ks_2, "
         "alpha_2`. The declarations must match (a dielectric's η is not a conductor's), and amplitudes cannot be "
         "shared; fits treat a shared parameter as acting through every lobe that reads it.",
+        "- Every lobe takes the option `bounded=true`: each amplitude it declares without an upper bound (ks, ks_j) "
+        "is bounded by 1, so that ks·F ≤ 1 where the Fresnel factor reaches 1 and the plausibility check's specular "
+        "test holds by construction. `\"lambert+ggx(bounded=true)\"` is the best fit a renderer can take as "
+        "plausible; on materials whose grazing rise needs ks > 1 with Schlick's Fresnel (the RGL-EPFL vinyl films) "
+        "it predicts worse than the unbounded fit, which the selection's verdict then flags IMPLAUSIBLE.",
         "- A *colour* parameter has one value per channel (shape `(channels,)`); a *shape* parameter is one scalar "
         "shared by all channels. Fits keep every parameter strictly inside its bounds through smooth transforms "
         "(see `brdffit.params`).",

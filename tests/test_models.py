@@ -544,3 +544,20 @@ def test_suffixed_names_never_collide_with_declared_names():
     assert len(names) == len(set(names)) == 12
     assert names[:4] == ["ks", "n", "ks_3", "n_3"]
     assert sum(len(n) for n in model.names_by_lobe) == len(model.params)
+
+
+def test_bounded_option_caps_every_unbounded_amplitude_at_one():
+    """`bounded=true`, an option every lobe has: the amplitudes a lobe declares without an upper bound (ks, ks_j)
+    get the upper bound 1, nothing else changes, and the spec round-trips."""
+    free = models.get("lambert+ggx+lafortune")
+    bounded = models.get("lambert+ggx(bounded=true)+lafortune(bounded=true)")
+    assert bounded.spec == "lambert+ggx(bounded=True)+lafortune(bounded=True)"  # as every option token prints
+    assert models.get(bounded.spec).spec == bounded.spec
+    for name in free.param_specs.names:
+        spec, capped = free.param_specs[name], bounded.param_specs[name]
+        if spec.linear and spec.upper == float("inf"):
+            assert (capped.lower, capped.upper) == (spec.lower, 1.0), name
+        else:
+            assert (capped.lower, capped.upper) == (spec.lower, spec.upper), name
+    assert {n for n in free.param_specs.names
+            if bounded.param_specs[n].upper == 1.0 and free.param_specs[n].upper != 1.0} == {"ks", "ks_1"}

@@ -330,3 +330,18 @@ def test_data_no_candidate_can_fit_plausibly_give_an_implausible_verdict_and_adv
     verdict = selection.verdict()
     assert "IMPLAUSIBLE" in verdict and "What to do: check the values' units" in verdict, verdict
     assert any("no plausible candidate" in w for w in selection.warnings), selection.warnings
+
+
+def test_the_advised_bounded_fit_passes_the_specular_check_where_the_free_one_fails():
+    """What the IMPLAUSIBLE advice offers: the same model with bounded=true keeps ks ≤ 1, so its ks·F check holds,
+    where the free fit of data 3 times a material's needs ks > 1."""
+    from brdffit import fit
+
+    truth = models.get("lambert+ggx", rho_d=[0.3, 0.25, 0.2], ks=[0.5, 0.5, 0.5], alpha=0.3, f0=0.04)
+    data = synth.generate(truth, pattern="uniform", n=600, seed=2)
+    data = _without_sigma(data.replace(values=data.values * 3.0))
+    free = fit(data, "lambert+ggx")
+    bounded = fit(data, "lambert+ggx(bounded=true)")
+    assert free.plausibility()["specular"].level == "implausible" and np.max(free.params["ks"]) > 1
+    assert np.max(bounded.params["ks"]) <= 1 + 1e-9
+    assert bounded.plausibility()["specular"].level == "ok", bounded.plausibility().lines()

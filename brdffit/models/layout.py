@@ -77,6 +77,9 @@ class Layout:
         for j, lobe in enumerate(self.lobes):
             own = []  # the slots this lobe reads, in its declaration order
             specs = lobe.param_specs()
+            if lobe.bounded:  # every amplitude at most 1: ks·F ≤ 1 wherever F reaches 1 (the plausibility check)
+                specs = tuple(dataclasses.replace(spec, upper=1.0, default=min(spec.default, 1.0))
+                              if spec.linear and math.isinf(spec.upper) else spec for spec in specs)
             _check_shared(j, lobe, specs, latest)
             for spec in specs:
                 if spec.name in lobe.shared:

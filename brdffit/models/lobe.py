@@ -14,7 +14,10 @@ from typing import ClassVar
 from ..geometry import LocalPair
 from ..params import ParamSpec
 
-__all__ = ["Lobe"]
+__all__ = ["Lobe", "COMMON_OPTIONS"]
+
+# The options every lobe has (the base class's fields), described once in docs/models.md.
+COMMON_OPTIONS = ("share", "bounded")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,10 +36,15 @@ class Lobe(abc.ABC):
     - ``param_specs()``: the parameter declarations, in order;
     - ``__call__(params, pair)``: the BRDF value in 1/sr, without the cosine factor.
 
-    Every lobe has one option of its own, declared here once: ``share``, the names of parameters that this lobe
-    takes from the nearest earlier lobe of the sum declaring them, instead of having its own (space-separated:
-    ``"lambert+ggx+ggx(share=f0)"`` is two GGX lobes with one Fresnel term). The model's `Layout` resolves it;
-    amplitudes cannot be shared.
+    Every lobe has two options of its own, declared here once (`COMMON_OPTIONS`):
+
+    - ``share``: the names of parameters that this lobe takes from the nearest earlier lobe of the sum declaring
+      them, instead of having its own (space-separated: ``"lambert+ggx+ggx(share=f0)"`` is two GGX lobes with one
+      Fresnel term). The model's `Layout` resolves it; amplitudes cannot be shared.
+    - ``bounded``: every amplitude the lobe declares without an upper bound (ks) is bounded by 1, so that ks·F ≤ 1
+      where its Fresnel factor reaches 1 (`brdffit.properties.plausibility`'s specular check holds by
+      construction): ``"lambert+ggx(bounded=true)"`` is the best fit a renderer can take as physically
+      plausible, where the unbounded one needs ks > 1 to follow the data. The `Layout` applies it.
     """
 
     name: ClassVar[str]
@@ -45,6 +53,7 @@ class Lobe(abc.ABC):
     offset: ClassVar[bool] = False
 
     share: str = ""
+    bounded: bool = False
 
     @property
     def shared(self) -> tuple[str, ...]:

@@ -162,8 +162,10 @@ def get(spec, channels: int = 3, **options_and_params) -> "Model":
 
 def describe(spec_class: type[Lobe]) -> str:
     """One paragraph on a lobe class: name, reference and its own options (used by ``brdffit models``; the
-    ``share`` option every lobe has is described once, in docs/models.md)."""
-    own = [f for f in dataclasses.fields(spec_class) if f.name != "share"]
+    options every lobe has, `COMMON_OPTIONS`, are described once, in docs/models.md)."""
+    from .lobe import COMMON_OPTIONS
+
+    own = [f for f in dataclasses.fields(spec_class) if f.name not in COMMON_OPTIONS]
     opts = ", ".join(f"{f.name}={f.default!r}" for f in own) or "none"
     return f"{spec_class.name}: {spec_class.reference} (options: {opts})"
 
