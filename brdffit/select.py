@@ -89,7 +89,9 @@ class Selection:
             the criterion), and with a scene ``scene_error``.
         chosen: the chosen spec (the scene's choice when a scene was given, else the criterion's).
         criterion: ``"heldout"``, ``"aic"``, ``"bic"`` or ``"cv"``; margin: the margin used; holdout: the fraction
-            of the rows held out.
+            of the rows held out; heldout_scale: with the cosine loss, the RMS of the data's own cosine-weighted
+            values f cosθi √w on the held-out rows (a held-out error over it is the relative error in reflected
+            radiance), else None.
         best: the candidate with the best score.
         chosen_by_criterion: the criterion's choice (equals ``chosen`` without a scene).
         chosen_by_scene: the scene's choice, or None.
@@ -110,6 +112,7 @@ class Selection:
     warnings: list
     scene_results: dict = dataclasses.field(default_factory=dict)
     holdout: float = 0.2
+    heldout_scale: float | None = None
 
     @property
     def result(self) -> FitResult:
@@ -125,8 +128,10 @@ class Selection:
         rows = {row["spec"]: row for row in self.table}
         chosen = rows[self.chosen_by_criterion]
         error = chosen["heldout_error"]
-        line = (f"verdict: {self.chosen}: error on unseen directions {error:.4g} (loss RMS on the {self.holdout:.0%} "
-                "of rows held out from its fit)")
+        line = f"verdict: {self.chosen}: error on unseen directions {error:.4g}"
+        if self.heldout_scale:
+            line += f" = {error / self.heldout_scale:.1%} of the reflected radiance"
+        line += f" (loss RMS on the {self.holdout:.0%} of rows held out from its fit)"
         lambert = rows.get("lambert")
         if lambert is not None and self.chosen_by_criterion != "lambert" and lambert["heldout_error"] > 0:
             line += f", {error / lambert['heldout_error']:.2f}x Lambert's {lambert['heldout_error']:.4g}"
@@ -306,6 +311,15 @@ def _implausibility(result: FitResult) -> str:
     return ""
 
 
+def _radiance_scale(measurements, rows: np.ndarray) -> float:
+    """The RMS of the data's cosine-weighted values f cosθi √w on ``rows`` (the cosine loss's residual of a model
+    that reflects nothing): a cosine-loss error over it is the relative error in reflected radiance."""
+    weights = np.ones(measurements.n) if measurements.weights is None else np.asarray(measurements.weights)
+    scaled = (np.asarray(measurements.values)[rows] * (np.cos(np.asarray(measurements.theta_i)[rows])
+                                                       * np.sqrt(weights[rows]))[:, None])
+    return _rms(scaled)
+
+
 def _implausible_where_measured(result: FitResult) -> str:
     """Why a fit is IMPLAUSIBLE (`FitResult.plausibility`: an albedo above 1 where the data were measured, or a
     ks·F above 1), in words; empty when no check says so."""
@@ -473,7 +487,8 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
     bar.close(f"chose {by_scene or chosen['spec']}")
     return Selection(table=rows, chosen=by_scene or chosen["spec"], criterion=criterion, margin=margin,
                      best=best["spec"], chosen_by_criterion=chosen["spec"], chosen_by_scene=by_scene,
-                     results=done, warnings=warnings, scene_results=scene_results, holdout=holdout)
+                     results=done, warnings=warnings, scene_results=scene_results, holdout=holdout,
+                     heldout_scale=_radiance_scale(measurements, fold_rows[0]) if loss == "cosine" else None)
 
 
 def _choose_by_heldout(usable, margin, plausible, done, implausible, warnings):

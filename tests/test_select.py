@@ -286,6 +286,14 @@ def test_heldout_chooses_the_truth_and_the_verdict_compares_with_lambert():
     ratio = rows["lambert+ggx"]["heldout_error"] / rows["lambert"]["heldout_error"]
     assert verdict.startswith("verdict: lambert+ggx: error on unseen directions "), verdict
     assert f"{ratio:.2f}x Lambert's" in verdict and verdict.endswith("; plausible")
+    # relative to the reflected radiance: the held-out rows' cosine-weighted RMS, computed here from the data
+    held = np.random.default_rng(0).permutation(np.flatnonzero(np.any(np.isfinite(data.values), axis=1)))
+    held = held[: int(round(0.2 * len(held)))]
+    scaled = data.values[held] * np.cos(data.theta_i[held])[:, None]
+    scale = np.sqrt(np.nanmean(scaled ** 2))
+    assert selection.heldout_scale == pytest.approx(scale, rel=1e-12)
+    assert f"= {rows['lambert+ggx']['heldout_error'] / scale:.1%} of the reflected radiance" in verdict, verdict
+    assert rows["lambert+ggx"]["heldout_error"] / scale < 0.03  # 1% relative noise on a well-specified model
     assert selection.plausible and "verdict:" not in selection.summary()  # the verdict is printed once, before it
 
 
