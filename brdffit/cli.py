@@ -824,7 +824,7 @@ def _cmd_export(args) -> int:
 
     result = FitResult.load(args.result, args.name)
     if TARGETS[args.to].renderer and not args.force and not result.plausibility().ok:
-        why = "; ".join(c.message for c in result.plausibility().checks if c.level == "implausible")
+        why = "; ".join(c.message for c in result.plausibility().implausible)
         print(f"brdffit export: {args.result}: the fit {result.spec} is IMPLAUSIBLE ({why}); a renderer would show "
               "a material that reflects more light than it receives. Refit with another model, or give --force to "
               "export it anyway", file=sys.stderr)

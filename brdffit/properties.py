@@ -584,7 +584,12 @@ class Plausibility:
     @property
     def ok(self) -> bool:
         """True if no check is ``implausible``."""
-        return all(c.level != "implausible" for c in self.checks)
+        return not self.implausible
+
+    @property
+    def implausible(self) -> tuple:
+        """The checks at level ``implausible``, in order (empty for a plausible fit)."""
+        return tuple(c for c in self.checks if c.level == "implausible")
 
     def __getitem__(self, name: str) -> Check:
         return next(c for c in self.checks if c.name == name)

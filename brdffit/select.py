@@ -135,10 +135,9 @@ class Selection:
         lambert = rows.get("lambert")
         if lambert is not None and self.chosen_by_criterion != "lambert" and lambert["heldout_error"] > 0:
             line += f", {error / lambert['heldout_error']:.2f}x Lambert's {lambert['heldout_error']:.4g}"
-        checks = self.result.plausibility()
-        if checks.ok:
+        why = "; ".join(f"{c.name}: {c.message}" for c in self.result.plausibility().implausible)
+        if not why:
             return line + "; plausible"
-        why = "; ".join(f"{c.name}: {c.message}" for c in checks.checks if c.level == "implausible")
         return (line + f"; IMPLAUSIBLE ({why}).\nNo plausible candidate predicts these data within the margin of "
                 f"the best (the warnings below name the closest plausible one, if any). {IMPLAUSIBLE_ADVICE}")
 
@@ -288,7 +287,8 @@ def _verdict(row: dict, chosen: dict, best: dict, threshold: float, criterion: s
             "one standard error of the best CV error" if criterion == "cv" else "the margin of the best")
     if row["spec"] in implausible:
         why = implausible[row["spec"]]
-        return f"not eligible: {why}" if criterion == "heldout" else f"not eligible: implausible beyond the data ({why})"
+        return (f"not eligible: {why}" if criterion == "heldout"
+                else f"not eligible: implausible beyond the data ({why})")
     if row not in usable:
         return f"not eligible: its fit ended {row['status']}"
     if row["score"] > threshold:
@@ -323,8 +323,7 @@ def _radiance_scale(measurements, rows: np.ndarray) -> float:
 def _implausible_where_measured(result: FitResult) -> str:
     """Why a fit is IMPLAUSIBLE (`FitResult.plausibility`: an albedo above 1 where the data were measured, or a
     ks·F above 1), in words; empty when no check says so."""
-    return "; ".join(f"IMPLAUSIBLE {c.name}: {c.message}" for c in result.plausibility().checks
-                     if c.level == "implausible")
+    return "; ".join(f"IMPLAUSIBLE {c.name}: {c.message}" for c in result.plausibility().implausible)
 
 
 def _simplest(rows: list[dict], eligible) -> dict:

@@ -39,7 +39,7 @@ import numpy as np
 from ..arrays import jitted
 from ..measurements import MeasurementError, Measurements
 from ._common import FormatError, atomic_path, read_file_bytes
-from .tabulated import DEFAULT_MAX_THETA, DEFAULT_PAIRS, DEFAULT_SAMPLING, check_sampling, over_directions
+from .tabulated import DEFAULT_MAX_THETA, DEFAULT_PAIRS, DEFAULT_SAMPLING, check_sampling, grid_patch, over_directions
 
 __all__ = ["MerlTable", "read_merl", "write_merl", "looks_like_merl", "DIMS", "SCALES", "theta_h_index",
            "theta_d_index", "phi_d_index", "theta_h_centre", "theta_d_centre", "phi_d_centre", "cell_weights",
@@ -118,13 +118,6 @@ def cell_angles(phi_h: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     for a in out:
         a.flags.writeable = False
     return out
-
-
-def _clamped_cell(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The lower of the two cell centres around continuous coordinate ``x`` (0 .. n−2) and the fraction towards
-    the upper one, clamped to [0, 1] beyond the first and last centres."""
-    lower = np.clip(np.floor(x), 0, n - 2).astype(np.intp)
-    return lower, np.clip(x - lower, 0.0, 1.0)
 
 
 def _above_horizon(theta_i, theta_o) -> np.ndarray:
@@ -225,8 +218,8 @@ class MerlTable:
         x = np.sqrt(np.clip(theta_h, 0.0, _HALF_PI) / _HALF_PI) * DIMS[0] - 0.5
         y = np.asarray(theta_d) / _HALF_PI * DIMS[1] - 0.5
         z = np.mod(np.asarray(phi_d), math.pi) / math.pi * DIMS[2] - 0.5
-        i0, fx = _clamped_cell(x, DIMS[0])
-        j0, fy = _clamped_cell(y, DIMS[1])
+        i0, fx = grid_patch(x / (DIMS[0] - 1), DIMS[0])  # the centres are the nodes of a regular grid
+        j0, fy = grid_patch(y / (DIMS[1] - 1), DIMS[1])
         k0 = np.floor(z).astype(np.intp)
         fz = z - k0
         out = np.zeros(np.shape(theta_h) + (3,))
@@ -244,11 +237,12 @@ class MerlTable:
 
         Arguments:
             sampling: ``"directions"`` (default) the table's trilinear interpolation (`lookup`) at ``pairs``
-                quasi-random direction pairs uniform in solid angle with θi, θo ≤ ``max_theta``; ``"grid"`` one sample per cell centre weighted
-                by the cell measure (`grid_measurements`, which ``subsample`` and ``phi_h`` are for).
+                importance-weighted direction pairs with θi, θo ≤ ``max_theta`` (`brdffit.io.tabulated`);
+                ``"grid"`` one sample per cell centre weighted by the cell measure (`grid_measurements`, which
+                ``subsample`` and ``phi_h`` are for).
             pairs, max_theta: the direction pairs (``"directions"`` only): how many, the largest polar angle in
                 radians (80° by default).
-            seed: the pairs' scrambling seed, or the seed of a ``"grid"`` subsample.
+            seed: the seed of the pairs' random shift, or of a ``"grid"`` subsample.
 
         Returns:
             `Measurements`, channels ``("R", "G", "B")``, NaN where a cell is missing.
@@ -264,9 +258,9 @@ class MerlTable:
             raise ValueError("subsample and phi_h choose cells of the grid: give them with sampling='grid' (the "
                              "default sampling draws `pairs` direction pairs)")
         try:
-            return over_directions(functools.partial(self.lookup, interpolation="linear"), pairs=pairs, seed=seed, max_theta_i=float(max_theta),
-                                   max_theta_o=float(max_theta), isotropic=True, channels=CHANNELS,
-                                   meta=self._meta()).check_informative()
+            return over_directions(functools.partial(self.lookup, interpolation="linear"), pairs=pairs, seed=seed,
+                                   max_theta_i=float(max_theta), max_theta_o=float(max_theta), isotropic=True,
+                                   channels=CHANNELS, meta=self._meta()).check_informative()
         except MeasurementError as err:
             raise err.with_file(self.source or "MERL table") from None
 

@@ -34,10 +34,11 @@ divides by cos θo (docs/conventions.md: f_r without the cosine factor).
 
 **Negative values.** Some films hold small negative rgb values (ringing of the colour fit). pbrt-v4 and powitacq
 clip the interpolated value to 0, Mitsuba keeps it: `RglTable.lookup` clips by default (``negative="keep"`` keeps
-them), `RglTable.to_measurements` and `RglTable.grid_measurements` clip (``negative="missing"`` makes them NaN); the counts go to ``meta["read"]``.
+them), `RglTable.to_measurements` and `RglTable.grid_measurements` clip (``negative="missing"`` makes them NaN);
+the counts go to ``meta["read"]``.
 
-**What a fit is given.** `RglTable.to_measurements` by default evaluates `RglTable.lookup` at quasi-random direction
-pairs uniform in solid angle (`brdffit.io.tabulated`: the nodes below sit where the warp puts them, so a fit to them
+**What a fit is given.** `RglTable.to_measurements` by default evaluates `RglTable.lookup` at importance-weighted
+quasi-random direction pairs (`brdffit.io.tabulated`: the nodes below sit where the warp puts them, so a fit to them
 is not a fit over directions). ``sampling="grid"`` gives the nodes themselves (`RglTable.grid_measurements`).
 
 **Grid samples and weights.** `RglTable.grid_measurements` gives one sample per node of the rgb grid and per
@@ -76,7 +77,8 @@ import numpy as np
 
 from ..measurements import MeasurementError, Measurements
 from ._common import FormatError, read_file_bytes
-from .tabulated import DEFAULT_MAX_THETA, DEFAULT_PAIRS, DEFAULT_SAMPLING, check_sampling, over_directions
+from .tabulated import (DEFAULT_MAX_THETA, DEFAULT_PAIRS, DEFAULT_SAMPLING, check_sampling, grid_patch,
+                        over_directions, unit_vectors, vector_angles)
 
 __all__ = ["RglTable", "read_rgl", "read_tensor_file", "looks_like_rgl", "direction_to_unit", "MAGIC", "DTYPES"]
 
@@ -181,17 +183,10 @@ def direction_to_unit(theta, phi) -> tuple[np.ndarray, np.ndarray]:
     return np.sqrt(np.clip(theta, 0.0, _HALF_PI) / _HALF_PI), (np.asarray(phi) + math.pi) / _TWO_PI
 
 
-def _patch(coord: np.ndarray, nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """The patch index (0 .. nodes−2) and the fraction within it of coordinates in [0, 1] on a regular grid."""
-    scaled = np.clip(coord, 0.0, 1.0) * (nodes - 1)
-    index = np.minimum(scaled.astype(np.intp), nodes - 2)
-    return index, scaled - index
-
-
 def _bilinear(table: np.ndarray, u1, u2) -> np.ndarray:
     """A 2-d table (rows along u₂, columns along u₁) interpolated bilinearly at (u₁, u₂), clipped to [0, 1]²."""
-    i, fx = _patch(u1, table.shape[1])
-    j, fy = _patch(u2, table.shape[0])
+    i, fx = grid_patch(u1, table.shape[1])
+    j, fy = grid_patch(u2, table.shape[0])
     top = table[j, i] + fx * (table[j, i + 1] - table[j, i])
     bottom = table[j + 1, i] + fx * (table[j + 1, i + 1] - table[j + 1, i])
     return top + fy * (bottom - top)
@@ -236,8 +231,8 @@ class _Warp:
 
     def to_sample(self, u1, u2, slices, mix) -> tuple[np.ndarray, np.ndarray]:
         """The sample-square point (s₁, s₂) of unit-square points u: the marginal / conditional CDFs at u."""
-        i, fx = _patch(u1, self.cols)
-        j, fy = _patch(u2, self.rows)
+        i, fx = grid_patch(u1, self.cols)
+        j, fy = grid_patch(u2, self.rows)
         d = functools.partial(self._mix, self.density, slices, mix)
         c0 = d(j, i) + fy * (d(j + 1, i) - d(j, i))  # density along the row through u₂, at the patch's columns
         c1 = d(j, i + 1) + fy * (d(j + 1, i + 1) - d(j, i + 1))
@@ -351,8 +346,8 @@ class RglTable:
         """The rgb grid at sample-square points, interpolated bilinearly in s and linearly in θi, φi: (N, 3)."""
         rgb = self.rgb.reshape(-1, *self.rgb.shape[2:])
         h, w = rgb.shape[-2:]
-        i, fx = _patch(s1, w)
-        j, fy = _patch(s2, h)
+        i, fx = grid_patch(s1, w)
+        j, fy = grid_patch(s2, h)
         out = np.zeros((len(s1), 3))
         for k in range(slices.shape[1]):
             c = functools.partial(_corner, rgb, slices[:, k])
@@ -378,15 +373,15 @@ class RglTable:
         arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (theta_i, phi_i, theta_o, phi_o)))
         shape = arrays[0].shape
         ti, pi_, to, po = (a.reshape(-1) for a in arrays)
-        wi, wo = _vector(ti, pi_), _vector(to, po)
+        wi, wo = unit_vectors(ti, pi_), unit_vectors(to, po)
         above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
         wi, wo = wi[above], wo[above]
         if self._reduction >= 2:
             wi, wo = self._fold(wi, wo)
         m = wi + wo
         m /= np.linalg.norm(m, axis=1, keepdims=True)
-        theta_in, phi_in = _angles(wi)
-        theta_m, phi_m = _angles(m)
+        theta_in, phi_in = vector_angles(wi)
+        theta_m, phi_m = vector_angles(m)
         u_m = direction_to_unit(theta_m, phi_m - phi_in if self.isotropic else phi_m)
         u_m = (u_m[0], u_m[1] - np.floor(u_m[1]))
         slices, mix = self._slices(theta_in, phi_in)
@@ -415,10 +410,10 @@ class RglTable:
         """The table as the samples a fit is given (`brdffit.io.tabulated`).
 
         Arguments:
-            sampling: ``"directions"`` (default) the file's interpolation (`lookup`) at ``pairs`` quasi-random
-                direction pairs over the directions, θi and θo up to ``max_theta``; ``"grid"`` the file's own nodes with their solid-angle weights
-                (`grid_measurements`).
-            pairs, seed, max_theta: the direction pairs (``"directions"`` only): how many, the scrambling seed,
+            sampling: ``"directions"`` (default) the file's interpolation (`lookup`) at ``pairs``
+                importance-weighted direction pairs, θi and θo up to ``max_theta`` (`brdffit.io.tabulated`);
+                ``"grid"`` the file's own nodes with their solid-angle weights (`grid_measurements`).
+            pairs, seed, max_theta: the direction pairs (``"directions"`` only): how many, the seed of their shift,
                 the largest polar angle in radians (80° by default).
             negative: ``"clip"`` (default) a negative value becomes 0; ``"missing"`` makes it NaN.
 
@@ -476,7 +471,7 @@ class RglTable:
                 values = nodes["values"][keep]
                 negative_mask = values < 0
                 counts["negative"] += int(negative_mask.sum())
-                theta_o, phi_o = _angles(nodes["wo"][keep])
+                theta_o, phi_o = vector_angles(nodes["wo"][keep])
                 parts.append((np.full(len(theta_o), theta), np.full(len(theta_o), phi), theta_o, phi_o,
                               np.where(negative_mask, 0.0 if negative == "clip" else np.nan, values),
                               nodes["weights"][keep]))
@@ -507,8 +502,8 @@ class RglTable:
         """Outgoing directions ωo (N, 3) (some may lie below the horizon), values f_r (N, 3), unclipped, and
         weights (module docstring) of sample-square points of one tabulated incidence."""
         u1, u2 = self._warp.from_sample(s1, s2, slice_index)
-        m = _vector(_HALF_PI * u1 * u1, _TWO_PI * u2 - math.pi + (phi if self.isotropic else 0.0))
-        wi = _vector(np.array([theta]), np.array([phi]))[0]
+        m = unit_vectors(_HALF_PI * u1 * u1, _TWO_PI * u2 - math.pi + (phi if self.isotropic else 0.0))
+        wi = unit_vectors(np.array([theta]), np.array([phi]))[0]
         wo = 2.0 * (m @ wi)[:, None] * m - wi
         slices, mix = np.full((len(s1), 1), slice_index), np.ones((len(s1), 1))
         ndf, sigma, factor = self._microfacets(u1, u2, theta, phi)
@@ -535,21 +530,6 @@ def _trapezoid(n: int) -> np.ndarray:
     w = np.ones(n)
     w[[0, -1]] = 0.5
     return w
-
-
-def _vector(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
-    """Unit vectors (N, 3) of polar angles and azimuths; exactly the normal (0, 0, 1) at θ = 0."""
-    s = np.sin(theta)
-    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
-
-
-def _angles(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Polar angle (2 asin(|v − z| / 2), accurate near the normal) and azimuth in [−π, π] of unit vectors; the
-    azimuth is 0 on the normal (the convention at normal incidence)."""
-    theta = 2.0 * np.arcsin(np.minimum(0.5 * np.sqrt(v[:, 0] ** 2 + v[:, 1] ** 2 + (v[:, 2] - 1.0) ** 2), 1.0))
-    on_axis = (v[:, 0] == 0) & (v[:, 1] == 0)
-    phi = np.where(on_axis, 0.0, np.arctan2(v[:, 1], v[:, 0]))
-    return theta, phi
 
 
 # ----------------------------------------------------------------------------------------------------- reading

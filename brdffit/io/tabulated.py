@@ -56,6 +56,36 @@ PEAK_ROUGHNESS = (0.2, 0.04)
 PEAK_FRACTION = 0.5
 
 
+# ------------------------------------------------------------------ NumPy helpers the tabulated readers share
+# (brdffit.geometry holds the same maths in JAX; reading a file loads no JAX.)
+def unit_vectors(theta, phi) -> np.ndarray:
+    """Unit vectors (N, 3) of polar angles and azimuths; exactly the normal (0, 0, 1) at θ = 0."""
+    s = np.sin(theta)
+    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
+
+
+def vector_angles(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Polar angle (2 asin(|v − z| / 2), accurate near the normal) and azimuth in [−π, π] of unit vectors (N, 3);
+    the azimuth is 0 on the normal (the convention at normal incidence)."""
+    theta = 2.0 * np.arcsin(np.minimum(0.5 * np.sqrt(v[:, 0] ** 2 + v[:, 1] ** 2 + (v[:, 2] - 1.0) ** 2), 1.0))
+    on_axis = (v[:, 0] == 0) & (v[:, 1] == 0)
+    return theta, np.where(on_axis, 0.0, np.arctan2(v[:, 1], v[:, 0]))
+
+
+def grid_patch(coord, nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """The patch index (0 .. nodes−2) and the fraction within it of coordinates in [0, 1] on a regular grid of
+    ``nodes`` nodes (clamped to the first and last patch)."""
+    scaled = np.clip(coord, 0.0, 1.0) * (nodes - 1)
+    index = np.minimum(scaled.astype(np.intp), nodes - 2)
+    return index, scaled - index
+
+
+def _cone_polar(u, max_theta: float) -> np.ndarray:
+    """The polar angle of u ∈ [0, 1) mapped uniformly in solid angle onto the cone θ ≤ ``max_theta``:
+    cos θ = 1 − u (1 − cos θmax)."""
+    return np.arccos(1.0 - u * (1.0 - math.cos(max_theta)))
+
+
 def check_sampling(sampling: str, pairs: int, max_theta: float) -> None:
     """Refuse a sampling, a number of pairs or a largest polar angle that cannot be used (a `ValueError` naming
     the argument and what was expected)."""
@@ -95,16 +125,10 @@ def direction_pairs(n: int, seed: int = 0, *, max_theta_i: float = DEFAULT_MAX_T
     """
     points = _kronecker(n, 3 if isotropic else 4, seed)
     u_i, u_o, v_o = points[:, 0], points[:, 1], points[:, 2]
-    theta_i = np.arccos(1.0 - u_i * (1.0 - math.cos(max_theta_i)))
-    theta_o = np.arccos(1.0 - u_o * (1.0 - math.cos(max_theta_o)))
+    theta_i, theta_o = _cone_polar(u_i, max_theta_i), _cone_polar(u_o, max_theta_o)
     phi_o = 2.0 * math.pi * v_o - math.pi
     phi_i = np.zeros(n) if isotropic else 2.0 * math.pi * points[:, 3] - math.pi
     return theta_i, phi_i, theta_o, phi_o
-
-
-def _unit(theta, phi) -> np.ndarray:
-    s = np.sin(theta)
-    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
 
 
 def _ggx_half_density(cos_h, alpha: float) -> np.ndarray:
@@ -119,11 +143,11 @@ def _peak_pairs(points: np.ndarray, alpha: float, max_theta_i: float, isotropic:
     """Pairs whose ωi is uniform in its cone and whose ωo is the mirror of ωi about a half vector h drawn from
     GGX of roughness ``alpha`` (θh = atan(α √(u/(1−u))), Walter et al. 2007, eq. 35-36): dense about the
     specular direction, where the peaks of glossy materials are. Returns unit vectors ωi, ωo (n, 3)."""
-    theta_i = np.arccos(1.0 - points[:, 0] * (1.0 - math.cos(max_theta_i)))
+    theta_i = _cone_polar(points[:, 0], max_theta_i)
     phi_i = np.zeros(len(points)) if isotropic else 2.0 * math.pi * points[:, 3] - math.pi
     theta_h = np.arctan(alpha * np.sqrt(points[:, 1] / np.maximum(1.0 - points[:, 1], 1e-300)))
-    h = _unit(theta_h, 2.0 * math.pi * points[:, 2] - math.pi)
-    wi = _unit(theta_i, phi_i)
+    h = unit_vectors(theta_h, 2.0 * math.pi * points[:, 2] - math.pi)
+    wi = unit_vectors(theta_i, phi_i)
     return wi, 2.0 * np.sum(wi * h, axis=1)[:, None] * h - wi
 
 
@@ -153,7 +177,7 @@ def importance_pairs(n: int, seed: int = 0, *, max_theta_i: float = DEFAULT_MAX_
     shares = np.array(counts, dtype=np.float64) / sum(counts)
     theta_i, phi_i, theta_o, phi_o = direction_pairs(counts[0], seed, max_theta_i=max_theta_i,
                                                      max_theta_o=max_theta_o, isotropic=isotropic)
-    wi, wo = [_unit(theta_i, phi_i)], [_unit(theta_o, phi_o)]
+    wi, wo = [unit_vectors(theta_i, phi_i)], [unit_vectors(theta_o, phi_o)]
     for k, alpha in enumerate(peaks):
         a, b = _peak_pairs(_kronecker(counts[k + 1], 3 if isotropic else 4, seed + 1 + k), alpha, max_theta_i,
                            isotropic)
@@ -168,16 +192,9 @@ def importance_pairs(n: int, seed: int = 0, *, max_theta_i: float = DEFAULT_MAX_
     jacobian = 1.0 / (4.0 * np.maximum(np.sum(wo * h, axis=1), 1e-12))
     mixture = shares[0] * uniform + sum(share * _ggx_half_density(h[:, 2], alpha) * jacobian
                                         for share, alpha in zip(shares[1:], peaks))
-    theta_i, phi_i = _angles(wi)
-    theta_o, phi_o = _angles(wo)
+    theta_i, phi_i = vector_angles(wi)
+    theta_o, phi_o = vector_angles(wo)
     return theta_i, phi_i, theta_o, phi_o, uniform / mixture
-
-
-def _angles(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Polar angle and azimuth of unit vectors; azimuth 0 on the normal."""
-    theta = np.arccos(np.clip(v[:, 2], -1.0, 1.0))
-    on_axis = (v[:, 0] == 0) & (v[:, 1] == 0)
-    return theta, np.where(on_axis, 0.0, np.arctan2(v[:, 1], v[:, 0]))
 
 
 def over_directions(lookup: Callable, *, pairs: int, seed: int, max_theta_i: float, max_theta_o: float,
