@@ -256,9 +256,12 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
 
 
 def _grams(a: np.ndarray) -> np.ndarray:
-    """``a aᵀ`` of each of a batch of short, wide matrices ``(..., R, N)``: ``einsum``, twice as fast as ``matmul``
-    for R = 3, N = 2048 (a `fit_many` pass: 384 such products; NumPy's matmul calls BLAS on each)."""
-    return np.einsum("...in,...jn->...ij", a, a)
+    """``a aᵀ`` of each of a batch of short, wide matrices ``(..., R, N)``. ``matmul`` calls BLAS once per product,
+    which costs more than ``einsum``'s plain loop for R ≤ 3 (a `fit_many` pass of Lambert + GGX: thousands of
+    (3, N) products) and less from R = 4 on, where the gap grows with R (a three-lobe Lafortune pass: R = 14)."""
+    if a.shape[-2] <= 3:
+        return np.einsum("...in,...jn->...ij", a, a)
+    return a @ np.swapaxes(a, -1, -2)
 
 
 def _expand(problem: Problem, sums):
