@@ -52,6 +52,10 @@ CHANNEL_MODES = ("shared-shape", "independent")
 # faster from a new process: the refinement's pass is a second compiled shape (measured, issue 15).
 COARSE_RESIDUALS = 150_000
 COARSE_SAMPLES = 10_000
+# A single start on this many samples or more is solved alone, not padded to POLISH_STARTS (`_polish_width`). A
+# selection screens on a subsample of 4,096 rows from twice that many on (`brdffit.select.SCREEN_SAMPLES`); below,
+# its refits run on the screen's own data shape and share its padded programs.
+SINGLE_START_SAMPLES = 8192
 COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
 # An outer scalar closer than this fraction of its range to a bound, at the end of a polish that did not
 # converge, is held on the bound (step 4 of the pipeline).
@@ -184,8 +188,14 @@ def _robust_scale(problem: Problem, start: dict, data: FitData) -> float:
 
 
 # -------------------------------------------------------------------------------------------------------- polish
-def _polish_width(count: int) -> int:
-    """The number of points a polish of ``count`` starts solves: the next multiple of POLISH_STARTS."""
+def _polish_width(count: int, samples: int) -> int:
+    """The number of points a polish of ``count`` starts on ``samples`` samples solves: the next multiple of
+    POLISH_STARTS, so that one compiled pass serves a search's starts, a given start and the hold rounds alike;
+    but a single start on `SINGLE_START_SAMPLES` or more samples alone. There every padding copy costs a pass over
+    the data at each step (a refit of a selection's choice to all of a tabulated file's 15,384 pairs from its
+    screening fit: 4 times the work of its one start), and no search of a smaller subsample shares its shape."""
+    if count == 1 and samples >= SINGLE_START_SAMPLES:
+        return 1
     return -(-count // POLISH_STARTS) * POLISH_STARTS
 
 
@@ -226,7 +236,7 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
         # Starts padded to a multiple of POLISH_STARTS (repeating the last): one compiled pass serves a search's
         # starts, a given start and the hold rounds alike.
         count = len(starts[0])
-        width = _polish_width(count)
+        width = _polish_width(count, int(np.shape(data.values)[1]))
         padded = [material + [material[-1]] * (width - count) for material in starts]
         out, compile_time, run_time = _timed(lambda: marquardt.solve(
             problem, padded, [solve_data], rtol=problem.solver.rtol, atol=problem.solver.atol,
@@ -678,7 +688,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             # A pass at the answer itself, where the solver's last sums are not those of the answer. It gives the
             # status, the covariance and the metrics.
             normal = normal_equations_at(problem, params, full[m],
-                                         width=1 if two_stage else _polish_width(len(starts[0])))
+                                         width=1 if two_stage else _polish_width(len(starts[0]), full[m].values.shape[0]))
         answers.append((problem, measurements, full[m], params, best, normal, records[m]))
     times = {"compile": compile_time, "run": run_time / len(items), "init": init_time / len(items)}
     moved = on_device([{k: np.asarray(v, dtype=float) for k, v in answer[3].items()} for answer in answers])
