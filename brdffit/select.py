@@ -20,7 +20,7 @@ import jax
 import numpy as np
 
 from .criteria import CRITERIA, DEFAULT_MARGIN, HELDOUT_MARGIN, resolve_criterion
-from .fitting.api import fit
+from .fitting.api import COARSE_ATOL, COARSE_RTOL, fit
 from .fitting.result import FitResult
 from .fitting.losses import loss_epsilon
 from .models.model import evaluate_dirs
@@ -249,30 +249,39 @@ def _smaller_lafortune(spec: str):
 def _each_candidate(candidates, work, bar, message):
     """``work(spec, init)`` for every candidate, `SELECT_THREADS` at a time, where ``init`` is ``"auto"`` or, for
     a Lafortune sum whose one-lobe-smaller spec is also a candidate, the new-lobe starts from that one's fit
-    (`brdffit.fitting.progressive`; that candidate's work is waited for first). ``work`` returns a pair whose
-    first element is the candidate's `FitResult`.
+    (`brdffit.fitting.progressive`). ``work`` returns a pair whose first element is the candidate's `FitResult`.
+
+    A chain of such sums (one lobe, two, three) is one task, its members fitted in turn, and the longest chains
+    are started first: the chain is the selection's critical path (each member waits for the one before), and a
+    member in a pool slot of its own would hold that slot idle while it waits.
 
     Returns:
         The ``work`` outputs in the order of ``candidates``.
     """
-    futures = {}
+    chains: dict[str, list[str]] = {}  # the chain's first spec -> its specs in order
+    head = {}
+    for spec in candidates:
+        smaller, _ = _smaller_lafortune(spec)
+        head[spec] = head[smaller] if smaller in head else spec
+        chains.setdefault(head[spec], []).append(spec)
 
-    def run(spec):
-        init = "auto"
-        smaller, k = _smaller_lafortune(spec)
-        if smaller in futures:  # submitted before this one, so running or done: no pool slot waits on a queue
-            previous = futures[smaller].result()[0]
-            if previous.model is not None:
-                init = new_lobe_candidates(previous, k, "anisotropic=true" in spec.replace(" ", "").lower())
-        return work(spec, init)
+    def run(chain):
+        out = {}
+        for spec in chain:
+            init = "auto"
+            smaller, k = _smaller_lafortune(spec)
+            if smaller in out and out[smaller][0].model is not None:
+                init = new_lobe_candidates(out[smaller][0], k, "anisotropic=true" in spec.replace(" ", "").lower())
+            out[spec] = work(spec, init)
+        return out
 
     with ThreadPoolExecutor(max_workers=SELECT_THREADS) as pool:
-        for spec in candidates:
-            futures[spec] = pool.submit(run, spec)
+        futures = {first: pool.submit(run, chain)
+                   for first, chain in sorted(chains.items(), key=lambda item: -len(item[1]))}
         out = []
         for i, spec in enumerate(candidates):
             bar.update(i, message(spec))
-            out.append(futures[spec].result())
+            out.append(futures[head[spec]].result()[spec])
     return out
 
 
@@ -570,8 +579,13 @@ def _screened_rows(candidates, measurements, screen_data, seen, held, options, d
     rows = []
     n_values = int(np.isfinite(measurements.values).sum())
     training = int(np.any(np.isfinite(screen_data.values), axis=1).sum())
+    # The screen is the coarse stage of a two-stage fit (`brdffit.fitting.api`), with its tolerances: it ranks the
+    # candidates, and whatever is reported as a fit is refitted from it to all the data at the caller's.
+    loose = dict(options, rtol=max(COARSE_RTOL, options.get("rtol", 0.0)),
+                 atol=max(COARSE_ATOL, options.get("atol", 0.0)))
+
     def work(spec, init):
-        result = fit(screen_data, spec, init=init, **options)
+        result = fit(screen_data, spec, init=init, **loose)
         return (result,) + _loss_residuals(result, measurements)
 
     for spec, (result, r, evaluation) in zip(candidates, _each_candidate(
