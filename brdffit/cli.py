@@ -620,6 +620,8 @@ def _cmd_fit(args) -> int:
     from . import fit, io, select
 
     enable_compilation_cache()
+    if args.report:
+        _import_in_background("brdffit.report")
     selection = None
     if args.model == "auto":
         from .select import DEFAULT_CANDIDATES
@@ -686,6 +688,16 @@ def _cmd_fit(args) -> int:
         print(f"brdffit fit: warning: the chosen fit {result.spec} is IMPLAUSIBLE (its summary says why); "
               "`brdffit export` refuses it for a renderer unless --force", file=sys.stderr)
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+
+
+def _import_in_background(module: str) -> None:
+    """Import ``module`` in a daemon thread: the report's plotting modules (matplotlib, about half a second) load
+    while the fit runs, mostly in XLA's compiled code without Python's lock; a later import of the same module
+    waits for this one and then finds it loaded."""
+    import importlib
+    import threading
+
+    threading.Thread(target=importlib.import_module, args=(module,), name=f"import {module}", daemon=True).start()
 
 
 def _write_report(out: Path, measurements, result, post, selection, args, exports=None) -> dict:
