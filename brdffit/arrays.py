@@ -7,7 +7,7 @@ a cache lookup each in a warm one. A first fit made about thirty of them: 0.5–
 of a warm one (docs/benchmarks.md). ``jax.device_put`` of a NumPy array compiles nothing, so the fitting pipeline
 builds its data's arrays (their fields, subsamples, stacks and pieces) and its other small arrays in NumPy on the
 host and moves them with `to_device` / `on_device`: only the model's own maths is compiled
-(`brdffit.fitting.programs.Program`), since a compiled program of the data's few operations cost its compilation
+(`brdffit.programs.Program`), since a compiled program of the data's few operations cost its compilation
 (60-400 ms each here) to every first fit. Host-side maths on columns of samples in JAX functions (the readers'
 and the report's angle conversions, the synthesised data) goes through `padded_columns`: a jitted function called on
 lengths padded to a power of two, so that files of any length share a few compilations.

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from . import __version__
+from .compilation_cache import cache_dir, enable_compilation_cache
 from .criteria import CRITERIA
 from .distributed import DEFAULT_BATCH
 from .export.records import EXPORTS_FILE
@@ -28,28 +29,6 @@ DEFAULT_MODEL = "auto"
 
 class UsageError(Exception):
     """A command-line value that cannot be used; reported with exit code 2."""
-
-
-def cache_dir() -> Path:
-    """Where the CLI keeps JAX's persistent compilation cache: $BRDFFIT_CACHE_DIR, else the user cache directory
-    ($XDG_CACHE_HOME or ~/.cache) under brdffit/jax."""
-    if os.environ.get("BRDFFIT_CACHE_DIR"):
-        return Path(os.environ["BRDFFIT_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "brdffit" / "jax"
-
-
-def enable_compilation_cache() -> None:
-    """Turn on JAX's persistent compilation cache so that a second process starts warm."""
-    import jax
-
-    try:
-        directory = cache_dir()
-        directory.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return  # an unwritable cache only costs time
-    jax.config.update("jax_compilation_cache_dir", str(directory))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
 def bounded(kind=int, low=None, high=None):

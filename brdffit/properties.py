@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .arrays import to_device, traced
-from .fitting.programs import Program
+from .programs import Program
 from .geometry import spherical_to_vector
 from .models import Model, evaluate_dirs
 

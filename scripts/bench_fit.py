@@ -40,7 +40,7 @@ CHILD = r"""
 import json, sys, time, resource
 t0 = time.perf_counter()
 import brdffit
-from brdffit.cli import enable_compilation_cache
+from brdffit.compilation_cache import enable_compilation_cache
 enable_compilation_cache()
 m = brdffit.io.load(sys.argv[1])
 t1 = time.perf_counter()

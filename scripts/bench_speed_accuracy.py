@@ -70,7 +70,7 @@ from scipy.optimize import least_squares
 
 import brdffit
 from brdffit import models, synth
-from brdffit.cli import enable_compilation_cache
+from brdffit.compilation_cache import enable_compilation_cache
 from brdffit.metrics import fit_metrics
 from brdffit.params import at_bound
 

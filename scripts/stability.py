@@ -67,7 +67,7 @@ import numpy as np  # noqa: E402
 
 import brdffit  # noqa: E402
 from brdffit import models, synth  # noqa: E402
-from brdffit.cli import enable_compilation_cache  # noqa: E402
+from brdffit.compilation_cache import enable_compilation_cache  # noqa: E402
 from brdffit.params import at_bound  # noqa: E402
 
 SPEC = "lambert+cook-torrance"

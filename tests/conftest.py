@@ -3,8 +3,8 @@ session shares one compilation cache.
 
 The cache: the controller makes one temporary folder for the session and names it in ``BRDFFIT_CACHE_DIR``, which
 the xdist workers and every ``brdffit`` process a test starts inherit; each process turns JAX's persistent cache on
-there (`brdffit.cli.enable_compilation_cache`, as the CLI does). A program that one worker compiled is then loaded
-by the other worker and by the tests' subprocesses without being traced again (`brdffit.fitting.programs`), and
+there (`brdffit.compilation_cache.enable_compilation_cache`, as the CLI does). A program that one worker compiled is then loaded
+by the other worker and by the tests' subprocesses without being traced again (`brdffit.programs`), and
 nothing is written into the user's own cache. Most of the suite's time is tracing and compiling (issue 15); the
 compiled programs change no result (`tests/test_programs.py`). The folder is removed when the session ends.
 """
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import brdffit  # noqa: F401  (enables jax_enable_x64)
-from brdffit.cli import enable_compilation_cache
+from brdffit.compilation_cache import enable_compilation_cache
 
 _OWNER = "BRDFFIT_TEST_CACHE_OWNER"
 

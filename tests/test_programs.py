@@ -1,4 +1,4 @@
-"""Compiled programs kept across processes (`brdffit.fitting.programs`): a new process loads what an earlier one
+"""Compiled programs kept across processes (`brdffit.programs`): a new process loads what an earlier one
 compiled without tracing it, and a program whose key differs, whose file is damaged or that runs on tracers is
 compiled (or traced) as plain ``jax.jit`` would."""
 
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import brdffit  # noqa: F401  (float64)
-from brdffit.fitting import programs
-from brdffit.fitting.programs import Program
+from brdffit import programs
+from brdffit.programs import Program
 
 TRACES = []
 
@@ -47,7 +47,7 @@ def test_a_kept_program_runs_in_a_new_process_without_being_traced_and_a_damaged
 import json, sys
 import jax, jax.numpy as jnp, numpy as np
 import brdffit
-from brdffit.fitting.programs import Program
+from brdffit.programs import Program
 jax.config.update("jax_compilation_cache_dir", {str(tmp_path)!r})
 traced = []
 def f(model, x, data):

@@ -35,7 +35,7 @@ import numpy as np
 from .losses import get_loss
 from .normal_equations import NormalEquations, shape_key, timed_first_calls
 from .problem import FitData, Problem
-from .programs import Program
+from ..programs import Program
 from .separable import adds_to_offset, channel_grams, one_channel_basis, same_in_every_channel, weights
 
 __all__ = ["applies", "moment_sums"]

@@ -31,7 +31,7 @@ from ..arrays import on_host
 from ..metrics import metric_sums
 from ..models.model import evaluate_pair
 from .problem import BUCKET_CHUNK, FitData, Problem, chunk_data, physical_params, residuals_of
-from .programs import Program
+from ..programs import Program
 
 __all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "timed_first_calls",
            "shape_key", "metric_sums_of", "meat_of", "CHUNK_SAMPLES"]

@@ -19,7 +19,7 @@ from ..models.layout import Layout, layout
 from ..models.model import Model, evaluate_pair
 from ..params import ParamTable
 from .losses import get_loss, robust_residuals
-from .programs import Program
+from ..programs import Program
 
 __all__ = ["Problem", "FitData", "make_fit_data", "bucket", "BUCKET_CHUNK", "physical_params", "residual_fn", "residuals_at", "stack_data",
            "sample_pieces", "take_materials", "take_samples", "chunk_data",

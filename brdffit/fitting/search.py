@@ -31,7 +31,7 @@ from ..arrays import on_device
 from ..params import bound_margin
 from .losses import get_loss
 from .problem import FitData, Problem, residual_fn, sample_pieces
-from .programs import Program
+from ..programs import Program
 from .separable import amplitude_sums, same_in_every_channel, solve_box
 
 __all__ = ["search", "grid", "interior", "canonical", "search_range", "SEARCH_SAMPLES", "SCREEN_SAMPLES",

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..arrays import on_device, traced
-from ..fitting.programs import Program
+from ..programs import Program
 from ..geometry import LocalPair, spherical_to_vector
 from ..params import ParamSpec, ParamTable
 from .layout import Layout, layout

@@ -1,6 +1,6 @@
 """Compiled programs kept across processes, without tracing them again (issue 15).
 
-JAX's persistent compilation cache (which the CLI turns on, `brdffit.cli.enable_compilation_cache`) saves XLA's
+JAX's persistent compilation cache (which the CLI turns on, `brdffit.compilation_cache.enable_compilation_cache`) saves XLA's
 compilation in a new process, not the tracing and the lowering to StableHLO that it needs to compute its key: in a
 warm `brdffit fit FILE` those were most of the time left (about 2.5 s of tracing and lowering for the twelve
 candidates of a selection, against 2 s of fitting). A `Program` is a jitted function that also keeps each
@@ -33,7 +33,7 @@ from pathlib import Path
 import jax
 from jax._src import config as _jax_config  # its options as thread-local context managers
 
-from ..arrays import traced
+from .arrays import traced
 
 __all__ = ["Program", "program_directory"]
 
