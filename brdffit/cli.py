@@ -10,13 +10,14 @@ import json
 import os
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NamedTuple
 
 from . import __version__
 from .compilation_cache import cache_dir, enable_compilation_cache
 from .criteria import CRITERIA
+from .defaults import FIT, POSTERIOR
 from .distributed import DEFAULT_BATCH
 from .export.records import EXPORTS_FILE
 
@@ -59,6 +60,38 @@ def bounded(kind=int, low=None, high=None):
 
     parse.__name__ = kind.__name__
     return parse
+
+
+class RegistryNames(Sequence):
+    """The names of a registry declared in a module that imports JAX (the synthesis patterns, the tone maps), as an
+    option's ``choices``: the module is imported when argparse first checks a value or prints the option's help,
+    so the parser is built without JAX and the names are declared once, with what they name.
+
+    Arguments:
+        module: the module's import path, e.g. ``"brdffit.render"``.
+        attribute: the registry in it (a dict or a sequence of names).
+    """
+
+    def __init__(self, module: str, attribute: str):
+        self._where = (module, attribute)
+        self._names: tuple | None = None
+
+    def _loaded(self) -> tuple:
+        if self._names is None:
+            import importlib
+
+            module, attribute = self._where
+            self._names = tuple(getattr(importlib.import_module(module), attribute))
+        return self._names
+
+    def __getitem__(self, index):
+        return self._loaded()[index]
+
+    def __len__(self) -> int:
+        return len(self._loaded())
+
+    def __contains__(self, name) -> bool:
+        return name in self._loaded()
 
 
 def _check_fixed(fixed: dict, specs) -> None:
@@ -906,8 +939,10 @@ def _cmd_render(args) -> int:
 
 
 def _add_posterior_options(p):
-    p.add_argument("--walkers", type=bounded(int, 2), default=32, help="emcee walkers (default 32)")
-    p.add_argument("--steps", type=bounded(int, 1), default=5000, help="steps per walker in total (default 5000)")
+    p.add_argument("--walkers", type=bounded(int, 2), default=POSTERIOR.walkers,
+                   help=f"emcee walkers (default {POSTERIOR.walkers})")
+    p.add_argument("--steps", type=bounded(int, 1), default=POSTERIOR.steps,
+                   help=f"steps per walker in total (default {POSTERIOR.steps})")
     p.add_argument("--max-samples", type=bounded(int, 1), default=None, metavar="N",
                    help="run the chain on a stratified subsample of N samples")
 
@@ -975,15 +1010,17 @@ def _add_fit_options(p):
     from .fitting.losses import LOSSES
     from .fitting.solvers import SOLVERS
 
-    p.add_argument("--loss", default="cosine", choices=list(LOSSES),
-                   help="residual definition (default cosine): " + "; ".join(f"{name}: {loss.formula}"
+    p.add_argument("--loss", default=FIT.loss, choices=list(LOSSES),
+                   help=f"residual definition (default {FIT.loss}): " + "; ".join(f"{name}: {loss.formula}"
                                                                           for name, loss in LOSSES.items()))
-    p.add_argument("--solver", default="lm", choices=list(SOLVERS), help="least-squares solver (default lm)")
+    p.add_argument("--solver", default=FIT.solver, choices=list(SOLVERS),
+                   help=f"least-squares solver (default {FIT.solver})")
     p.add_argument("--fixed", action="append", metavar="NAME=VALUE",
                    help="hold a parameter at a value (repeatable; a colour takes R,G,B)")
-    p.add_argument("--seed", type=bounded(int, 0), default=0, help="seed of subsamples and starts (default 0)")
-    p.add_argument("--max-steps", type=bounded(int, 1), default=256, metavar="N",
-                   help="solver step limit (default 256)")
+    p.add_argument("--seed", type=bounded(int, 0), default=FIT.seed,
+                   help=f"seed of subsamples and starts (default {FIT.seed})")
+    p.add_argument("--max-steps", type=bounded(int, 1), default=FIT.max_steps, metavar="N",
+                   help=f"solver step limit (default {FIT.max_steps})")
 
 
 def _add(sub, name, help_text, examples, run):
@@ -1051,7 +1088,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("result", help="results file written by `brdffit fit` (result.h5)")
     p.add_argument("--name", help="which fit in the file (default: the first)")
     _add_posterior_options(p)
-    p.add_argument("--seed", type=bounded(int, 0), default=0, help="seed of the walkers' start (default 0)")
+    p.add_argument("--seed", type=bounded(int, 0), default=POSTERIOR.seed,
+                   help=f"seed of the walkers' start (default {POSTERIOR.seed})")
     p.add_argument("--json", action="store_true", help="print the posterior summary as JSON")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p = _add(sub, "report", "write report.html and report.md (with figures) for a fit stored in a results file",
@@ -1068,7 +1106,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("model", help="model spec")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="parameter value (repeatable)")
     p.add_argument("--channels", type=bounded(int, 1), default=3, help="number of channels (default 3)")
-    p.add_argument("--pattern", default="uniform", help="uniform, gonio-grid, in-plane, merl or half-diff")
+    p.add_argument("--pattern", default="uniform", choices=RegistryNames("brdffit.synth", "PATTERNS"),
+                   metavar="NAME", help="sampling pattern: %(choices)s (default %(default)s)")
     p.add_argument("--n", type=bounded(int, 1), default=None, help="number of samples")
     p.add_argument("--noise", default=None, help="noise spec, e.g. relative:0.01 or gaussian:0.002")
     p.add_argument("--seed", type=bounded(int, 0), default=0, help="seed (default 0)")
@@ -1110,8 +1149,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a flat square swatch (side 2) seen from distance 3 instead of a sphere, so that the "
                         "highlight moves across it (a viewer at infinity would see one flat colour)")
     p.add_argument("--resolution", type=bounded(int, 8, 4096), default=256, help="image size in pixels (default 256)")
-    p.add_argument("--tonemap", default="reinhard", choices=["reinhard", "filmic", "clamp"],
-                   help="tone curve before sRGB encoding (default reinhard)")
+    p.add_argument("--tonemap", default="reinhard", choices=RegistryNames("brdffit.render", "TONEMAPS"),
+                   metavar="NAME", help="tone curve before sRGB encoding: %(choices)s (default %(default)s)")
     p.add_argument("--exposure", type=bounded(float, 0.0), default=1.0, help="exposure multiplier (default 1)")
     p.add_argument("--area-light", type=bounded(float, 0.0, 1.5), default=0.0, metavar="RADIUS",
                    help="make the key light an area light of this angular radius (radians), 16 samples")

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaln
 
+from .defaults import POSTERIOR
 from .fitting.result import FitResult
 from .fitting.losses import loss_epsilon, residual_scale
 from .io.hdf5 import is_lock_conflict, open_h5_waiting
@@ -480,10 +481,10 @@ def _log_prob_fn(problem: Problem, estimate: bool, likelihood: str, nu: float, p
     return jax.jit(jax.vmap(one, in_axes=(0, None)))
 
 
-def posterior(fit_result: FitResult, measurements, *, nwalkers: int = 32, nsteps: int = 5000, burn="auto",
+def posterior(fit_result: FitResult, measurements, *, nwalkers: int = POSTERIOR.walkers, nsteps: int = POSTERIOR.steps, burn="auto",
               thin="auto", likelihood: str = "gaussian", noise="estimate", prior="bounds", nu: float = 4.0,
               max_samples: int | None = None, store=None, name: str | None = None, resume: bool = True,
-              progress: bool = True, seed: int = 0) -> Posterior:
+              progress: bool = True, seed: int = POSTERIOR.seed) -> Posterior:
     """Sample the posterior of a fit's free parameters with emcee.
 
     Arguments:

@@ -19,6 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 import jax
 import numpy as np
 
+from .defaults import FIT
 from .criteria import CRITERIA, DEFAULT_MARGIN, HELDOUT_MARGIN, resolve_criterion
 from .fitting.api import COARSE_ATOL, COARSE_RTOL, fit
 from .fitting.result import FitResult
@@ -339,7 +340,7 @@ def _simplest(rows: list[dict], eligible) -> dict:
     return min((r for r in rows if eligible(r)), key=lambda r: (r["n_params"], r["cost_ns"]))
 
 
-def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto", *, loss: str = "cosine",
+def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto", *, loss: str = FIT.loss,
            margin: float | None = None, folds: int = 5, holdout: float = 0.2, scene=None,
            tolerance: float | None = None, scene_metric: str = "relative", reference: str = "data", seed: int = 0,
            screen: bool = True, plausible: bool = True, progress: bool = False, **fit_options) -> Selection:

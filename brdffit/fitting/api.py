@@ -28,6 +28,7 @@ import jax
 import numpy as np
 
 from ..arrays import host_arrays, on_device, to_device
+from ..defaults import FIT
 from ..metrics import fit_sums, metrics_from_sums
 from ..models.model import Model
 from ..models.registry import get as get_model
@@ -698,9 +699,9 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
 
 
 # ---------------------------------------------------------------------------------------------------- public API
-def fit(measurements, model, *, loss: str = "cosine", solver="lm", init="auto", fixed=None, free=None,
-        multistart: int = 0, channel_mode: str = "shared-shape", robust=None, max_steps: int = 256,
-        rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0, coarse="auto",
+def fit(measurements, model, *, loss: str = FIT.loss, solver=FIT.solver, init="auto", fixed=None, free=None,
+        multistart: int = 0, channel_mode: str = "shared-shape", robust=None, max_steps: int = FIT.max_steps,
+        rtol: float = FIT.rtol, atol: float = FIT.atol, seed: int = FIT.seed, coarse="auto",
         strict: bool = False, progress: bool = False) -> FitResult:
     """Fit a model to measurements by least squares: amplitudes exactly, the rest by a global search and a
     polish (the pipeline of the module doc).
@@ -809,9 +810,9 @@ def _fit_independent(measurements, model, options: dict, bar: Progress) -> FitRe
     )
 
 
-def fit_many(measurements_list, model, *, loss: str = "cosine", solver="lm", init="auto", fixed=None,
-             free=None, robust=None, max_steps: int = 256, rtol: float = 1e-8, atol: float = 1e-12, seed: int = 0,
-             ) -> list[FitResult]:
+def fit_many(measurements_list, model, *, loss: str = FIT.loss, solver=FIT.solver, init="auto", fixed=None,
+             free=None, robust=None, max_steps: int = FIT.max_steps, rtol: float = FIT.rtol, atol: float = FIT.atol,
+             seed: int = FIT.seed) -> list[FitResult]:
     """Fit one model to many equally shaped data sets: the pipeline of `fit`, every stage batched.
 
     This is the path for databases and spatially varying materials: every data set must have the same number of

@@ -42,6 +42,7 @@ import dataclasses
 
 import numpy as np
 
+from ..defaults import FIT
 from .moments import applies, moment_sums
 from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of
 from .problem import FitData, Problem
@@ -102,8 +103,8 @@ class Marquardt:
         offset: the relative offset below which a point has converged (Bates & Watts 1981; 0 turns the test off).
     """
 
-    rtol: float = 1e-8
-    atol: float = 1e-12
+    rtol: float = FIT.rtol
+    atol: float = FIT.atol
     damping: float = 1e-3
     offset: float = RELATIVE_OFFSET
 
