@@ -7,7 +7,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import os
 import signal
 import sys
 from collections.abc import Callable, Sequence
@@ -19,7 +18,8 @@ from .compilation_cache import cache_dir, enable_compilation_cache
 from .criteria import CRITERIA
 from .defaults import FIT, POSTERIOR
 from .distributed import DEFAULT_BATCH
-from .export.records import EXPORTS_FILE
+from .output_folder import (FOLDER, OutputFolderError, check_output_folder, check_still_free, check_writable,
+                            default_out, staged_folder)
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 EXIT_IMPLAUSIBLE = 3  # `brdffit export` refused a renderer material of an implausible fit (--force exports it)
@@ -359,130 +359,6 @@ def _load(path, args):
                              "theta_i=NAME,phi_i=NAME,theta_o=NAME,phi_o=NAME (see --help)") from None
 
 
-def _default_out(path: Path) -> Path:
-    return path.with_name(path.stem + ".brdffit")
-
-
-def _check_writable(out: Path) -> None:
-    """Refuse, before any work, an output folder that cannot be made (e.g. the default beside a read-only input)."""
-    existing = out
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
-        raise UsageError(f"cannot write the output folder {out} ({existing} is not a writable folder); choose one "
-                         "with --out")
-
-
-# What `brdffit fit` writes into its output folder (the report's figures are PNG files beside report.html), and
-# what `brdffit export --fit` records there (brdffit.export.records).
-OUTPUT_NAMES = ("result.h5", "result.json", "summary.txt", "posterior.json", "selection.json", "report.html",
-                "report.md", EXPORTS_FILE)
-STAGE_MARK = ".new-"  # a folder being written: .<out name>.new-<pid>-<random> beside the output folder
-
-
-def _earlier_result(out: Path) -> list[str]:
-    """The names in ``out`` (an earlier result); raises UsageError if any of them is not brdffit's output."""
-    if not out.is_dir():
-        return []
-    names = sorted(os.listdir(out))
-    foreign = [n for n in names if n not in OUTPUT_NAMES and not n.endswith(".png")]
-    if foreign:
-        raise UsageError(f"the output folder {out} holds files brdffit did not write ({', '.join(foreign[:5])}); "
-                         "choose another --out")
-    return names
-
-
-def _check_output_folder(out: Path, force: bool) -> None:
-    """Refuse, before any work, to replace an earlier result without ``--force`` (it would lose that fit)."""
-    earlier = _earlier_result(out)
-    if earlier and not force:
-        raise UsageError(f"the output folder {out} holds an earlier result ({', '.join(earlier[:4])}"
-                         f"{', ...' if len(earlier) > 4 else ''}); pass --force to replace it, or choose another "
-                         "--out")
-
-
-def _check_still_free(out: Path) -> None:
-    """Refuse, at the end of a fit without --force, a result that another process wrote into ``out`` meanwhile."""
-    earlier = _earlier_result(out)
-    if earlier:
-        raise UsageError(f"while this fit ran, another process wrote a result into {out} ({', '.join(earlier[:4])}"
-                         f"{', ...' if len(earlier) > 4 else ''}); this fit's result was not written: pass --force "
-                         "to replace that one, or choose another --out")
-
-
-def _exchange(a: Path, b: Path) -> bool:
-    """Swap two paths in one atomic step (Linux renameat2 with RENAME_EXCHANGE); False where it is unavailable."""
-    import ctypes
-
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        renameat2 = libc.renameat2
-    except (OSError, AttributeError):
-        return False
-    at_fdcwd, rename_exchange = -100, 2  # <fcntl.h> AT_FDCWD, <linux/fs.h> RENAME_EXCHANGE
-    return renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
-
-
-def _remove_abandoned(out: Path) -> None:
-    """Delete the staging folders beside ``out`` of earlier runs that were killed (their process is gone)."""
-    import functools
-    import shutil
-
-    from .io._common import remove_abandoned
-
-    remove_abandoned(out.parent, f".{out.name}{STAGE_MARK}", functools.partial(shutil.rmtree, ignore_errors=True))
-
-
-@contextlib.contextmanager
-def staged_folder(out: Path, check=None):
-    """Yield a new, empty folder beside ``out`` to write a result into; on success it takes ``out``'s place.
-
-    The folder holds either the complete earlier result or the complete new one at every moment: the new files are
-    written under the staging name, and the staging folder and ``out`` are exchanged in one atomic rename
-    (renameat2 RENAME_EXCHANGE; where the system lacks it, two renames leave a moment without ``out``); the earlier
-    result is deleted only then. On failure the staging folder is deleted and ``out`` is untouched. A staging
-    folder left by a killed run (``.<name>.new-<pid>-*``) is deleted by the next run.
-
-    The exchange holds the lock of ``out``'s parent folder (`brdffit.io.locking.locked`), so that two processes
-    finishing into one folder take turns; ``check``, when given, runs under that lock just before it (a fit
-    without --force refuses there a result that another process wrote into ``out`` while it ran).
-    """
-    import shutil
-    import tempfile
-
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    _remove_abandoned(out)
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}{STAGE_MARK}{os.getpid()}-", dir=out.parent))
-    umask = os.umask(0o022)
-    os.umask(umask)
-    try:
-        os.chmod(stage, 0o777 & ~umask)  # what mkdir would have given the folder (mkdtemp makes it private)
-        yield stage
-        from .io.locking import locked
-
-        with locked(out):
-            if check is not None:
-                check()
-            _commit(stage, out)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)  # after an exchange it holds the earlier result
-
-
-def _commit(stage: Path, out: Path) -> None:
-    """Put the complete folder ``stage`` in ``out``'s place (`staged_folder`)."""
-    import shutil
-    import tempfile
-
-    if not out.exists():
-        os.rename(stage, out)
-    elif not _exchange(stage, out):
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}{STAGE_MARK}{os.getpid()}-", dir=out.parent))
-        os.rename(out, old / out.name)
-        os.rename(stage, out)
-        shutil.rmtree(old, ignore_errors=True)
-
-
 def _cmd_models(args) -> int:
     from . import models
 
@@ -625,9 +501,9 @@ def _progress(args) -> bool:
 
 def _cmd_fit(args) -> int:
     path = Path(args.file)
-    out = Path(args.out) if args.out else _default_out(path)
-    _check_writable(out)
-    _check_output_folder(out, args.force)
+    out = Path(args.out) if args.out else default_out(path)
+    check_writable(out)
+    check_output_folder(out, args.force)
     measurements = _load(path, args)  # first: a file that cannot be read is reported before JAX is loaded
     from . import fit, io, select
 
@@ -661,25 +537,25 @@ def _cmd_fit(args) -> int:
         result = fit(measurements, _with_lobes(args.model, k), multistart=args.multistart, progress=_progress(args),
                      **_fit_options(args))
     final = out
-    still_free = None if args.force else lambda: _check_still_free(final)  # another fit may have finished first
+    still_free = None if args.force else lambda: check_still_free(final)  # another fit may have finished first
     with staged_folder(final, check=still_free) as out:  # the new files appear in `final` together, replacing it
-        h5 = out / "result.h5"
+        h5 = out / FOLDER.results
         io.save(measurements, h5)
         result.save(h5)
         summary = result.to_dict()
-        (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (out / FOLDER.summary_json).write_text(json.dumps(summary, indent=2) + "\n")
         verdict = selection.verdict() + "\n" if selection is not None else ""
-        (out / "summary.txt").write_text(verdict + result.summary() + "\n")
-        files = [h5, out / "result.json", out / "summary.txt"]
+        (out / FOLDER.summary).write_text(verdict + result.summary() + "\n")
+        files = [h5, out / FOLDER.summary_json, out / FOLDER.summary]
         posterior_summary = None
         if args.posterior:
             post = _run_posterior(result, measurements, h5, args)
             posterior_summary = post.to_dict()
-            (out / "posterior.json").write_text(json.dumps(posterior_summary, indent=2) + "\n")
-            files.append(out / "posterior.json")
+            (out / FOLDER.posterior).write_text(json.dumps(posterior_summary, indent=2) + "\n")
+            files.append(out / FOLDER.posterior)
         if selection is not None:
-            (out / "selection.json").write_text(json.dumps(selection.to_dict(), indent=2) + "\n")
-            files.append(out / "selection.json")
+            (out / FOLDER.selection).write_text(json.dumps(selection.to_dict(), indent=2) + "\n")
+            files.append(out / FOLDER.selection)
         if args.report:
             written = _write_report(out, measurements, result, post if args.posterior else None, selection, args)
             files.extend([Path(written["html"]), Path(written["md"])])
@@ -1215,7 +1091,7 @@ def main(argv=None) -> int:
         return args.run(args)
     # brdffit.io.FormatError and brdffit.MeasurementError are ValueErrors: naming them would load the readers and
     # NumPy for every command (0.5 s of `brdffit models`).
-    except (UsageError, FileNotFoundError, IsADirectoryError, KeyError, ValueError) as exc:
+    except (UsageError, OutputFolderError, FileNotFoundError, IsADirectoryError, KeyError, ValueError) as exc:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"brdffit {args.command}: error: {message}", file=sys.stderr)
         return EXIT_BAD_INPUT

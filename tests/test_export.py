@@ -502,7 +502,8 @@ def _stated_rms(text: str) -> str:
 
 
 def test_cli_fit_option_records_its_achieved_error_for_the_report(mi, oren_nayar_folder, tmp_path, capsys):
-    from brdffit.cli import _earlier_result, main
+    from brdffit.cli import main
+    from brdffit.output_folder import _earlier_result
 
     result_h5, xml = oren_nayar_folder / "result.h5", tmp_path / "clay.xml"
     assert main(["export", str(result_h5), "--to", "mitsuba", "--fit", "--out", str(xml)]) == 0

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 import brdffit.io as bio
-from brdffit.cli import EXIT_BAD_INPUT, EXIT_OK, STAGE_MARK, main, staged_folder
+from brdffit.cli import EXIT_BAD_INPUT, EXIT_OK, main
+from brdffit.output_folder import STAGE_MARK, staged_folder
 from brdffit.io import update_hdf5
 from brdffit.measurements import Measurements
 

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from brdffit import cli
+from brdffit.output_folder import STAGE_MARK
 from brdffit.export import records
 from brdffit.io import locking
 from brdffit.io.locking import LockTimeout, locked
@@ -214,7 +215,7 @@ def complete_result(out: Path) -> str:
     with h5py.File(out / "result.h5", "r") as f:
         assert list(f["fits"]) == [spec.replace("/", "_")]
     assert (out / "summary.txt").is_file()
-    assert not any(cli.STAGE_MARK in p.name for p in out.parent.iterdir())
+    assert not any(STAGE_MARK in p.name for p in out.parent.iterdir())
     return spec
 
 

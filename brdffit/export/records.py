@@ -21,13 +21,12 @@ import json
 import numbers
 from pathlib import Path
 
+from ..output_folder import FOLDER
+
 __all__ = ["EXPORTS_FILE", "ExportRecord", "ExportLog", "exports_path", "read", "record"]
 
-EXPORTS_FILE = "exports.json"
+EXPORTS_FILE = FOLDER.exports
 FORMAT, VERSION = "brdffit exports", 1
-# `brdffit fit` writes these two into every output folder (brdffit.cli.OUTPUT_NAMES): a result file beside its
-# JSON summary is one.
-_RESULT_FILE, _RESULT_SUMMARY = "result.h5", "result.json"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -163,7 +162,8 @@ def exports_path(result_path) -> Path | None:
         ``result.json`` beside it), else None.
     """
     result_path = Path(result_path)
-    if result_path.name != _RESULT_FILE or not (result_path.parent / _RESULT_SUMMARY).is_file():
+    # `brdffit fit` writes both into every output folder: a result file beside its JSON summary is one.
+    if result_path.name != FOLDER.results or not (result_path.parent / FOLDER.summary_json).is_file():
         return None
     return result_path.parent / EXPORTS_FILE
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..export.records import ExportLog
+from ..output_folder import FOLDER
 from ..io._common import atomic_path
 from . import figures as F
 
@@ -435,7 +436,7 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
     problems = [exports.problem] if exports.problem else []
     blocks = _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths,
                      _albedo_warnings(albedo, channels) + problems, exports)
-    md_path, html_path = out / "report.md", out / "report.html"
+    md_path, html_path = out / FOLDER.report_md, out / FOLDER.report_html
     _write_text(md_path, _to_markdown(blocks, out))
     _write_text(html_path, _to_html(blocks))
     return {"html": str(html_path), "md": str(md_path), "figures": [p for p, _ in figure_paths]}
