@@ -1,5 +1,5 @@
 """Lazy imports, so that ``brdffit --help``, ``brdffit info`` and ``import brdffit`` do not pay for JAX, SciPy and
-optimistix before something uses them (issue 15: the CLI's light commands answer in well under a second).
+optimistix before something uses them (importing those takes far longer than the CLI's light commands' own work).
 
 `exports` makes each public name of a package load from its submodule on first access (PEP 562's module
 ``__getattr__``, through the package's module class). `module` is a stand-in for a module that is imported on first

@@ -1,14 +1,14 @@
-"""Host values onto the device without compiling anything, and host columns through compiled functions (issue 15).
+"""Host values onto the device without compiling anything, and host columns through compiled functions.
 
 ``jnp.asarray`` of a NumPy array or a Python number runs a small compiled program (``jit(stage)``, or
 ``jit(convert_element_type)`` when it changes the dtype), and ``jnp.stack``, ``jnp.full`` and the like one each:
-one compilation per shape and dtype, 10–40 ms each in a new process (lowering included), and still a lowering and
-a cache lookup each in a warm one. A first fit made about thirty of them: 0.5–0.9 s of a 5–7 s single fit, 0.45 s
-of a warm one (docs/benchmarks.md). ``jax.device_put`` of a NumPy array compiles nothing, so the fitting pipeline
+one compilation per shape and dtype in a new process (lowering included), and still a lowering and a cache
+lookup each in a warm one. A first fit made dozens of them, a sizeable share of its time in a new process or a warm
+one (docs/benchmarks.md). ``jax.device_put`` of a NumPy array compiles nothing, so the fitting pipeline
 builds its data's arrays (their fields, subsamples, stacks and pieces) and its other small arrays in NumPy on the
 host and moves them with `to_device` / `on_device`: only the model's own maths is compiled
-(`brdffit.programs.Program`), since a compiled program of the data's few operations cost its compilation
-(60-400 ms each here) to every first fit. Host-side maths on columns of samples in JAX functions (the readers'
+(`brdffit.programs.Program`), since a compiled program of the data's few operations adds its compilation to
+every first fit. Host-side maths on columns of samples in JAX functions (the readers'
 and the report's angle conversions, the synthesised data) goes through `padded_columns`: a jitted function called on
 lengths padded to a power of two, so that files of any length share a few compilations.
 """
@@ -63,8 +63,7 @@ def host_arrays(tree):
 
 def on_device(tree):
     """Every leaf of ``tree`` (a NamedTuple, a dict, ...) as `to_device` gives it, the host leaves moved by one
-    ``jax.device_put`` (one call a leaf took ~1.8 times as long: ~30 µs a leaf, and a `fit_many` pass moves
-    dozens; issue 19).
+    ``jax.device_put`` (a call per leaf costs a dispatch each, and a `fit_many` pass moves dozens).
 
     Arguments:
         tree: a pytree of NumPy arrays, numbers or JAX arrays.

@@ -31,9 +31,9 @@ MODEL_FLOOR = 1e-8
 # a synthetic Ward material, 0 of 150 without them.
 NOISE_MIN_COS = 0.15
 # The noise sums are taken over every k-th sample of a call with k = max(1, N // NOISE_SAMPLES): they need a log
-# and two divisions per value, which over every sample added about 80 ms of CPU time to the ~350 ms of the metric
-# sums of a MERL-size fit; over 4,096 samples of each chunk of 65,536 they add under 5 ms (measured with
-# process_time), and 94,000 samples still tell the noise models apart by thousands of log-likelihood units.
+# and two divisions per value, which over every sample of a MERL-size fit add a sizeable share to the CPU time of
+# the metric sums; over 4,096 samples of each chunk of 65,536 they add little, and 94,000 samples still tell the
+# noise models apart by thousands of log-likelihood units.
 NOISE_SAMPLES = 4096
 
 
@@ -92,8 +92,8 @@ def _metric_sums(model: Model, pair: LocalPair, values, cos_i, weights):
 
 @jax.jit
 def _metrics(model: Model, pair: LocalPair, values, cos_i, weights):
-    # Chunks of _CHUNK samples in one compiled loop: on the CPU this ran twice as fast as the same sums over a
-    # MERL-size table at once (the working set stays in cache). Padding repeats the last sample with a NaN value,
+    # Chunks of _CHUNK samples in one compiled loop: on the CPU this runs faster than the same sums over a
+    # MERL-size table at once, since the working set stays in cache. Padding repeats the last sample with a NaN value,
     # which no sum counts.
     n = values.shape[0]
     chunks = max(-(-n // _CHUNK), 1)

@@ -1,14 +1,14 @@
-"""Compiled programs kept across processes, without tracing them again (issue 15).
+"""Compiled programs kept across processes, without tracing them again.
 
 JAX's persistent compilation cache (which the CLI turns on, `brdffit.compilation_cache.enable_compilation_cache`) saves XLA's
 compilation in a new process, not the tracing and the lowering to StableHLO that it needs to compute its key: in a
-warm `brdffit fit FILE` those were most of the time left (about 2.5 s of tracing and lowering for the twelve
-candidates of a selection, against 2 s of fitting). A `Program` is a jitted function that also keeps each
+warm `brdffit fit FILE` those would be most of the time left (tracing and lowering the programs of a selection's
+candidates takes longer than fitting them). A `Program` is a jitted function that also keeps each
 executable it compiles on disk, under a key that it can compute *before* tracing: the program's name, the values
 of its static arguments, the tree structure and the shapes and dtypes of its array arguments, and a stamp of
 everything that could change the program (brdffit's source files, the JAX and jaxlib versions, the backend and its
 device, float64 mode, ``XLA_FLAGS``). A later process with the same key loads the executable
-(`jax.experimental.serialize_executable`, ~2 ms) and runs it.
+(`jax.experimental.serialize_executable`, far cheaper than tracing) and runs it.
 
 Persistence is on exactly when JAX's persistent cache directory is configured: the executables go to its
 ``brdffit-programs`` folder. Otherwise, when called on tracers (inside another jitted function), or when a static

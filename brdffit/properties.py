@@ -535,10 +535,10 @@ def scan_albedo(model: Model, theta_i=PLAUSIBILITY_THETA_I, phi_i=PLAUSIBILITY_P
                 resolution: int = PLAUSIBILITY_RESOLUTION) -> np.ndarray:
     """The directional albedo on a grid of incidence directions, quickly: ``(len(theta_i), len(phi_i), C)``.
 
-    The quadrature of `directional_albedo`, with its nodes computed on the host in NumPy (~20 ms; compiled, 0.3 s
-    in a first fit's summary) and the model evaluated by `brdffit.evaluate_dirs` (compiled once per model
-    structure; the whole quadrature compiled per model took 4-8 s on the project's CPU, this 1 s). Summaries and
-    reports use it (`plausibility`).
+    The quadrature of `directional_albedo`, with its nodes computed on the host in NumPy (compiled, they would add
+    a compilation to a first fit's summary) and the model evaluated by `brdffit.evaluate_dirs` (compiled once per
+    model structure: a far smaller program than the whole quadrature compiled per model). Summaries and reports use
+    it (`plausibility`).
     """
     theta, phi = (np.asarray(x, dtype=float).reshape(-1) for x in np.meshgrid(theta_i, phi_i, indexing="ij"))
     t, wt = _gauss_legendre(resolution, 0.0, 1.0)

@@ -13,8 +13,7 @@ from .._lazy import exports as _exports
 
 # The most materials of one task (`fit_database`'s ``batch``, the CLI's ``--batch``): declared here, where the CLI
 # reads it without loading Dask. Larger batches share a task's reading, scheduling and the engine's per-batch work
-# among more materials: 1,000 Lambert + GGX materials of 2,000 samples on two local workers took 13.4 s in batches
-# of 32, 11.9 s of 64 and 10.9 s of 128 (docs/benchmarks.md); a task's `fit_many` calls are bounded in samples
+# among more materials (docs/benchmarks.md compares batch sizes); a task's `fit_many` calls are bounded in samples
 # (`brdffit.distributed.tasks.FIT_SAMPLES`), so the batch does not bound memory.
 DEFAULT_BATCH = 128
 

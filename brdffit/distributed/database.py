@@ -1,4 +1,4 @@
-"""`fit_database`: fit every material of a database on a Dask distributed cluster (issue 19, docs/batch.md).
+"""`fit_database`: fit every material of a database on a Dask distributed cluster (docs/batch.md).
 
 The client plans and records; the workers read and fit (`brdffit.distributed.tasks`):
 
@@ -44,8 +44,8 @@ from .tasks import error_row, fit_batch
 __all__ = ["fit_database", "local_cluster"]
 
 # The table is rewritten whole; at most this often (and at the end), so that a large database does not spend its
-# time rewriting a growing table after every batch; and at most `WRITE_SHARE` of the time (1,000 rows take 0.14 s
-# to write, CPU time that the client takes from the workers when it shares their machine).
+# time rewriting a growing table after every batch; and at most `WRITE_SHARE` of the time (writing a large table
+# takes CPU time that the client takes from the workers when it shares their machine).
 WRITE_INTERVAL_S = 1.0
 WRITE_SHARE = 0.05
 
@@ -110,10 +110,9 @@ def local_cluster(workers: int):
     ``MALLOC_TRIM_THRESHOLD_`` that Dask's nannies set by default (``distributed.nanny.pre-spawn-environ``).
 
     Setting that variable turns off glibc's dynamic mmap threshold, so every large array of a fit is mapped and
-    faulted in anew: measured on 64 Lambert + GGX materials of 2,000 samples in one process, `fit_many` took
-    90 ms a material with it and 51 ms without (35–42 ms with OMP/MKL/OpenBLAS threads at 1, which the nanny's
-    other variables keep). Workers started with ``dask worker`` get it from the same setting: set
-    ``DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON__MALLOC_TRIM_THRESHOLD_=None`` where they start (docs/batch.md).
+    faulted in anew, which makes `fit_many` markedly slower; the nanny's other variables (OMP, MKL and OpenBLAS
+    threads at 1), which speed it up, are kept. Workers started with ``dask worker`` get it from the same setting:
+    set ``DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON__MALLOC_TRIM_THRESHOLD_=None`` where they start (docs/batch.md).
 
     Arguments:
         workers: the number of worker processes.
@@ -259,7 +258,7 @@ def cut(items: list, batch: int, workers: int) -> list[list]:
     """``items`` cut, in order, into batches of at most ``batch``, as many as needed rounded up to a multiple of
     ``workers`` (but never more than the items), their sizes differing by at most one: so that the workers end
     together, where batches of ``batch`` and a remainder would leave some workers idle while others fit the last
-    batches (7 batches of <= 32 on 2 workers: one worker fitted 4, the other 3 and then waited 11% of the run).
+    batches (7 batches of <= 32 on 2 workers: one worker fits 4, the other 3 and then waits for it).
 
     Arguments:
         items: what to cut.

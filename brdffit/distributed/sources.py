@@ -68,7 +68,7 @@ def _holds_material(obj) -> bool:
     """Whether an h5py object, or a group's contents as the inspection kept them (`brdffit.io.hdf5.read_hdf5_many`:
     ``members`` name -> dataset, None for a member that is not one), holds a material."""
     members = getattr(obj, "members", None)
-    if members is not None:  # no lookup in the file: h5py's high-level objects were a tenth of a file's reading
+    if members is not None:  # no lookup in the file: h5py's high-level objects are costly next to the reading
         return all(members.get(d) is not None for d in _MATERIAL_DATASETS)
     import h5py
 

@@ -222,7 +222,7 @@ def _evaluator(parts: list, channels: int):
 @functools.partial(jax.jit, static_argnums=0)
 def _smith_g(dist, cos_i, cos_o, m):
     """brdffit's separable Smith G1(ωi) G1(ωo) of a distribution as one compiled program: run operation by
-    operation, each of its ~15 operations was compiled anew for every number of pairs (0.6 s of a report)."""
+    operation, each of its ~15 operations was compiled anew for every number of pairs."""
     return dist.G(cos_i, cos_o, m)
 
 

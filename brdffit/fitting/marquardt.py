@@ -30,8 +30,8 @@ Parameters the pipeline holds (on a bound, or where a dead lobe left them) simpl
 Why the engine has its own solver: its only compiled program is the pass, one per model structure and data
 shape (a straight-line program of the residuals and Q tangents), which the polish, the full-data refinement and
 the covariance share. An optimistix solve compiles the whole iteration (the solver's loop, its linear solves and
-the transposed tangents of the projection) for each model and option: 5–12 s per model on the project's 2-core
-CPU against ~0.4 s for the pass (docs/benchmarks.md, issue 15). The optimistix solvers stay available by name
+the transposed tangents of the projection) for each model and option, a far larger program than the pass
+(docs/benchmarks.md). The optimistix solvers stay available by name
 (`brdffit.fitting.solvers.SOLVERS`) and as objects, and `tests/test_marquardt.py` checks that both reach the
 same optimum.
 """
@@ -114,8 +114,8 @@ class Marquardt:
 # whole until its slowest point converges (32 materials x 4 starts of Lambert + GGX: most points converge in 4-5
 # steps, the slowest in 12).
 _COMPACT_POINTS = 8
-# The most points of one compact pass: a wider one runs in groups. Measured on Lambert + GGX (2,048 samples, CPU):
-# 128 points in one pass took ~100 ms, in four of 32 ~60 ms (the wider pass's intermediates leave the cache).
+# The most points of one compact pass: a wider one runs in groups, faster on a CPU than in one pass, whose
+# intermediates would leave the cache.
 _MAX_WIDTH = 32
 
 
@@ -216,7 +216,7 @@ class _Batch:
                                    dtype=int).reshape(problem.channels, len(linear))
         self.is_amplitude = np.zeros(self.size, bool)
         self.is_amplitude[self.amplitudes.ravel()] = True
-        # (M,) valid residuals, counted on the host (a compiled count added 0.12-0.16 s to a first fit)
+        # (M,) valid residuals, counted on the host (a compiled count would add its compilation to a first fit)
         self.n_values = sum(np.sum(np.asarray(piece.mask), axis=(1, 2)) for piece in pieces)
         self.compact = compact
         # A compact batch's passes form their sums from the channels' shared moments where they can
@@ -233,7 +233,7 @@ class _Batch:
         that sees almost no sample has a Gram matrix near 0, whose solve can jump to 1e118: `_TRUSTED_SPREAD`), a
         second pass evaluates the moved point at once. With ``refresh``, so does every point whose tangents the
         move made stale (`refresh`); the solver asks for that only for the trials it accepts, since a rejected
-        trial's tangents are never used (a quarter of those second passes of a Lambert + GGX `fit_many`, issue 19).
+        trial's tangents are never used (a sizeable share of those second passes of a Lambert + GGX `fit_many`).
         Each point's second pass is its own: whether one point is evaluated again never changes another's path (a
         fit's answer does not depend on the other starts and materials of its batch).
 

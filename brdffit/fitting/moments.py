@@ -14,9 +14,8 @@ and each ∂f₀/∂θ_q and ∂B_k/∂θ_q whose lobe reads θ_q), the compiled
 
 and the host maps them to the free scalars with a coefficient matrix V_c ``(L, P)`` (amplitudes of the point):
 JᵀJ = Σ_c V_cᵀ S_c V_c and Jᵀr = Σ_c V_cᵀ g_c. The residuals themselves are formed on the device (no cancellation
-in the cost). Measured on Lambert + GGX (32 points, 2,048 samples, one CPU core) the pass and its host sums took
-about half the time of `brdffit.fitting.normal_equations.accumulate`'s, whose (C, Q + 1, N) tangents leave the
-cache (issue 19).
+in the cost). On a CPU the pass and its host sums take less time than
+`brdffit.fitting.normal_equations.accumulate`'s, whose (C, Q + 1, N) tangents leave the cache.
 
 The default solver's passes in a `fit_many` batch use it (`brdffit.fitting.marquardt`), but for the answers'
 sums on the whole data, which need the residuals themselves (the sandwich covariance's meat, the metric sums):

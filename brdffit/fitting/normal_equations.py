@@ -75,10 +75,10 @@ def _tangent_groups(problem: Problem) -> list[tuple]:
     The seeds of one JVP share its tangent axis, so every operation that any of them reaches carries all of them:
     an amplitude's seed, which reaches only the product with its lobe, then rides through the whole lobe with the
     shape parameters' seeds. When the amplitudes are at least as many as the other names, they get their own JVP,
-    whose tangents reach only the products (the second JVP's primal is the same program, for XLA to share):
-    measured on 65,536 samples, CPU time of a pass 16.6 -> 9.2 ms for Lambert + Cook-Torrance and 25 -> 11 ms for
-    Lambert + GGX, while for 3 Lafortune lobes (4 amplitudes, 6 shape names) the split gained 8% and doubled the
-    compilation, so there all names stay in one."""
+    whose tangents reach only the products (the second JVP's primal is the same program, for XLA to share): a
+    pass of Lambert + Cook-Torrance or Lambert + GGX then takes markedly less CPU time, while for 3 Lafortune lobes
+    (4 amplitudes, 6 shape names) the split gained little and lengthened the compilation, so there all names stay
+    in one."""
     amplitudes = tuple(n for n in problem.free if n in problem.linear)
     others = tuple(n for n in problem.free if n not in problem.linear)
     if amplitudes and others and len(amplitudes) >= len(others):
@@ -92,8 +92,7 @@ def _tangents(problem: Problem, tree: dict, data: FitData):
 
     The seeds of a group (`_tangent_groups`) are stacked and the JVP is vmapped over them (what ``jax.jacfwd``
     does): the compiled program holds one copy of the model with a tangent axis and evaluates the primal once.
-    One JVP per name, unrolled, held Q + 1 copies: on Lambert + 3-lobe Lafortune (20,000 samples) it compiled in
-    3.1 s and ran a pass in 120 ms, against 1.0 s and 56 ms vmapped."""
+    One JVP per name, unrolled, held Q + 1 copies, which compiled and ran slower than the vmapped JVP."""
     def r(values):
         f = evaluate_pair(problem.model(physical_params(problem, {}, dict(data.fixed, **values))), data.pair)
         return residuals_of(problem, f, data), f
@@ -124,7 +123,7 @@ def pass_program(structure: Problem):
     ``(M, S, N, C)`` the model values. With ``materials`` (integer indices ``(M,)``), row i of ``trees`` is
     evaluated on material ``materials[i]`` of ``data``, gathered inside the program: the data of a batch stay on
     the device, and a compact polish's passes move only the points and their indices (a host gather of the data
-    at every step was a fifth of a `fit_many`, issue 19). The first call of each shape compiles; the seconds are
+    at every step cost a sizeable share of a `fit_many`). The first call of each shape compiles; the seconds are
     added to `compile_seconds`."""
     per_material = jax.vmap(jax.vmap(lambda tree, data: _tangents(structure, tree, data), in_axes=(0, None)),
                             in_axes=(0, 0))
@@ -177,7 +176,7 @@ def metric_sums_of(values: list, pieces: list[FitData], materials=None) -> np.nd
     ``(M, S, N, C)`` array per piece) against the pieces' data (row i against material ``materials[i]``, when
     given), `brdffit.metrics.metric_sums` in NumPy on the host: they do not depend on the model, and a solver asks
     for them at its answers only (one point a material), so a compiled program only added its compilation to a
-    first fit (0.43-0.46 s; issue 15). The errors are ignored as XLA ignores them (a value below -1/cosθi has no
+    first fit. The errors are ignored as XLA ignores them (a value below -1/cosθi has no
     log-loss term: NaN, as in the compiled sums)."""
     total = 0.0
     index = slice(None) if materials is None else np.asarray(materials)
@@ -211,7 +210,7 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
         values: also return the pass's arrays of each piece: the tangents and residuals ``(M, S, C, Q + 1, N)``
             (host) and the model values ``(M, S, N, C)`` (device). A solver keeps them for its current points and
             forms the meat (`meat_of`) and the metric sums (`metric_sums_of`) of its answer only.
-        meat: form Jᵀ diag(r²) J (else the field is None): a third of the host's work in a pass.
+        meat: form Jᵀ diag(r²) J (else the field is None): a sizeable share of the host's work in a pass.
         materials: integer indices ``(M,)``: point row i is evaluated on material ``materials[i]`` of the pieces
             (gathered on the device, `pass_program`); None: the pieces have the M materials of ``trees``.
 
@@ -237,8 +236,8 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
     # covariance as infinite standard errors, which is what they mean, without a warning per chunk.
     with np.errstate(over="ignore", invalid="ignore"):
         for piece in pieces:
-            # The per-channel Gram matrices on the host: measured 3x faster on the CPU than the same reductions in
-            # XLA, and a (M, S, C, Q + 1, N) transfer per chunk on a GPU.
+            # The per-channel Gram matrices on the host: faster on the CPU than the same reductions in XLA (see
+            # `_grams`), and a (M, S, C, Q + 1, N) transfer per chunk on a GPU.
             a, f = fn(trees, piece, materials)
             a = np.asarray(a)
             kept.append((a, f))

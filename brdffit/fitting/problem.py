@@ -152,7 +152,7 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad
         pad: append missing samples (at normal incidence and exitance, masked) up to `bucket` of the count.
         device: put the arrays on the device; False leaves them NumPy arrays (`brdffit.arrays.host_arrays`) for a
             pipeline that cuts and stacks them first (`take_samples`, `stack_data`, `sample_pieces`: a `fit_many`
-            moved each material's arrays to the device and back before stacking them, issue 19).
+            would otherwise move each material's arrays to the device and back before stacking them).
 
     Returns:
         The `FitData`.
@@ -180,8 +180,8 @@ def make_fit_data(measurements, fixed: dict, eps, robust_scale: float = 1.0, pad
 
 # The data's own arrays (their fields, subsamples, stacks, pieces) are computed on the host in NumPy and moved to
 # the device once: they do not depend on the model, so compiled programs would only add their compilations to a
-# first fit (1.0 s of a 6 s single fit in a new process: XLA compiles even an addition in 60-130 ms here), and
-# NumPy does each in milliseconds (issue 15, docs/benchmarks.md).
+# first fit (in a new process XLA compiles even an addition), and NumPy does each in milliseconds
+# (docs/benchmarks.md).
 def _sample_fields(values, theta_i, phi_i, theta_o, phi_o, weights, sigma):
     """The per-sample fields of `FitData` (NumPy, on the host): the `LocalPair`, the values with missing ones set
     to 0, the mask, cosθi clamped at 0, √weights (ones when None) and σ (ones where unknown or not positive)."""

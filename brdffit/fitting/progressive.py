@@ -3,7 +3,7 @@
 Fitting K Lafortune lobes from scratch tends to end with two lobes sharing the work of one (a flat valley where
 the solver crawls). Ngan et al. (2005) and Lafortune et al. (1997) fit lobes one after another instead; here
 the K-lobe fit starts from the (K − 1)-lobe solution plus a new lobe tried forward, off-specular and retro at
-several sharpnesses, all amplitudes re-solved by bounded linear least squares (`brdffit.initial_guess`). A new
+several sharpnesses, all amplitudes re-solved by bounded linear least squares (`brdffit.fitting.separable`). A new
 lobe the data do not need starts, and usually stays, at ks = 0, which the fit's status and warnings report.
 """
 

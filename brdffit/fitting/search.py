@@ -41,10 +41,10 @@ SEARCH_SAMPLES = 4000
 POLISH_STARTS = 4
 # With more than SCREEN_ABOVE candidates and more than twice SCREEN_SAMPLES samples, every candidate is first
 # scored on a seeded subsample of SCREEN_SAMPLES samples (a screen), and only the SCREEN_KEEP best of each material
-# are scored again on the search's subsample, which chooses the starts from them as before: a fit_many material of
-# Lambert + GGX on 2,000 samples scored its ~320 candidates on all of them, half of its time after compilation
-# (issue 19). Twice the polish's starts are kept: keeping 16 instead of 8 found no better optimum in any of the 60
-# pairs of the misspecification matrix at 2,000 samples (where the screen runs), and took a tenth of a search.
+# are scored again on the search's subsample, which chooses the starts from them as before: unscreened, a fit_many
+# material of Lambert + GGX on 2,000 samples scores its ~320 candidates on all of them, a large share of its time
+# after compilation. Twice the polish's starts are kept: keeping 16 instead of 8 found no better optimum in any of
+# the 60 pairs of the misspecification matrix at 2,000 samples (where the screen runs), and rescored twice as many.
 SCREEN_SAMPLES = 512
 SCREEN_KEEP = 2 * POLISH_STARTS
 # Screen costs within this relative difference of the last kept one are ties that the screen's rounding would
@@ -122,7 +122,7 @@ def _grid_units(d: int, seed: int) -> np.ndarray:
     if per_axis >= 5:
         axes = [(np.arange(per_axis) + 0.5) / per_axis for _ in range(d)]
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
-    from scipy.stats import qmc  # here, not at import: scipy.stats takes ~1 s to import
+    from scipy.stats import qmc  # here, not at import: scipy.stats is slow to import
 
     return qmc.Sobol(d, scramble=True, seed=seed).random(MAX_CANDIDATES)
 
@@ -198,8 +198,8 @@ def _over_materials(one, name: str) -> Program:
     """``one(params, data)`` of one candidate and one material, compiled for ``(M, B)`` candidates and data with a
     leading material axis M: the candidates vmapped, the materials `_materials_a_step` at a time in the program
     (``lax.map``): one after another on a CPU, where vmapped over the materials too, the ``(M, B, N)``
-    intermediates of a `fit_many` batch left the cache (its search ran 2.3 times slower; 1, 2 or 4 materials a
-    step ran alike; issue 19, docs/benchmarks.md)."""
+    intermediates of a `fit_many` batch left the cache (its search ran markedly slower; 1, 2 or 4 materials a
+    step ran alike; docs/benchmarks.md)."""
     per_material = jax.vmap(one, in_axes=(0, None))
 
     @functools.wraps(one)  # its name in JAX's logs and profiles
@@ -218,8 +218,8 @@ def _sums_fn(problem: Problem, shared: bool):
     ``(M, B, C, K)`` its normal equations (`brdffit.fitting.separable.amplitude_sums`, with the basis of one
     channel for every channel where ``shared``: `_channel_shared`), for B candidates of each of
     M materials (candidates ``(M, B) + shape``, data with a leading material axis). The bounded solve runs on the
-    host: enumerated on the device it held 3^K unrolled systems per candidate and compiled in 1–4 s per model,
-    five times the rest."""
+    host: enumerated on the device it held 3^K unrolled systems per candidate, whose compilation outweighed the
+    rest of the program's."""
     def one(params, data: FitData):
         return amplitude_sums(problem, params, problem.linear, data, shared=shared)
 
@@ -277,10 +277,10 @@ def score(problem: Problem, candidates: list, data: FitData, width: int = SCORE_
     reads the cost off the same sums: ‖w(f₀ + Ba − f_d)‖² = c₀ − 2aᵀb + aᵀGa. A nonlinear loss or a robust one is
     scored by its own residuals at the solved amplitudes. One call scores ``width`` candidates of every material
     on one piece of ``piece`` samples, so that one compiled shape per batch size serves every subsample of a
-    search: the screen, the rescoring and an unscreened search (issue 15: each subsample size compiled its own,
-    0.3 s a candidate model in a first selection), and a `fit_many` batch of M materials makes as many calls as
-    one material (called material by material, the calls' dispatch and the data's transfers were a quarter of a
-    `fit_many`, issue 19).
+    search: the screen, the rescoring and an unscreened search (else each subsample size would compile its own
+    for every candidate model of a first selection), and a `fit_many` batch of M materials makes as many calls as
+    one material (called material by material, the calls' dispatch and the data's transfers were a sizeable share of
+    a `fit_many`).
 
     Arguments:
         problem: the problem, with `separable` set for the scoring (amplitudes projected with the loss's

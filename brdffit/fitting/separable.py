@@ -57,7 +57,7 @@ def amplitude_basis(problem: Problem, params: dict, names: tuple, data: FitData)
     (the others at 0) for that amplitude's B. A channel's value depends only on that channel's amplitude, so
     ones in every channel give every channel's column at once. Lobes without such amplitudes go into f₀. A lobe
     that is zero with those amplitudes at 0 (`adds_to_offset`) is not evaluated there: in a search or a pass of
-    Lambert + GGX that evaluation was a third of the GGX lobe's.
+    Lambert + GGX that evaluation would be a sizeable share of the GGX lobe's.
 
     Arguments:
         problem: the `Problem`.
@@ -232,8 +232,8 @@ def amplitude_sums(problem: Problem, params: dict, names: tuple, data: FitData, 
     search's candidates, `brdffit.fitting.search`), so that f₀ and B, which evaluate each channel from that
     channel's values alone, are the same in every channel: they are evaluated for one channel, and the weights,
     which differ between channels (the mask; a nonlinear loss's linearisation), enter the sums as matrix products
-    over the samples: G_c = Σ_n w²_nc B_n B_nᵀ, b_c = Σ_n B_n w²_nc (f_d − f₀)_nc. On a CPU that scored a
-    Lambert + GGX candidate 2.2 times as fast as the per-channel products of the weighted basis (issue 19).
+    over the samples: G_c = Σ_n w²_nc B_n B_nᵀ, b_c = Σ_n B_n w²_nc (f_d − f₀)_nc. On a CPU that scores a
+    Lambert + GGX candidate faster than the per-channel products of the weighted basis.
 
     Arguments:
         problem: the `Problem`.
@@ -335,8 +335,8 @@ def solve_box(gram, rhs, lower, upper) -> np.ndarray:
     lies in the box and no column is negligible, it is the optimum: only the other systems enumerate their active
     sets. An optimum within 1e-8 (relative) of a bound is enumerated too, so that an amplitude that the data do
     not want lands exactly on its bound, as the enumeration puts it (a free solve left ks = 2e-15). Nearly all of
-    a search's or a polish's systems are inside (99.6% of the candidates of a `fit_many` batch of Lambert + GGX
-    materials), and the enumeration of 6 patterns was 12% of a `fit_many` (issue 19).
+    a search's or a polish's systems are inside, and enumerating all their patterns cost a noticeable share of a
+    `fit_many`.
 
     Arguments:
         gram: G ``(..., K, K)``; rhs: b ``(..., K)``; lower, upper: sequences of K bounds (±inf for none).

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 from .._lazy import module
 
-# The table is read by the CLI's help, which must not load JAX or optimistix (issue 15); they are imported when
+# The table is read by the CLI's help, which must not load JAX or optimistix; they are imported when
 # a solver is made or a solve compiled.
 jax = module("jax")
 jnp = module("jax.numpy")
@@ -88,11 +88,11 @@ def _working_float():
 
 
 def coarse_solver(solver, rtol: float, atol: float):
-    """The solver of a two-stage fit's coarse stage (`brdffit.fit.COARSE_SAMPLES` samples) for a named solver.
+    """The solver of a two-stage fit's coarse stage (`brdffit.fitting.api.COARSE_SAMPLES` samples) for a named solver.
 
     For ``"optx-lm"`` in float64 it is optimistix's Levenberg-Marquardt whose damped step solves the normal equations
     (JᵀJ + λI) δ = −Jᵀr by Cholesky (lineax's ``Normal(Cholesky())``) instead of a QR factorisation of the
-    stacked [J; √λ I] (optimistix's default): the same steps, 1.5× faster on 30,000 residuals, where the QR of the
+    stacked [J; √λ I] (optimistix's default): the same steps, faster on many residuals, where the QR of the
     tall matrix is most of a step. Normal equations square the condition number, which float64 absorbs; the
     refinement that follows solves normal equations too. In float32, and for the other names, it is
     `make_solver`'s.

@@ -154,7 +154,7 @@ class _Dataset(NamedTuple):
     @classmethod
     def of_id(cls, dataset_id) -> "_Dataset":
         """The facts of a dataset from its low-level identifier (``dataset.id``; `_visit` opens only the identifier:
-        the high-level `h5py.Dataset` and its file object cost ~40 µs a lookup, as much as the reading), its
+        the high-level `h5py.Dataset` and its file object cost as much a lookup as the reading itself), its
         contents read when asked (``read()``)."""
         h5py = _h5py()
         plist = dataset_id.get_create_plist()
@@ -355,7 +355,8 @@ def _inspect_run(paths: list, timeout: float, reader=None) -> list:
     if pid == 0:
         os.close(read_end)
         # The child shares the parent's memory until it writes to it; a collection of the garbage collector would
-        # visit (and so copy) every page of the parent's objects: 25% of a batch's inspection with JAX loaded.
+        # visit (and so copy) every page of the parent's objects: a sizeable share of a batch's inspection with JAX
+        # loaded.
         gc.disable()
         _child_inspects(paths, write_end, reader)
     os.close(write_end)
@@ -403,7 +404,7 @@ def inspect_hdf5_many(paths, timeout: float | None = None) -> list:
     """Check HDF5 files in forked child processes that read all of each file, ``timeout`` seconds a file.
 
     One child inspects the files in turn, so a batch of good files costs one fork (a fork of a process with JAX
-    loaded costs ~20-50 ms, an inspection of a small file ~10 ms). A child stops at the first file it refuses (or
+    loaded costs more than the inspection of a small file). A child stops at the first file it refuses (or
     that does not finish in time, or crashes libhdf5), and the files after it go to a new child: every file is
     inspected by a child that has run libhdf5 only on files that passed. What is refused: see `inspect_hdf5`.
 
@@ -526,8 +527,8 @@ def read_hdf5_many(paths, capture, read, timeout: float | None = None):
 
     In the child, each file that passes the head check is opened and inspected as `inspect_hdf5` does, keeping the
     contents of the groups ``capture(path)`` names; then its ``format_version`` is checked and ``read(f, path,
-    captured)`` runs, and what it returns comes back pickled. Reading each file once, in the inspection, instead of
-    a second time in this process took a database task's reading from 4.1 to 3.6 ms a file (issue 19). ``read``
+    captured)`` runs, and what it returns comes back pickled. Reading each file once, in the inspection, spares a
+    database task a second reading of every file in this process. ``read``
     must catch what it reports itself; whatever else it raises refuses the file. The files are inspected in one
     child until one is refused (`inspect_hdf5_many`).
 
@@ -665,7 +666,8 @@ def read_hdf5(path, group: str = MEASUREMENTS_GROUP) -> Measurements:
 def read_hdf5_group(path, group_name: str, read_fn: Callable[[Any], Any]):
     """Open a brdffit HDF5 file read-only, check its format version, and return ``read_fn(file[group_name])``.
 
-    Later issues read ``/fits/<name>`` and ``/posteriors/<name>`` through this.
+    `read_hdf5` (the measurements) and `brdffit.distributed.table.read_results` (a results table) read through
+    this.
     """
     h5py = _h5py()
     name = group_name.strip("/")

@@ -84,7 +84,7 @@ class Model(eqx.Module):
 def coerce_value(spec: ParamSpec, value, channels: int):
     """Turn a user-given value into the stored shape of ``spec``, or raise a ValueError that names it. A host value
     is shaped in NumPy and stays on the host: the caller moves a model's values with one `brdffit.arrays.on_device`
-    (no compiled program; a transfer a value was a third of a `fit_many`'s results, issue 19); a traced one stays
+    (no compiled program; a transfer per value cost a sizeable share of a `fit_many`'s results); a traced one stays
     traced. A device value already of the stored shape and of JAX's float type stays as it is (the pipeline
     moves a batch's answers with one `on_device`)."""
     if isinstance(value, jax.Array) and not traced(value) and value.dtype == jax.dtypes.canonicalize_dtype(float) \
@@ -110,7 +110,7 @@ def coerce_value(spec: ParamSpec, value, channels: int):
 # per primitive as JAX does when it runs them eagerly (dozens per lobe, which made reports and selection spend
 # most of their time compiling). As `Program`s they are also kept on disk where JAX's persistent cache is on, so a
 # warm process loads them without tracing (a report's or a selection's plausibility checks traced them anew for
-# every model; issue 15). Inside a traced function they inline as ``jax.jit`` does.
+# every model). Inside a traced function they inline as ``jax.jit`` does.
 @Program
 def evaluate_dirs(model: Model, wi, wo):
     """Evaluate a model for pairs of unit direction vectors.

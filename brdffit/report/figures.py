@@ -52,8 +52,8 @@ PNG_COMPRESSION = 1
 
 # Each figure's subplot parameters (fractions of the figure), as matplotlib's tight_layout chose them on the shipped
 # materials' reports (RGB, one to three lobes), the left margin widened for longer tick labels: tight_layout drew
-# every figure once more to measure it, a third of a report's time (1.35 of 3.9 s in a warm process; issue 15). The
-# posterior figures, whose grids grow with the parameters, keep tight_layout.
+# every figure once more to measure it, a sizeable share of a report's time. The posterior figures, whose grids grow
+# with the parameters, keep tight_layout.
 LAYOUT = {
     "slices": dict(left=0.08, right=0.986, bottom=0.133, top=0.889, wspace=0.17, hspace=0.3),
     "hemisphere": dict(left=0.073, right=0.898, bottom=0.059, top=0.846, wspace=0.373),
