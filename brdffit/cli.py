@@ -878,7 +878,10 @@ def _cmd_batch(args) -> int:
     elif not args.quiet:
         print(f"{len(rows)} materials: {', '.join(f'{n} {status}' for status, n in counts.most_common())}; "
               f"wrote {args.out}")
-    converged = all(row["status"] in ("converged", "converged-at-bound") for row in rows)
+    from .fitting.outcome import STATUSES, Status
+
+    # a failed material's row has the status "error"
+    converged = all(row["status"] in STATUSES and Status(row["status"]).converged for row in rows)
     return EXIT_OK if converged else EXIT_NOT_CONVERGED
 
 

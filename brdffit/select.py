@@ -22,6 +22,7 @@ import numpy as np
 from .defaults import FIT
 from .criteria import CRITERIA, DEFAULT_MARGIN, HELDOUT_MARGIN, resolve_criterion
 from .fitting.api import COARSE_ATOL, COARSE_RTOL, fit
+from .fitting.outcome import Status
 from .fitting.result import FitResult
 from .fitting.losses import loss_epsilon
 from .models.model import evaluate_dirs
@@ -56,7 +57,6 @@ _COST_REPEATS = 5
 # Candidates fitted at a time, each in a thread of its own: a first selection is mostly XLA compiling every
 # candidate's programs, one core a compilation, while the GIL is free (issue 15). Every fit is the same as alone.
 SELECT_THREADS = min(4, os.cpu_count() or 1)
-_CONVERGED = ("converged", "converged-at-bound")
 # Screening (AIC/BIC): every candidate is fitted to the training rows (a subsample of SCREEN_SAMPLES of them when
 # there are twice as many), and only those that can still be chosen are refitted to all the data. A subsample optimum costs the full data about
 # k (n/n_s − 1) more in the criterion's units for a well-specified model (the excess χ² of an estimate with n/n_s
@@ -418,11 +418,11 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
         rows, screened = _fitted_rows(candidates, measurements, fold_rows, options, done, bar), None
     for row in rows:
         row["score"] = row["heldout_error"] if criterion in ("cv", "heldout") else row[criterion]
-    finite = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r["score"])]
+    finite = [r for r in rows if r["status"] != Status.NONFINITE and math.isfinite(r["score"])]
     if not finite:
         raise ValueError("no candidate produced a finite score; check the data and candidates")
     # Only a converged fit is a candidate's answer: an unconverged one's score says little about the model.
-    usable = [r for r in finite if r["status"] in _CONVERGED]
+    usable = [r for r in finite if Status(r["status"]).converged]
     if not usable:
         usable = finite
         warnings.append("no candidate's fit converged: the choice is among unconverged fits (raise max_steps, "
@@ -461,7 +461,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
                               excluded=set(implausible))
             for row in rows:
                 row["score"] = row["heldout_error"] if criterion in ("cv", "heldout") else row[criterion]
-            usable = [r for r in rows if r["status"] in _CONVERGED and math.isfinite(r["score"])
+            usable = [r for r in rows if Status(r["status"]).converged and math.isfinite(r["score"])
                       and r["spec"] not in implausible] or usable
     for row in rows:
         row["verdict"] = _verdict(row, chosen, best, threshold, criterion, usable, implausible)
@@ -608,11 +608,11 @@ def _refit_contenders(rows, measurements, screened, criterion, margin, options, 
     gets its full-data fields and ``done`` its full-data fit (a row whose ``done`` entry is still its screening
     fit has not been refitted)."""
     n_values = int(np.isfinite(measurements.values).sum())
-    finite = [r for r in rows if r["status"] != "nonfinite" and math.isfinite(r[criterion])]
+    finite = [r for r in rows if r["status"] != Status.NONFINITE and math.isfinite(r[criterion])]
     while finite:
         # The best that can be chosen: a converged fit's score (a refit that ended unconverged is no longer the
         # bar, and the candidates it had ruled out are measured against the next best).
-        eligible = [r for r in finite if r["status"] in _CONVERGED and r["spec"] not in excluded] or finite
+        eligible = [r for r in finite if Status(r["status"]).converged and r["spec"] not in excluded] or finite
         best = min(r[criterion] for r in eligible)
         todo = [row for row in finite if done[row["spec"]] is screened[row["spec"]] and row["spec"] not in excluded
                 and row[criterion] - SCREEN_SLACK * row["n_params"] * n_values

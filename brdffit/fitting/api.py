@@ -38,6 +38,7 @@ from .losses import ROBUST, get_loss, loss_epsilon
 from . import marquardt, noise
 from .normal_equations import chunks, compile_seconds
 from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data, take_materials, take_samples
+from .outcome import Status
 from .result import FitResult
 from .search import (POLISH_STARTS, SCREEN_SAMPLES, SEARCH_SAMPLES, canonical, grid, interior, quasi_random_starts,
                      score, search, search_range)
@@ -292,10 +293,10 @@ def _answered(outcome: dict, params: dict) -> bool:
             and all(np.array_equal(np.asarray(params[k]), np.asarray(outcome["params"][k])) for k in params))
 
 
-def _start_status(outcome: dict) -> str:
+def _start_status(outcome: dict) -> Status:
     if outcome["nonfinite"]:
-        return "nonfinite"
-    return "max-steps" if outcome["max_steps"] else "converged"
+        return Status.NONFINITE
+    return Status.MAX_STEPS if outcome["max_steps"] else Status.CONVERGED
 
 
 def _best(outcomes: list[dict]) -> dict:
@@ -504,12 +505,12 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
         status, hit, decrease = diagnose(problem, params, cost, outcome["max_steps"], outcome["nonfinite"],
                                          normal.jtj, normal.jtr)
     else:
-        status, hit, decrease = ("nonfinite" if not np.isfinite(cost) else "converged"), [], 0.0
+        status, hit, decrease = (Status.NONFINITE if not np.isfinite(cost) else Status.CONVERGED), [], 0.0
     if n_valid <= 0:
-        status = "nonfinite"
+        status = Status.NONFINITE
     pruned = [label for name in outcome.get("pruned", []) for label in layout[name].labels()]
-    if pruned and status == "converged":
-        status = "converged-at-bound"
+    if pruned and status == Status.CONVERGED:
+        status = Status.CONVERGED_AT_BOUND
     hit = hit + pruned
     uncertainty = Uncertainty(normal if problem.free else None, cost, problem.loss, n_valid)
     labels = layout.labels(problem.free)
@@ -611,8 +612,8 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             kept[m] = revived
     normals = [_normal(problem, b, d) for b, d in zip(kept, solve_items)]
     statuses = [diagnose(problem, b["params"], b["cost"], b["max_steps"], b["nonfinite"], n.jtj, n.jtr)[0]
-                if problem.free else "converged" for b, n in zip(kept, normals)]
-    holds = [_to_hold(problem, b["params"]) if st in ("max-steps", "stalled") else {}
+                if problem.free else Status.CONVERGED for b, n in zip(kept, normals)]
+    holds = [_to_hold(problem, b["params"]) if st.unfinished else {}
              for b, st in zip(kept, statuses)]
     for _ in range(HOLD_ROUNDS):
         if not any(holds):
@@ -633,7 +634,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             records[m].append({"init": _json_params(_held_start(problem, kept[m]["params"], held)),
                                "cost": retry["cost"], "status": retry_status, "steps": retry["steps"],
                                "held": sorted(held)})
-            if retry["cost"] <= kept[m]["cost"] or retry_status.startswith("converged"):
+            if retry["cost"] <= kept[m]["cost"] or retry_status.converged:
                 retry["steps"] += kept[m]["steps"]
                 retry["notes"] = kept[m]["notes"] + [
                     f"{', '.join(sorted(held))} held (on a bound, or where a lobe whose amplitudes all went to 0 "
@@ -643,14 +644,14 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
             # The active-set update: a held bound whose descent direction points into the box (Karush-Kuhn-Tucker)
             # is released, a scalar the re-solve took to a bound is added.
             holds[m] = _next_holds(problem, held, retry["params"], retry_normal.jtr) \
-                if statuses[m] in ("max-steps", "stalled") else {}
+                if statuses[m].unfinished else {}
 
     problems = [problem] * len(items)
     for m in range(len(items)):
         # Pruning is for a solve that still did not converge with a lobe drifting: a converged fit's spare lobe
         # is the least-squares answer, and selection, not the fit, decides whether it is worth its parameters.
         dead = _dead_amplitudes(problem, kept[m]["params"], kept[m]["cost"], solve_items[m]) \
-            if statuses[m] in ("max-steps", "stalled") else []
+            if statuses[m].unfinished else []
         if dead:
             bar.update(2, f"pruning {', '.join(dead)}")
             problems[m], pruned, c_time, r_time = _prune(problem, solve_problem, kept[m], dead, solve_items[m],
@@ -755,10 +756,6 @@ def fit(measurements, model, *, loss: str = FIT.loss, solver=FIT.solver, init="a
     return result
 
 
-# The worst status of a set of fits, for independent channels (every status ranked).
-_SEVERITY = {"converged": 0, "converged-at-bound": 1, "stalled": 2, "max-steps": 3, "nonfinite": 4}
-
-
 def _fit_independent(measurements, model, options: dict, bar: Progress) -> FitResult:
     """One fit per channel, solved as one batch of single-channel materials, assembled: shape parameters become
     per-channel arrays."""
@@ -779,7 +776,7 @@ def _fit_independent(measurements, model, options: dict, bar: Progress) -> FitRe
             merged[name] = np.concatenate(parts) if spec.colour else np.stack([p[0] for p in parts])
         return merged
 
-    worst = max((r.status for r in results), key=_SEVERITY.__getitem__)
+    worst = Status.worst(r.status for r in results)
     k = sum(r.n_params for r in results)
     n = sum(r.n_samples for r in results)
     cost = sum(r.cost for r in results)

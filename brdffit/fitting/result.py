@@ -12,9 +12,9 @@ import numpy as np
 from ..models.model import Model, evaluate
 from ..models.registry import model_from_dict, model_to_dict
 from .noise import NoiseModel
-from .status import STATUSES
+from .outcome import STATUSES, Status
 
-__all__ = ["FitResult", "STATUSES"]
+__all__ = ["FitResult", "Status", "STATUSES"]
 
 
 def _json_value(value):
@@ -48,7 +48,7 @@ class FitResult:
         dof: n_samples − n_params.
         cost: the minimised sum of squared residuals.
         aic, bic: information criteria (docs/fitting.md).
-        status: one of `STATUSES`.
+        status: a `Status` (a name of `STATUSES` is read as one).
         bounds_hit: labels of parameters that ended on a bound.
         warnings: human-readable warnings (non-identifiable parameter pairs, ...).
         steps: solver steps of the kept start.
@@ -79,7 +79,7 @@ class FitResult:
     cost: float
     aic: float
     bic: float
-    status: str
+    status: Status
     bounds_hit: list
     warnings: list
     steps: int
@@ -100,6 +100,7 @@ class FitResult:
     _plausibility: object = dataclasses.field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
+        self.status = Status(self.status)
         if not self.stderr_laplace:  # results built without it (older files, hand-made ones) reported Laplace
             self.stderr_laplace = dict(self.stderr)
 
@@ -121,7 +122,7 @@ class FitResult:
     @property
     def converged(self) -> bool:
         """True for ``converged`` and ``converged-at-bound``."""
-        return self.status in ("converged", "converged-at-bound")
+        return self.status.converged
 
     @property
     def spec(self) -> str:

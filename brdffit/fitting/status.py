@@ -1,14 +1,6 @@
 """Diagnosis of a fit: its status, the bounds it ended on, and the warnings a user should read.
 
-A status is one of `STATUSES` (docs/fitting.md explains each):
-
-- ``converged``: the solver's termination test passed and a further Gauss-Newton step predicts no decrease;
-- ``converged-at-bound``: the same, with parameters on a bound (named in ``bounds_hit``); at a bound the
-  Karush-Kuhn-Tucker condition is what is tested: the descent direction points out of the box;
-- ``max-steps``: the step limit was reached first;
-- ``stalled``: the solver stopped where a Gauss-Newton step still predicts a decrease above `STALL_TOLERANCE` of
-  the cost (undamped Gauss-Newton thrown far away, a bound transform saturated on the way);
-- ``nonfinite``: the cost is not finite.
+A status is a `brdffit.fitting.outcome.Status` (its docstring and docs/fitting.md explain each).
 """
 
 from __future__ import annotations
@@ -18,12 +10,12 @@ import itertools
 import numpy as np
 
 from ..params import at_bound
+from .outcome import STATUSES, Status
 from .problem import Problem
 
-__all__ = ["STATUSES", "STALL_TOLERANCE", "bounds_hit", "bounded_step", "predicted_decrease", "diagnose", "warnings_of",
+__all__ = ["Status", "STATUSES", "STALL_TOLERANCE", "bounds_hit", "bounded_step", "predicted_decrease", "diagnose", "warnings_of",
            "information_criteria"]
 
-STATUSES = ("converged", "converged-at-bound", "max-steps", "stalled", "nonfinite")
 # A fit whose final point still leaves a predicted Gauss-Newton decrease above this fraction of the cost is
 # "stalled", not converged. Converged fits leave ~1e-12; the stalls the stability study found (docs/stability.md)
 # leave more than the cost itself.
@@ -108,17 +100,17 @@ def diagnose(problem: Problem, params: dict, cost: float, max_steps: bool, nonfi
         jtj, jtr: the physical normal matrices at ``params``.
 
     Returns:
-        ``(status, hit, decrease)``.
+        ``(status, hit, decrease)``: a `Status`, the labels on a bound, the predicted decrease.
     """
     hit = bounds_hit(problem, params)
     decrease = predicted_decrease(problem, params, jtj, jtr) if problem.free else 0.0
     if nonfinite or not np.isfinite(cost):
-        return "nonfinite", hit, decrease
+        return Status.NONFINITE, hit, decrease
     if max_steps:
-        return "max-steps", hit, decrease
+        return Status.MAX_STEPS, hit, decrease
     if decrease > STALL_TOLERANCE * max(cost, 1e-300):
-        return "stalled", hit, decrease
-    return ("converged-at-bound" if hit else "converged"), hit, decrease
+        return Status.STALLED, hit, decrease
+    return (Status.CONVERGED_AT_BOUND if hit else Status.CONVERGED), hit, decrease
 
 
 def warnings_of(problem: Problem, labels: list, uncertainty, hit: list, status: str, decrease: float,

@@ -1,0 +1,57 @@
+"""How a fit ended: `Status`, declared once with its order of severity (docs/fitting.md explains each).
+
+A status is a `str` (an `enum.StrEnum`): it compares equal to its name, is written as its name to JSON, HDF5 and
+tables, and is read back by ``Status(name)``. No JAX is imported: the CLI reads statuses from batch tables.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Iterable
+
+__all__ = ["Status", "STATUSES"]
+
+
+class Status(enum.StrEnum):
+    """How a fit ended, from the best to the worst (the declaration order is the severity).
+
+    - ``converged``: the solver's termination test passed and a further Gauss-Newton step predicts no decrease;
+    - ``converged-at-bound``: the same, with parameters on a bound (named in ``bounds_hit``); at a bound the
+      Karush-Kuhn-Tucker condition is what is tested: the descent direction points out of the box;
+    - ``stalled``: the solver stopped where a Gauss-Newton step still predicts a decrease above
+      `brdffit.fitting.status.STALL_TOLERANCE` of the cost (undamped Gauss-Newton thrown far away, a bound
+      transform saturated on the way);
+    - ``max-steps``: the step limit was reached first;
+    - ``nonfinite``: the cost is not finite.
+    """
+
+    CONVERGED = "converged"
+    CONVERGED_AT_BOUND = "converged-at-bound"
+    STALLED = "stalled"
+    MAX_STEPS = "max-steps"
+    NONFINITE = "nonfinite"
+
+    @property
+    def converged(self) -> bool:
+        """Whether the fit's answer is an optimum (inside the box or on its boundary)."""
+        return self in (Status.CONVERGED, Status.CONVERGED_AT_BOUND)
+
+    @property
+    def unfinished(self) -> bool:
+        """Whether a solve stopped short of an optimum with a finite cost (stalled or at its step limit): the case
+        that the pipeline's hold rounds and pruning resume."""
+        return self in (Status.STALLED, Status.MAX_STEPS)
+
+    @property
+    def severity(self) -> int:
+        """0 for ``converged`` up to 4 for ``nonfinite``."""
+        return _ORDER.index(self)
+
+    @classmethod
+    def worst(cls, statuses: Iterable) -> "Status":
+        """The most severe of ``statuses`` (names or members), e.g. of a fit's independent channels."""
+        return max((cls(s) for s in statuses), key=lambda s: s.severity)
+
+
+_ORDER = tuple(Status)
+STATUSES = tuple(s.value for s in Status)
