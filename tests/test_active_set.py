@@ -7,6 +7,7 @@ from scipy.optimize import minimize
 
 from brdffit import synth, models
 from brdffit.fitting import api
+from brdffit.fitting.outcome import SolveOutcome
 from brdffit.fitting.status import bounded_step
 
 
@@ -80,8 +81,8 @@ def test_a_converged_start_tied_with_a_lower_max_steps_one_is_kept():
     """Two starts at the same optimum to 3e-9: the converged one is kept; a converged start 1e-3 above a
     max-steps one is not (the lower cost wins)."""
     def outcome(cost, max_steps):
-        return {"cost": cost, "max_steps": max_steps, "nonfinite": False}
+        return SolveOutcome({}, cost, max_steps=max_steps)
 
-    assert api._best([outcome(1202.97355, False), outcome(1202.97354, True)])["max_steps"] is False
-    assert api._best([outcome(1204.0, False), outcome(1202.97354, True)])["max_steps"] is True
-    assert api._best([outcome(np.inf, False), outcome(3.0, True)])["cost"] == 3.0
+    assert api._best([outcome(1202.97355, False), outcome(1202.97354, True)]).max_steps is False
+    assert api._best([outcome(1204.0, False), outcome(1202.97354, True)]).max_steps is True
+    assert api._best([outcome(np.inf, False), outcome(3.0, True)]).cost == 3.0

@@ -1,6 +1,8 @@
 """The default solver (`brdffit.fitting.marquardt`): its transforms' slopes, its agreement with optimistix's
 Levenberg-Marquardt, holds and the independence of the points of a batch."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -63,9 +65,9 @@ def test_points_of_a_batch_are_solved_independently(misspecified):
     together = marquardt.solve(problem, [starts], [data], **kwargs)[0]
     for start, joint in zip(starts, together):
         alone = marquardt.solve(problem, [[start]], [data], **kwargs)[0][0]
-        assert not joint["max_steps"] and not alone["max_steps"]
-        assert joint["cost"] == pytest.approx(alone["cost"], rel=1e-12)
-        np.testing.assert_allclose(joint["params"]["m"], alone["params"]["m"], rtol=1e-7)
+        assert not joint.max_steps and not alone.max_steps
+        assert joint.cost == pytest.approx(alone.cost, rel=1e-12)
+        np.testing.assert_allclose(joint.params["m"], alone.params["m"], rtol=1e-7)
 
 
 def test_a_held_parameter_stays_and_the_others_reach_their_conditional_optimum(misspecified):
@@ -73,15 +75,15 @@ def test_a_held_parameter_stays_and_the_others_reach_their_conditional_optimum(m
     start = dict(base, m=np.asarray(0.3))
     held = marquardt.solve(problem, [[start]], [data], rtol=1e-10, atol=1e-14, max_steps=200,
                            held=[{"m": np.asarray(0.3), "f0": np.asarray(np.nan)}])[0][0]
-    assert float(held["params"]["m"]) == 0.3
+    assert float(held.params["m"]) == 0.3
     # The conditional optimum in f0 with m held: a dense scan of f0 finds no lower cost.
     from brdffit.fitting.search import score
 
     grid = np.linspace(1e-3, 1.0, 400)
-    candidates = [dict(held["params"], f0=np.asarray(f)) for f in grid]
+    candidates = [dict(held.params, f0=np.asarray(f)) for f in grid]
     costs, _ = score(problem.structure, candidates, data)
-    assert held["cost"] <= costs.min() * (1 + 1e-9)
-    assert not held["max_steps"] and not held["nonfinite"]
+    assert held.cost <= costs.min() * (1 + 1e-9)
+    assert not held.max_steps and not held.nonfinite
 
 
 def test_a_compact_batch_marks_one_answer_a_material_and_the_pipeline_keeps_it(misspecified):
@@ -93,10 +95,10 @@ def test_a_compact_batch_marks_one_answer_a_material_and_the_pipeline_keeps_it(m
     starts = [[dict(base, m=np.asarray(m)) for m in (0.05, 0.2, 0.4, 0.6)]] * 2
     out = marquardt.solve(problem, starts, [both], rtol=1e-10, atol=1e-14, max_steps=200)
     for material in out:
-        marked = [o for o in material if o["answer"]]
-        assert len(marked) == 1 and marked[0]["exact"]
-        assert marked[0]["cost"] <= min(o["cost"] for o in material) * (1 + marquardt.BEST_TIE)
-    tied = [dict(marked[0]), dict(marked[0], answer=False, cost=marked[0]["cost"] * (1 - 1e-15), exact=False)]
+        marked = [o for o in material if o.answer]
+        assert len(marked) == 1 and marked[0].exact
+        assert marked[0].cost <= min(o.cost for o in material) * (1 + marquardt.BEST_TIE)
+    tied = [marked[0], dataclasses.replace(marked[0], answer=False, cost=marked[0].cost * (1 - 1e-15), exact=False)]
     assert api._best(tied) is tied[0]
-    unmarked = [dict(o, answer=False) for o in tied]
+    unmarked = [dataclasses.replace(o, answer=False) for o in tied]
     assert api._best(unmarked) is unmarked[1]  # without the mark, the rounding decides

@@ -38,7 +38,7 @@ from .losses import ROBUST, get_loss, loss_epsilon
 from . import marquardt, noise
 from .normal_equations import chunks, compile_seconds
 from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data, take_materials, take_samples
-from .outcome import Status
+from .outcome import SolveOutcome, Status
 from .result import FitResult
 from .search import (POLISH_STARTS, SCREEN_SAMPLES, SEARCH_SAMPLES, canonical, grid, interior, quasi_random_starts,
                      score, search, search_range)
@@ -216,9 +216,8 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
             the compiled programs, stay the same).
 
     Returns:
-        ``(outcomes, compile_seconds, run_seconds)``: for each material a list of per-start dicts ``params``
-        (physical, every parameter), ``cost``, ``steps``, ``max_steps``, ``nonfinite`` and, from the default
-        solver, ``normal`` (the normal equations at the answer) and ``exact`` (`brdffit.fitting.marquardt.solve`).
+        ``(outcomes, compile_seconds, run_seconds)``: for each material a list of one `SolveOutcome` a start
+        (with ``normal``, ``exact`` and ``answer`` from the default solver, `brdffit.fitting.marquardt.solve`).
     """
     specs = problem.specs
     if not problem.outer:  # nothing nonlinear is free: the projection is the whole solve
@@ -228,8 +227,7 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
         out = []
         for m, material in enumerate(starts):
             params = dict(material[0], **{a: amplitudes[a][m, 0] for a in amplitudes})
-            out.append([{"params": params, "cost": float(costs[m, 0]), "steps": 0, "max_steps": False,
-                         "nonfinite": not np.isfinite(costs[m, 0])}])
+            out.append([SolveOutcome(params, float(costs[m, 0]), nonfinite=not np.isfinite(costs[m, 0]))])
         return out, 0.0, time.perf_counter() - t0
     solve_data = data._replace(fixed={k: to_device(np.stack([np.asarray(material[0][k], dtype=float)
                                                                for material in starts]))
@@ -261,9 +259,9 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
     run_time = time.perf_counter() - t0
     outcomes = []
     for m, material in enumerate(starts):
-        outcomes.append([{"params": {k: v[m, i] for k, v in out["params"].items()}, "cost": float(out["cost"][m, i]),
-                          "steps": int(out["steps"][m, i]), "max_steps": bool(out["max_steps"][m, i]),
-                          "nonfinite": bool(out["nonfinite"][m, i])} for i in range(len(material))])
+        outcomes.append([SolveOutcome({k: v[m, i] for k, v in out["params"].items()}, float(out["cost"][m, i]),
+                                      steps=int(out["steps"][m, i]), max_steps=bool(out["max_steps"][m, i]),
+                                      nonfinite=bool(out["nonfinite"][m, i])) for i in range(len(material))])
     return outcomes, compile_time, run_time
 
 
@@ -279,24 +277,18 @@ def _normal(problem: Problem, outcome: dict, data: FitData):
     """The normal equations at an outcome: the solver's own when it gave them, else a pass over ``data``."""
     if not problem.free:
         return None
-    if outcome.get("normal") is not None:
-        return outcome["normal"]
-    return normal_equations_at(problem, outcome["params"], data)
+    if outcome.normal is not None:
+        return outcome.normal
+    return normal_equations_at(problem, outcome.params, data)
 
 
 def _answered(outcome: dict, params: dict) -> bool:
     """Whether the solver's sums of an outcome on the whole data serve as those of the answer ``params``: they
     carry the metric sums, the solver's last pass evaluated the point itself (``exact``), and the canonical order
     left the parameters as they were (a reordering of lobes would move the Jacobian's columns)."""
-    normal = outcome.get("normal")
-    return (normal is not None and normal.metric_sums is not None and outcome.get("exact", False)
-            and all(np.array_equal(np.asarray(params[k]), np.asarray(outcome["params"][k])) for k in params))
-
-
-def _start_status(outcome: dict) -> Status:
-    if outcome["nonfinite"]:
-        return Status.NONFINITE
-    return Status.MAX_STEPS if outcome["max_steps"] else Status.CONVERGED
+    normal = outcome.normal
+    return (normal is not None and normal.metric_sums is not None and outcome.exact
+            and all(np.array_equal(np.asarray(params[k]), np.asarray(outcome.params[k])) for k in params))
 
 
 def _best(outcomes: list[dict]) -> dict:
@@ -305,11 +297,11 @@ def _best(outcomes: list[dict]) -> dict:
     rather than one that ran out of steps). The solver's mark stands: its final pass at the answer can move that
     cost by rounding above another start's at the same optimum (whose sums then are not the answer's: a further
     pass, a new compiled shape in a `fit_many` worker)."""
-    marked = [o for o in outcomes if o.get("answer") and not o["nonfinite"]]
+    marked = [o for o in outcomes if o.answer and not o.nonfinite]
     if marked:
         return marked[0]
-    costs = np.array([np.inf if o["nonfinite"] else o["cost"] for o in outcomes])
-    return outcomes[marquardt.answer(costs, np.array([o["max_steps"] for o in outcomes]))]
+    costs = np.array([np.inf if o.nonfinite else o.cost for o in outcomes])
+    return outcomes[marquardt.answer(costs, np.array([o.max_steps for o in outcomes]))]
 
 
 # ---------------------------------------------------------------------------------------------------------- hold
@@ -407,25 +399,24 @@ def _revive(problem: Problem, solve_problem: Problem, kept: dict, search_data: F
         ``(outcome, compile_seconds, run_seconds)``: the best revived outcome, with a note, when it converged
         below ``kept``'s cost, else None; and the seconds the polish spent either way.
     """
-    groups = _dead_shapes(problem, kept["params"])
+    groups = _dead_shapes(problem, kept.params)
     if not groups:
         return None, 0.0, 0.0
     specs = problem.specs
     candidates = [setting for names in groups for setting in grid([specs[n] for n in names], seed)]
     single = take_materials(search_data, [material])
-    found = search(problem, kept["params"], single, seed, candidates=candidates, starts=starts)
+    found = search(problem, kept.params, single, seed, candidates=candidates, starts=starts)
     polish_data = stack_data([data])
     outcomes, compile_time, run_time = _polish(solve_problem, found, polish_data, metrics=metrics,
                                                max_steps=min(solve_problem.max_steps, REVIVE_STEPS))
-    revived = dict(_best(outcomes[0]))
+    revived = _best(outcomes[0])
     # Only a converged answer replaces one: a lower point still moving after REVIVE_STEPS lies in a flat valley
     # (two GGX lobes sharing f0 on paper_white: 0.15 % lower after 256 steps, not converged).
-    if revived["max_steps"] or revived["nonfinite"] or not revived["cost"] < kept["cost"] * (1.0 - 1e-12):
+    if revived.max_steps or revived.nonfinite or not revived.cost < kept.cost * (1.0 - 1e-12):
         return None, compile_time, run_time
-    revived["steps"] += kept["steps"]
-    revived["notes"] = kept["notes"] + [
+    revived = dataclasses.replace(revived, steps=revived.steps + kept.steps, notes=kept.notes + (
         f"{'; '.join(', '.join(names) for names in groups)} searched again where their lobe's amplitudes had all "
-        f"gone to 0 (cost {kept['cost']:.6g} -> {revived['cost']:.6g})"]
+        f"gone to 0 (cost {kept.cost:.6g} -> {revived.cost:.6g})",))
     return revived, compile_time, run_time
 
 
@@ -471,22 +462,20 @@ def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, dat
             if slot.name in dead:
                 for name in layout.partners(j, slot.local):
                     if name in problem.free and name not in dead:
-                        held[name] = np.asarray(kept["params"][name], dtype=float)
+                        held[name] = np.asarray(kept.params[name], dtype=float)
     free = tuple(n for n in problem.free if n not in held)
     reduced = dataclasses.replace(problem, free=free)
-    start = dict(kept["params"], **held)
+    start = dict(kept.params, **held)
     start = {k: (interior(v, problem.specs[k]) if k in reduced.outer else v) for k, v in start.items()}
     single = stack_data([data])
     single = single._replace(fixed={k: to_device(np.asarray(v)[None]) for k, v in start.items() if k not in free})
     outcomes, compile_time, run_time = _polish(dataclasses.replace(solve_problem, free=free), [[start] * starts],
                                                single, metrics=metrics)
-    pruned = dict(_best(outcomes[0]))
-    pruned["steps"] += kept["steps"]
-    pruned["notes"] = kept["notes"] + [
+    pruned = _best(outcomes[0])
+    pruned = dataclasses.replace(pruned, steps=pruned.steps + kept.steps, pruned=tuple(dead), notes=kept.notes + (
         f"{', '.join(dead)} went to 0 in every channel: the lobe contributes nothing and was pruned (amplitude "
         f"held at 0; {', '.join(sorted(set(held) - set(dead))) or 'nothing else'} held where it was); a model "
-        "without it suffices"]
-    pruned["pruned"] = dead
+        "without it suffices",))
     return reduced, pruned, compile_time, run_time
 
 
@@ -500,22 +489,22 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
     layout = problem.layout
     valid = np.isfinite(measurements.values)
     n_valid = int(valid.sum())
-    cost = float(normal.cost) if normal is not None else float(outcome["cost"])
+    cost = float(normal.cost) if normal is not None else float(outcome.cost)
     if problem.free:
-        status, hit, decrease = diagnose(problem, params, cost, outcome["max_steps"], outcome["nonfinite"],
+        status, hit, decrease = diagnose(problem, params, cost, outcome.max_steps, outcome.nonfinite,
                                          normal.jtj, normal.jtr)
     else:
         status, hit, decrease = (Status.NONFINITE if not np.isfinite(cost) else Status.CONVERGED), [], 0.0
     if n_valid <= 0:
         status = Status.NONFINITE
-    pruned = [label for name in outcome.get("pruned", []) for label in layout[name].labels()]
+    pruned = [label for name in outcome.pruned for label in layout[name].labels()]
     if pruned and status == Status.CONVERGED:
         status = Status.CONVERGED_AT_BOUND
     hit = hit + pruned
     uncertainty = Uncertainty(normal if problem.free else None, cost, problem.loss, n_valid)
     labels = layout.labels(problem.free)
     warnings = warnings_of(problem, labels, uncertainty, hit, status, decrease, cost, params)
-    warnings = outcome.get("notes", []) + warnings
+    warnings = list(outcome.notes) + warnings
     k = len(labels)
     aic, bic = information_criteria(problem.loss, cost, n_valid, k)
     channel_cost = normal.channel_cost if normal is not None else np.full(problem.channels, cost / problem.channels)
@@ -537,7 +526,7 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
         covariance=covariance, correlation=correlation, labels=labels, metrics=metrics, n_samples=n_valid,
         n_params=k,
         dof=n_valid - k, cost=cost, aic=aic, bic=bic, status=status, bounds_hit=hit, warnings=warnings,
-        steps=int(outcome["steps"]), compile_time=times["compile"], run_time=times["run"], init_time=times["init"],
+        steps=int(outcome.steps), compile_time=times["compile"], run_time=times["run"], init_time=times["init"],
         loss=problem.loss, solver=solver_name(problem.solver), channel_mode="shared-shape",
         fixed=sorted(n for n in layout.names if n not in problem.free), starts=starts,
         noise_variance=float(uncertainty.variance), strategy=strategy, models=[fitted], noise_model=noise_model,
@@ -598,28 +587,28 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
                   f"{f' on {COARSE_SAMPLES} samples' if two_stage else ''}")
     outcomes, compile_time, run_time = _polish(solve_problem, starts, stack_data(solve_items), metrics=not two_stage)
 
-    records = [[{"init": _json_params(s), "cost": o["cost"], "status": _start_status(o), "steps": o["steps"]}
+    records = [[{"init": _json_params(s), "cost": o.cost, "status": o.status, "steps": o.steps}
                 for s, o in zip(starts[m], outcomes[m])] for m in range(len(items))]
-    kept = [dict(_best(o), notes=[]) for o in outcomes]
+    kept = [_best(o) for o in outcomes]
     for m in range(len(items)):
         revived, c_time, r_time = _revive(problem, solve_problem, kept[m], search_data, m, solve_items[m],
                                           seed, len(starts[0]), not two_stage)
         compile_time += c_time
         run_time += r_time
         if revived is not None:
-            records[m].append({"init": _json_params(kept[m]["params"]), "cost": revived["cost"],
-                               "status": _start_status(revived), "steps": revived["steps"], "revived": True})
+            records[m].append({"init": _json_params(kept[m].params), "cost": revived.cost,
+                               "status": revived.status, "steps": revived.steps, "revived": True})
             kept[m] = revived
     normals = [_normal(problem, b, d) for b, d in zip(kept, solve_items)]
-    statuses = [diagnose(problem, b["params"], b["cost"], b["max_steps"], b["nonfinite"], n.jtj, n.jtr)[0]
+    statuses = [diagnose(problem, b.params, b.cost, b.max_steps, b.nonfinite, n.jtj, n.jtr)[0]
                 if problem.free else Status.CONVERGED for b, n in zip(kept, normals)]
-    holds = [_to_hold(problem, b["params"]) if st.unfinished else {}
+    holds = [_to_hold(problem, b.params) if st.unfinished else {}
              for b, st in zip(kept, statuses)]
     for _ in range(HOLD_ROUNDS):
         if not any(holds):
             break
         bar.update(2, "holding parameters and solving again")
-        again, c_time, r_time = _polish(solve_problem, [[_held_start(problem, b["params"], h)] * len(starts[0])
+        again, c_time, r_time = _polish(solve_problem, [[_held_start(problem, b.params, h)] * len(starts[0])
                                                         for b, h in zip(kept, holds)],
                                         stack_data(solve_items), holds, metrics=not two_stage)
         compile_time += c_time
@@ -627,30 +616,29 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         for m, held in enumerate(holds):
             if not held:
                 continue
-            retry = dict(again[m][0])
+            retry = again[m][0]
             retry_normal = _normal(problem, retry, solve_items[m])
-            retry_status = diagnose(problem, retry["params"], retry["cost"], retry["max_steps"], retry["nonfinite"],
+            retry_status = diagnose(problem, retry.params, retry.cost, retry.max_steps, retry.nonfinite,
                                     retry_normal.jtj, retry_normal.jtr)[0]
-            records[m].append({"init": _json_params(_held_start(problem, kept[m]["params"], held)),
-                               "cost": retry["cost"], "status": retry_status, "steps": retry["steps"],
+            records[m].append({"init": _json_params(_held_start(problem, kept[m].params, held)),
+                               "cost": retry.cost, "status": retry_status, "steps": retry.steps,
                                "held": sorted(held)})
-            if retry["cost"] <= kept[m]["cost"] or retry_status.converged:
-                retry["steps"] += kept[m]["steps"]
-                retry["notes"] = kept[m]["notes"] + [
+            if retry.cost <= kept[m].cost or retry_status.converged:
+                retry = dataclasses.replace(retry, steps=retry.steps + kept[m].steps, notes=kept[m].notes + (
                     f"{', '.join(sorted(held))} held (on a bound, or where a lobe whose amplitudes all went to 0 "
                     f"left them) after a solve that ended {statuses[m]} "
-                    f"(cost {kept[m]['cost']:.6g} -> {retry['cost']:.6g})"]
+                    f"(cost {kept[m].cost:.6g} -> {retry.cost:.6g})",))
                 kept[m], normals[m], statuses[m] = retry, retry_normal, retry_status
             # The active-set update: a held bound whose descent direction points into the box (Karush-Kuhn-Tucker)
             # is released, a scalar the re-solve took to a bound is added.
-            holds[m] = _next_holds(problem, held, retry["params"], retry_normal.jtr) \
+            holds[m] = _next_holds(problem, held, retry.params, retry_normal.jtr) \
                 if statuses[m].unfinished else {}
 
     problems = [problem] * len(items)
     for m in range(len(items)):
         # Pruning is for a solve that still did not converge with a lobe drifting: a converged fit's spare lobe
         # is the least-squares answer, and selection, not the fit, decides whether it is worth its parameters.
-        dead = _dead_amplitudes(problem, kept[m]["params"], kept[m]["cost"], solve_items[m]) \
+        dead = _dead_amplitudes(problem, kept[m].params, kept[m].cost, solve_items[m]) \
             if statuses[m].unfinished else []
         if dead:
             bar.update(2, f"pruning {', '.join(dead)}")
@@ -658,15 +646,15 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
                                                           len(starts[0]), not two_stage)
             compile_time += c_time
             run_time += r_time
-            records[m].append({"init": _json_params(pruned["params"]), "cost": pruned["cost"],
-                               "status": _start_status(pruned), "steps": pruned["steps"], "pruned": dead})
+            records[m].append({"init": _json_params(pruned.params), "cost": pruned.cost,
+                               "status": pruned.status, "steps": pruned.steps, "pruned": dead})
             kept[m] = pruned
             normals[m] = _normal(problems[m], pruned, solve_items[m])
 
     answers = []
     for m, measurements in enumerate(items):
         best, normal, problem = kept[m], normals[m], problems[m]
-        params = canonical(problem, best["params"])
+        params = canonical(problem, best.params)
         if two_stage:
             bar.update(3, f"refining on all {measurements.n} samples")
             data = full[m]._replace(fixed={k: to_device(v) for k, v in params.items() if k not in problem.free})
@@ -677,20 +665,20 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
                 damping=REFINE_DAMPING, metrics=True)[0][0])
             compile_time += c_time
             run_time += r_time
-            best = dict(best, params=refined["params"], cost=refined["cost"], steps=best["steps"] + refined["steps"],
-                        max_steps=refined["max_steps"], nonfinite=refined["nonfinite"], normal=refined["normal"],
-                        exact=refined["exact"])
-            params = canonical(problem, refined["params"])
+            best = dataclasses.replace(best, params=refined.params, cost=refined.cost, steps=best.steps + refined.steps,
+                                       max_steps=refined.max_steps, nonfinite=refined.nonfinite, normal=refined.normal,
+                                       exact=refined.exact)
+            params = canonical(problem, refined.params)
         if not problem.free:
             r = np.asarray(residuals_at(problem, {k: to_device(v) for k, v in params.items()}, full[m]))
-            best = dict(best, cost=float(np.sum(r * r)))
+            best = dataclasses.replace(best, cost=float(np.sum(r * r)))
         elif _answered(best, params):
-            normal = best["normal"]
+            normal = best.normal
         else:
             # A pass at the answer itself, where the solver's last sums are not those of the answer. It gives the
             # status, the covariance and the metrics.
-            normal = normal_equations_at(problem, params, full[m],
-                                         width=1 if two_stage else _polish_width(len(starts[0]), full[m].values.shape[0]))
+            width = 1 if two_stage else _polish_width(len(starts[0]), full[m].values.shape[0])
+            normal = normal_equations_at(problem, params, full[m], width=width)
         answers.append((problem, measurements, full[m], params, best, normal, records[m]))
     times = {"compile": compile_time, "run": run_time / len(items), "init": init_time / len(items)}
     moved = on_device([{k: np.asarray(v, dtype=float) for k, v in answer[3].items()} for answer in answers])

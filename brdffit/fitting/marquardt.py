@@ -45,6 +45,7 @@ import numpy as np
 from ..defaults import FIT
 from .moments import applies, moment_sums
 from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of
+from .outcome import SolveOutcome
 from .problem import FitData, Problem
 from .separable import solve_box
 
@@ -421,10 +422,10 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
             values of the pass that evaluated it, which the solve keeps for its current points.
 
     Returns:
-        For each material, a list of S dicts: ``params`` (physical, every parameter), ``cost``, ``steps``,
-        ``max_steps`` (the step limit ended it), ``nonfinite``, ``normal`` (the `NormalEquations` at the
-        returned point, in the physical free parameters; with ``metrics``, its metric sums) and ``exact``: the
-        last pass evaluated the returned point itself, up to an amplitude move within `EXACT_MOVE` (its sums
+        For each material, a list of S `SolveOutcome`: ``params`` (physical, every parameter), ``cost``,
+        ``steps``, ``max_steps`` (the step limit ended it), ``nonfinite``, ``normal`` (the `NormalEquations` at
+        the returned point, in the physical free parameters; with ``metrics``, its metric sums) and ``exact``:
+        the last pass evaluated the returned point itself, up to an amplitude move within `EXACT_MOVE` (its sums
         are then those of the point to that order, and no further pass at the answer is needed); ``answer``:
         the material's answer (`answer`, True for one point a material).
     """
@@ -501,9 +502,10 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         for s, start in enumerate(material):
             values = layout.unflatten(state.x[m, s], free, xp=np)
             params = dict(start, **{k: np.asarray(v) for k, v in values.items()})
-            row.append({"params": params, "cost": float(state.sums.cost[m, s]), "steps": int(steps[m, s]),
-                        "max_steps": bool(finite[m, s] and not converged[m, s] and steps[m, s] >= max_steps),
-                        "nonfinite": not finite[m, s], "exact": bool(exact[m, s]), "answer": bool(answers[m, s]),
-                        "normal": state.sums.at_point(m, s)})
+            row.append(SolveOutcome(
+                params, float(state.sums.cost[m, s]), steps=int(steps[m, s]),
+                max_steps=bool(finite[m, s] and not converged[m, s] and steps[m, s] >= max_steps),
+                nonfinite=not finite[m, s], normal=state.sums.at_point(m, s), exact=bool(exact[m, s]),
+                answer=bool(answers[m, s])))
         out.append(row)
     return out

@@ -1,4 +1,5 @@
-"""How a fit ended: `Status`, declared once with its order of severity (docs/fitting.md explains each).
+"""How a fit ended: `Status`, declared once with its order of severity (docs/fitting.md explains each), and what
+one start's solve ended with: `SolveOutcome`.
 
 A status is a `str` (an `enum.StrEnum`): it compares equal to its name, is written as its name to JSON, HDF5 and
 tables, and is read back by ``Status(name)``. No JAX is imported: the CLI reads statuses from batch tables.
@@ -6,10 +7,12 @@ tables, and is read back by ``Status(name)``. No JAX is imported: the CLI reads 
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 from collections.abc import Iterable
+from typing import Any
 
-__all__ = ["Status", "STATUSES"]
+__all__ = ["Status", "STATUSES", "SolveOutcome"]
 
 
 class Status(enum.StrEnum):
@@ -55,3 +58,43 @@ class Status(enum.StrEnum):
 
 _ORDER = tuple(Status)
 STATUSES = tuple(s.value for s in Status)
+
+
+@dataclasses.dataclass(frozen=True)
+class SolveOutcome:
+    """What the solve of one start ended with: `brdffit.fitting.marquardt.solve`, the compiled optimistix solve
+    or, with nothing nonlinear free, the projection alone; the pipeline's later stages (revive, hold, prune,
+    refine) give new outcomes built from it with `dataclasses.replace`.
+
+    Attributes:
+        params: physical values of every parameter.
+        cost: Σr² at ``params``.
+        steps: the solver's steps, summed over the stages that led here.
+        max_steps: the step limit was reached first.
+        nonfinite: the cost is not finite.
+        normal: the normal equations of the solver's last pass (the default solver; None from the others).
+        exact: ``normal`` is the pass at ``params`` itself.
+        answer: the solver marked this start as its material's answer.
+        notes: what the pipeline did on the way (a lobe searched again, parameters held, a lobe pruned), in
+            words; they open the result's warnings.
+        pruned: the amplitudes pruning held at 0.
+    """
+
+    params: dict
+    cost: float
+    steps: int = 0
+    max_steps: bool = False
+    nonfinite: bool = False
+    normal: Any = None
+    exact: bool = False
+    answer: bool = False
+    notes: tuple[str, ...] = ()
+    pruned: tuple[str, ...] = ()
+
+    @property
+    def status(self) -> Status:
+        """The solver's own verdict (``nonfinite``, ``max-steps`` or ``converged``), before the diagnosis of the
+        answer (`brdffit.fitting.status.diagnose`) refines it."""
+        if self.nonfinite:
+            return Status.NONFINITE
+        return Status.MAX_STEPS if self.max_steps else Status.CONVERGED
