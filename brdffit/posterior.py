@@ -54,7 +54,7 @@ class StepBackend(emcee.backends.HDFBackend):
 
     emcee's ``save_step`` adds the step's acceptances to ``accepted`` and writes the new random state before it
     counts the step in ``iteration``; a process killed (or interrupted) between those writes redoes the step when
-    it resumes and counts its acceptances twice (26 kills once gave an ``accepted`` 64 too high). Here the
+    it resumes and counts its acceptances twice, so ``accepted`` ends too high. Here the
     acceptance counts and the random state after step ``k`` go into the group ``step_state_<k mod 2>``, and
     ``iteration``, written last, says which of the two is current: an unfinished step leaves the current one
     untouched and the redone step writes exactly what the first attempt would have. emcee's own ``accepted`` field
@@ -577,7 +577,7 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = POSTERIOR.
     log_prob = _log_prob_fn(problem, estimate, likelihood, float(nu), tuple(sorted(priors.items())))
     lowers, uppers = context["lowers"], context["uppers"]
 
-    def log_prob_numpy(thetas):  # NumPy in, transferred by jit: jnp.asarray's dispatch was 1/4 of an emcee step
+    def log_prob_numpy(thetas):  # NumPy in, transferred by jit: an eager jnp.asarray adds a dispatch to every step
         return np.asarray(log_prob(np.asarray(thetas, dtype=float), context))
 
     run_name = (name or model.spec).replace("/", "_")
