@@ -1093,7 +1093,7 @@ def main(argv=None) -> int:
     try:
         return args.run(args)
     # brdffit.io.FormatError and brdffit.MeasurementError are ValueErrors: naming them would load the readers and
-    # NumPy for every command (0.5 s of `brdffit models`).
+    # NumPy for every command, the light ones too (`brdffit models`).
     except (UsageError, OutputFolderError, FileNotFoundError, IsADirectoryError, KeyError, ValueError) as exc:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"brdffit {args.command}: error: {message}", file=sys.stderr)

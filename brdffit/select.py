@@ -55,7 +55,7 @@ DEFAULT_CANDIDATES = (
 # only ever adds time).
 _COST_REPEATS = 5
 # Candidates fitted at a time, each in a thread of its own: a first selection is mostly XLA compiling every
-# candidate's programs, one core a compilation, while the GIL is free (issue 15). Every fit is the same as alone.
+# candidate's programs, one core a compilation, while the GIL is free. Every fit is the same as alone.
 SELECT_THREADS = min(4, os.cpu_count() or 1)
 # Screening (AIC/BIC): every candidate is fitted to the training rows (a subsample of SCREEN_SAMPLES of them when
 # there are twice as many), and only those that can still be chosen are refitted to all the data. A subsample optimum costs the full data about

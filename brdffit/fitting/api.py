@@ -7,8 +7,9 @@ channels are a batch of single-channel materials):
    no robust rewrite is asked, `brdffit.fitting.separable`) and the data arrays;
 2. **search**: score a grid of the nonlinear parameters over their declared bounds, amplitudes solved at each, on a
    subsample; the best separated candidates become the starts (`brdffit.fitting.search`);
-3. **polish**: all starts of all materials in one vmapped optimistix solve (on a subsample first when the data
-   are large); the lowest cost is kept;
+3. **polish**: all starts of all materials solved together, each solve's outcome a `SolveOutcome`: by the
+   engine's Levenberg-Marquardt over compiled passes (`brdffit.fitting.marquardt`, the default) or one vmapped
+   optimistix solve (on a subsample first when the data are large); the solver's answer is kept;
 4. **hold**: a polish that did not converge because an outer parameter runs into a bound (its transform
    saturates) or a lobe whose amplitudes all went to 0 leaves its shape drifting is solved again with those
    parameters held (on the bound, or where they are); the better answer is kept, and the bound stays visible in
@@ -51,7 +52,7 @@ __all__ = ["fit", "fit_many", "FitError", "CHANNEL_MODES"]
 CHANNEL_MODES = ("shared-shape", "independent")
 # Data with more (sample, channel) values than COARSE_RESIDUALS is first solved on a seeded subsample of
 # COARSE_SAMPLES samples and then refined on all of it (`brdffit.fitting.marquardt`). Below it one stage is
-# faster from a new process: the refinement's pass is a second compiled shape (measured, issue 15).
+# faster from a new process: the refinement's pass is a second compiled shape.
 COARSE_RESIDUALS = 150_000
 COARSE_SAMPLES = 10_000
 # A single start on this many samples or more is solved alone, not padded to POLISH_STARTS (`_polish_width`). A
@@ -66,7 +67,7 @@ HOLD_FRACTION = 1e-3
 # search's starts, and a revival that does not converge is discarded (its steps are lost time).
 REVIVE_STEPS = 64
 # A lobe is pruned only if zeroing it raises the cost by at most this fraction (and by AIC's price,
-# `_dead_amplitudes`): the tolerance within which issue 14 asks fits to reach the optimum.
+# `_dead_amplitudes`): a pruned fit stays within this fraction of the optimum's cost.
 PRUNE_COST_FRACTION = 1e-3
 # The full-data refinement (step 5) starts within the subsample's statistical error of the optimum (three passes
 # on a MERL table): a small initial damping. Its step limit is the fit's.
@@ -483,7 +484,7 @@ def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, dat
 def _result(problem: Problem, model: Model, measurements, data: FitData, params: dict, outcome: dict, normal,
             starts: list, times: dict, strategy: str, moved: dict) -> FitResult:
     """Diagnose the kept solution of one material and build its `FitResult` (``moved``: ``params`` on the device,
-    a batch's answers moved together: one transfer each was a twentieth of a `fit_many`, issue 19)."""
+    a batch's answers moved together: a transfer each would add a dispatch per material to a `fit_many`)."""
     params = {k: np.asarray(v) for k, v in params.items()}
     fitted = model.replace(**moved)
     layout = problem.layout
@@ -833,7 +834,7 @@ def batch_bucket(count: int) -> int:
     """The number of materials that `fit_many` fits for ``count`` of them: ``count`` up to 8, then the next of
     four sizes an octave (10, 12, 14, 16, 20, 24, 28, 32, 40, ...): at most a quarter of the work added, and a few
     compiled batch sizes for any count (the batches of a database of 1,000 materials cut for two workers hold 31
-    and 32 materials; each size compiled its programs anew in every worker, 1.7 s each; issue 19)."""
+    and 32 materials; each size compiles its programs anew in every worker)."""
     if count <= 8:
         return count
     step = 1 << (count.bit_length() - 3)
