@@ -536,9 +536,201 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
 
 
 # ------------------------------------------------------------------------------------------------------ pipeline
+@dataclasses.dataclass
+class _Material:
+    """One material's state between the pipeline's stages.
+
+    Attributes:
+        problem: its problem (pruning takes parameters out of it).
+        kept: its answer so far.
+        records: one record per start and per later solve (`FitResult.starts`).
+        normal: the normal equations at ``kept`` on the solve data (`_assess` onwards).
+        status: ``kept``'s diagnosed status (`_assess` onwards).
+        holds: outer name -> value to hold in the next hold round (NaN: free); empty when no round is due.
+    """
+
+    problem: Problem
+    kept: SolveOutcome
+    records: list
+    normal: object = None
+    status: Status | None = None
+    holds: dict = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass
+class _Run:
+    """What every stage of one run of the pipeline shares.
+
+    Attributes:
+        problem: the problem as prepared; ``solve_problem`` the one that polishes (a looser solver on a coarse
+            stage).
+        two_stage: the polish runs on a coarse subsample and the answer is refined on all the data.
+        full, solve_items: every material's data, whole and as the polish sees it (no material axis).
+        search_data: the search's subsamples (material axis).
+        starts: the number of starts a material (the polish's width).
+        seed, rtol, atol: the fit's.
+        bar: the progress line.
+        compile_time, run_time: seconds spent so far, summed over the stages.
+    """
+
+    problem: Problem
+    solve_problem: Problem
+    two_stage: bool
+    full: list
+    solve_items: list
+    search_data: FitData
+    starts: int
+    seed: int
+    rtol: float
+    atol: float
+    bar: Progress
+    compile_time: float = 0.0
+    run_time: float = 0.0
+
+    def spent(self, compile_time: float, run_time: float) -> None:
+        self.compile_time += compile_time
+        self.run_time += run_time
+
+    @property
+    def metrics(self) -> bool:
+        """Whether the polish sees the whole data (then the default solver gives its answer's metric sums)."""
+        return not self.two_stage
+
+
+def _polish_stage(run: _Run, starts: list[list[dict]]) -> list[_Material]:
+    """Stage 3: polish every start of every material; each material keeps its solver's answer."""
+    run.bar.update(1, f"polishing {run.starts} start{'s' if run.starts > 1 else ''}"
+                      f"{f' on {COARSE_SAMPLES} samples' if run.two_stage else ''}")
+    outcomes, compile_time, run_time = _polish(run.solve_problem, starts, stack_data(run.solve_items),
+                                               metrics=run.metrics)
+    run.spent(compile_time, run_time)
+    return [_Material(run.problem, _best(o), [{"init": _json_params(s), "cost": a.cost, "status": a.status,
+                                               "steps": a.steps} for s, a in zip(material_starts, o)])
+            for material_starts, o in zip(starts, outcomes)]
+
+
+def _revive_stage(run: _Run, materials: list[_Material]) -> list[_Material]:
+    """A lobe whose amplitudes all went to 0 searched again, the rest held (`_revive`), material by material."""
+    for m, material in enumerate(materials):
+        revived, compile_time, run_time = _revive(run.problem, run.solve_problem, material.kept, run.search_data, m,
+                                                  run.solve_items[m], run.seed, run.starts, run.metrics)
+        run.spent(compile_time, run_time)
+        if revived is not None:
+            material.records.append({"init": _json_params(material.kept.params), "cost": revived.cost,
+                                     "status": revived.status, "steps": revived.steps, "revived": True})
+            material.kept = revived
+    return materials
+
+
+def _assess(run: _Run, materials: list[_Material]) -> list[_Material]:
+    """Each answer's normal equations and status on the solve data, and what a hold round would hold."""
+    problem = run.problem
+    for material, data in zip(materials, run.solve_items):
+        kept = material.kept
+        material.normal = _normal(problem, kept, data)
+        material.status = diagnose(problem, kept.params, kept.cost, kept.max_steps, kept.nonfinite,
+                                   material.normal.jtj, material.normal.jtr)[0] if problem.free else Status.CONVERGED
+        material.holds = _to_hold(problem, kept.params) if material.status.unfinished else {}
+    return materials
+
+
+def _hold_stage(run: _Run, materials: list[_Material]) -> list[_Material]:
+    """Stage 4: up to `HOLD_ROUNDS` re-solves with the parameters on a bound (or of a dead lobe) held, an
+    active-set update between rounds; a retry replaces the answer when it is lower or converged."""
+    problem = run.problem
+    for _ in range(HOLD_ROUNDS):
+        if not any(material.holds for material in materials):
+            break
+        run.bar.update(2, "holding parameters and solving again")
+        holds = [material.holds for material in materials]
+        again, compile_time, run_time = _polish(
+            run.solve_problem, [[_held_start(problem, material.kept.params, h)] * run.starts
+                                for material, h in zip(materials, holds)],
+            stack_data(run.solve_items), holds, metrics=run.metrics)
+        run.spent(compile_time, run_time)
+        for m, (material, held) in enumerate(zip(materials, holds)):
+            if not held:
+                continue
+            retry = again[m][0]
+            retry_normal = _normal(problem, retry, run.solve_items[m])
+            retry_status = diagnose(problem, retry.params, retry.cost, retry.max_steps, retry.nonfinite,
+                                    retry_normal.jtj, retry_normal.jtr)[0]
+            kept = material.kept
+            material.records.append({"init": _json_params(_held_start(problem, kept.params, held)),
+                                     "cost": retry.cost, "status": retry_status, "steps": retry.steps,
+                                     "held": sorted(held)})
+            if retry.cost <= kept.cost or retry_status.converged:
+                retry = dataclasses.replace(retry, steps=retry.steps + kept.steps, notes=kept.notes + (
+                    f"{', '.join(sorted(held))} held (on a bound, or where a lobe whose amplitudes all went to 0 "
+                    f"left them) after a solve that ended {material.status} "
+                    f"(cost {kept.cost:.6g} -> {retry.cost:.6g})",))
+                material.kept, material.normal, material.status = retry, retry_normal, retry_status
+            # The active-set update: a held bound whose descent direction points into the box (Karush-Kuhn-Tucker)
+            # is released, a scalar the re-solve took to a bound is added.
+            material.holds = _next_holds(problem, held, retry.params, retry_normal.jtr) \
+                if material.status.unfinished else {}
+    return materials
+
+
+def _prune_stage(run: _Run, materials: list[_Material]) -> list[_Material]:
+    """Stage 4, last: a solve that still did not converge has its least useful lobe pruned (`_dead_amplitudes`,
+    `_prune`). A converged fit's spare lobe is the least-squares answer: selection, not the fit, decides whether
+    it is worth its parameters."""
+    for m, material in enumerate(materials):
+        dead = _dead_amplitudes(run.problem, material.kept.params, material.kept.cost, run.solve_items[m]) \
+            if material.status.unfinished else []
+        if not dead:
+            continue
+        run.bar.update(2, f"pruning {', '.join(dead)}")
+        material.problem, pruned, compile_time, run_time = _prune(run.problem, run.solve_problem, material.kept,
+                                                                  dead, run.solve_items[m], run.starts, run.metrics)
+        run.spent(compile_time, run_time)
+        material.records.append({"init": _json_params(pruned.params), "cost": pruned.cost,
+                                 "status": pruned.status, "steps": pruned.steps, "pruned": dead})
+        material.kept = pruned
+        material.normal = _normal(material.problem, pruned, run.solve_items[m])
+    return materials
+
+
+def _answer(run: _Run, material: _Material, measurements, data: FitData) -> tuple:
+    """Stage 5 and the answer's sums: on a coarse stage, the answer refined on all the data (the default
+    solver's steps from next to the optimum, small initial λ, whatever solver polished); then the normal
+    equations at the answer itself (the solver's last pass where it evaluated the answer, else one more pass).
+
+    Returns:
+        ``(params, outcome, normal)``: the answer's parameters in canonical lobe order, its outcome and sums.
+    """
+    best, normal, problem = material.kept, material.normal, material.problem
+    params = canonical(problem, best.params)
+    if run.two_stage:
+        run.bar.update(3, f"refining on all {measurements.n} samples")
+        fixed = data._replace(fixed={k: to_device(v) for k, v in params.items() if k not in problem.free})
+        refined, compile_time, run_time = _timed(lambda: marquardt.solve(
+            problem, [[params]], chunks(fixed), rtol=run.rtol, atol=run.atol, max_steps=problem.max_steps,
+            damping=REFINE_DAMPING, metrics=True)[0][0])
+        run.spent(compile_time, run_time)
+        best = dataclasses.replace(best, params=refined.params, cost=refined.cost, steps=best.steps + refined.steps,
+                                   max_steps=refined.max_steps, nonfinite=refined.nonfinite, normal=refined.normal,
+                                   exact=refined.exact)
+        params = canonical(problem, refined.params)
+    if not problem.free:
+        r = np.asarray(residuals_at(problem, {k: to_device(v) for k, v in params.items()}, data))
+        best = dataclasses.replace(best, cost=float(np.sum(r * r)))
+    elif _answered(best, params):
+        normal = best.normal
+    else:
+        # A pass at the answer itself, where the solver's last sums are not those of the answer. It gives the
+        # status, the covariance and the metrics.
+        width = 1 if run.two_stage else _polish_width(run.starts, data.values.shape[0])
+        normal = normal_equations_at(problem, params, data, width=width)
+    return params, best, normal
+
+
 def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart, robust, max_steps, rtol, atol,
               seed, coarse, bar: Progress) -> list[FitResult]:
-    """The fitting pipeline of the module doc over equally shaped materials ``items``."""
+    """The fitting pipeline of the module doc over equally shaped materials ``items``: prepare and search here,
+    then the stages (`_polish_stage`, `_revive_stage`, `_assess`, `_hold_stage`, `_prune_stage`, `_answer`)
+    on a `_Material` state each, then `_result`."""
     for measurements in items:  # no information, no fit: it would end "converged" at its start
         measurements.check_informative()
     rtol, atol = working_tolerances(rtol, atol)
@@ -584,108 +776,19 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         solve_problem = dataclasses.replace(problem, solver=loose)
     else:
         solve_items, solve_problem = full, problem
-    bar.update(1, f"polishing {len(starts[0])} start{'s' if len(starts[0]) > 1 else ''}"
-                  f"{f' on {COARSE_SAMPLES} samples' if two_stage else ''}")
-    outcomes, compile_time, run_time = _polish(solve_problem, starts, stack_data(solve_items), metrics=not two_stage)
-
-    records = [[{"init": _json_params(s), "cost": o.cost, "status": o.status, "steps": o.steps}
-                for s, o in zip(starts[m], outcomes[m])] for m in range(len(items))]
-    kept = [_best(o) for o in outcomes]
-    for m in range(len(items)):
-        revived, c_time, r_time = _revive(problem, solve_problem, kept[m], search_data, m, solve_items[m],
-                                          seed, len(starts[0]), not two_stage)
-        compile_time += c_time
-        run_time += r_time
-        if revived is not None:
-            records[m].append({"init": _json_params(kept[m].params), "cost": revived.cost,
-                               "status": revived.status, "steps": revived.steps, "revived": True})
-            kept[m] = revived
-    normals = [_normal(problem, b, d) for b, d in zip(kept, solve_items)]
-    statuses = [diagnose(problem, b.params, b.cost, b.max_steps, b.nonfinite, n.jtj, n.jtr)[0]
-                if problem.free else Status.CONVERGED for b, n in zip(kept, normals)]
-    holds = [_to_hold(problem, b.params) if st.unfinished else {}
-             for b, st in zip(kept, statuses)]
-    for _ in range(HOLD_ROUNDS):
-        if not any(holds):
-            break
-        bar.update(2, "holding parameters and solving again")
-        again, c_time, r_time = _polish(solve_problem, [[_held_start(problem, b.params, h)] * len(starts[0])
-                                                        for b, h in zip(kept, holds)],
-                                        stack_data(solve_items), holds, metrics=not two_stage)
-        compile_time += c_time
-        run_time += r_time
-        for m, held in enumerate(holds):
-            if not held:
-                continue
-            retry = again[m][0]
-            retry_normal = _normal(problem, retry, solve_items[m])
-            retry_status = diagnose(problem, retry.params, retry.cost, retry.max_steps, retry.nonfinite,
-                                    retry_normal.jtj, retry_normal.jtr)[0]
-            records[m].append({"init": _json_params(_held_start(problem, kept[m].params, held)),
-                               "cost": retry.cost, "status": retry_status, "steps": retry.steps,
-                               "held": sorted(held)})
-            if retry.cost <= kept[m].cost or retry_status.converged:
-                retry = dataclasses.replace(retry, steps=retry.steps + kept[m].steps, notes=kept[m].notes + (
-                    f"{', '.join(sorted(held))} held (on a bound, or where a lobe whose amplitudes all went to 0 "
-                    f"left them) after a solve that ended {statuses[m]} "
-                    f"(cost {kept[m].cost:.6g} -> {retry.cost:.6g})",))
-                kept[m], normals[m], statuses[m] = retry, retry_normal, retry_status
-            # The active-set update: a held bound whose descent direction points into the box (Karush-Kuhn-Tucker)
-            # is released, a scalar the re-solve took to a bound is added.
-            holds[m] = _next_holds(problem, held, retry.params, retry_normal.jtr) \
-                if statuses[m].unfinished else {}
-
-    problems = [problem] * len(items)
-    for m in range(len(items)):
-        # Pruning is for a solve that still did not converge with a lobe drifting: a converged fit's spare lobe
-        # is the least-squares answer, and selection, not the fit, decides whether it is worth its parameters.
-        dead = _dead_amplitudes(problem, kept[m].params, kept[m].cost, solve_items[m]) \
-            if statuses[m].unfinished else []
-        if dead:
-            bar.update(2, f"pruning {', '.join(dead)}")
-            problems[m], pruned, c_time, r_time = _prune(problem, solve_problem, kept[m], dead, solve_items[m],
-                                                          len(starts[0]), not two_stage)
-            compile_time += c_time
-            run_time += r_time
-            records[m].append({"init": _json_params(pruned.params), "cost": pruned.cost,
-                               "status": pruned.status, "steps": pruned.steps, "pruned": dead})
-            kept[m] = pruned
-            normals[m] = _normal(problems[m], pruned, solve_items[m])
-
-    answers = []
-    for m, measurements in enumerate(items):
-        best, normal, problem = kept[m], normals[m], problems[m]
-        params = canonical(problem, best.params)
-        if two_stage:
-            bar.update(3, f"refining on all {measurements.n} samples")
-            data = full[m]._replace(fixed={k: to_device(v) for k, v in params.items() if k not in problem.free})
-            # The full-data refinement: the default solver's steps from next to the optimum (small initial λ),
-            # whatever solver polished.
-            refined, c_time, r_time = _timed(lambda: marquardt.solve(
-                problem, [[params]], chunks(data), rtol=rtol, atol=atol, max_steps=problem.max_steps,
-                damping=REFINE_DAMPING, metrics=True)[0][0])
-            compile_time += c_time
-            run_time += r_time
-            best = dataclasses.replace(best, params=refined.params, cost=refined.cost, steps=best.steps + refined.steps,
-                                       max_steps=refined.max_steps, nonfinite=refined.nonfinite, normal=refined.normal,
-                                       exact=refined.exact)
-            params = canonical(problem, refined.params)
-        if not problem.free:
-            r = np.asarray(residuals_at(problem, {k: to_device(v) for k, v in params.items()}, full[m]))
-            best = dataclasses.replace(best, cost=float(np.sum(r * r)))
-        elif _answered(best, params):
-            normal = best.normal
-        else:
-            # A pass at the answer itself, where the solver's last sums are not those of the answer. It gives the
-            # status, the covariance and the metrics.
-            width = 1 if two_stage else _polish_width(len(starts[0]), full[m].values.shape[0])
-            normal = normal_equations_at(problem, params, full[m], width=width)
-        answers.append((problem, measurements, full[m], params, best, normal, records[m]))
-    times = {"compile": compile_time, "run": run_time / len(items), "init": init_time / len(items)}
-    moved = on_device([{k: np.asarray(v, dtype=float) for k, v in answer[3].items()} for answer in answers])
-    return [_result(problem, base_model, measurements, data, params, best, normal, records_m, times, strategy,
-                    on_the_device)
-            for (problem, measurements, data, params, best, normal, records_m), on_the_device in zip(answers, moved)]
+    run = _Run(problem, solve_problem, two_stage, full, solve_items, search_data, len(starts[0]), seed, rtol, atol,
+               bar)
+    materials = _polish_stage(run, starts)
+    for stage in (_revive_stage, _assess, _hold_stage, _prune_stage):
+        materials = stage(run, materials)
+    answers = [_answer(run, material, measurements, data)
+               for material, measurements, data in zip(materials, items, full)]
+    times = {"compile": run.compile_time, "run": run.run_time / len(items), "init": init_time / len(items)}
+    moved = on_device([{k: np.asarray(v, dtype=float) for k, v in params.items()} for params, _, _ in answers])
+    return [_result(material.problem, base_model, measurements, data, params, best, normal, material.records,
+                    times, strategy, on_the_device)
+            for material, measurements, data, (params, best, normal), on_the_device
+            in zip(materials, items, full, answers, moved)]
 
 
 # ---------------------------------------------------------------------------------------------------- public API
