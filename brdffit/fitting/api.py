@@ -37,13 +37,13 @@ from ..params import at_bound
 from ..progress import Progress
 from .losses import ROBUST, get_loss, loss_epsilon
 from . import marquardt, noise
-from .normal_equations import chunks, compile_seconds
+from .normal_equations import chunks, timed
 from .problem import FitData, Problem, make_fit_data, residuals_at, stack_data, take_materials, take_samples
 from .outcome import SolveOutcome, Status
 from .result import FitResult
-from .search import (POLISH_STARTS, SCREEN_SAMPLES, SEARCH_SAMPLES, canonical, grid, interior, quasi_random_starts,
+from .search import (SCREEN_SAMPLES, SEARCH_SAMPLES, canonical, grid, interior, quasi_random_starts,
                      score, search, search_range)
-from .solvers import coarse_solver, compiled_solve, make_solver, no_pins, solver_name, working_tolerances
+from .solvers import batch_solver, coarse_solver, make_solver, solver_name, working_tolerances
 from .status import diagnose, information_criteria, warnings_of
 from .uncertainty import Uncertainty, normal_equations_at
 
@@ -55,10 +55,6 @@ CHANNEL_MODES = ("shared-shape", "independent")
 # faster from a new process: the refinement's pass is a second compiled shape.
 COARSE_RESIDUALS = 150_000
 COARSE_SAMPLES = 10_000
-# A single start on this many samples or more is solved alone, not padded to POLISH_STARTS (`_polish_width`). A
-# selection screens on a subsample of 4,096 rows from twice that many on (`brdffit.select.SCREEN_SAMPLES`); below,
-# its refits run on the screen's own data shape and share its padded programs.
-SINGLE_START_SAMPLES = 8192
 COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
 # An outer scalar closer than this fraction of its range to a bound, at the end of a polish that did not
 # converge, is held on the bound (step 4 of the pipeline).
@@ -191,20 +187,10 @@ def _robust_scale(problem: Problem, start: dict, data: FitData) -> float:
 
 
 # -------------------------------------------------------------------------------------------------------- polish
-def _polish_width(count: int, samples: int) -> int:
-    """The number of points a polish of ``count`` starts on ``samples`` samples solves: the next multiple of
-    POLISH_STARTS, so that one compiled pass serves a search's starts, a given start and the hold rounds alike;
-    but a single start on `SINGLE_START_SAMPLES` or more samples alone. There every padding copy costs a pass over
-    the data at each step (a refit of a selection's choice to all of a tabulated file's 15,384 pairs from its
-    screening fit: 4 times the work of its one start), and no search of a smaller subsample shares its shape."""
-    if count == 1 and samples >= SINGLE_START_SAMPLES:
-        return 1
-    return -(-count // POLISH_STARTS) * POLISH_STARTS
-
-
 def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: list[dict] | None = None,
             metrics: bool = False, max_steps: int | None = None):
-    """Solve every start of every material in one batched program.
+    """Solve every start of every material: the projection alone where nothing nonlinear is free, else the
+    problem's solver through its `brdffit.fitting.solvers.BatchSolver` interface.
 
     Arguments:
         problem: the `Problem`.
@@ -220,7 +206,6 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
         ``(outcomes, compile_seconds, run_seconds)``: for each material a list of one `SolveOutcome` a start
         (with ``normal``, ``exact`` and ``answer`` from the default solver, `brdffit.fitting.marquardt.solve`).
     """
-    specs = problem.specs
     if not problem.outer:  # nothing nonlinear is free: the projection is the whole solve
         t0 = time.perf_counter()
         # The fixed values are the same for every material; one candidate on all the samples at once.
@@ -233,48 +218,11 @@ def _polish(problem: Problem, starts: list[list[dict]], data: FitData, held: lis
     solve_data = data._replace(fixed={k: to_device(np.stack([np.asarray(material[0][k], dtype=float)
                                                                for material in starts]))
                                       for k in problem.layout.names if k not in problem.free})
-    if isinstance(problem.solver, marquardt.Marquardt):
-        # Starts padded to a multiple of POLISH_STARTS (repeating the last): one compiled pass serves a search's
-        # starts, a given start and the hold rounds alike.
-        count = len(starts[0])
-        width = _polish_width(count, int(np.shape(data.values)[1]))
-        padded = [material + [material[-1]] * (width - count) for material in starts]
-        out, compile_time, run_time = _timed(lambda: marquardt.solve(
-            problem, padded, [solve_data], rtol=problem.solver.rtol, atol=problem.solver.atol,
-            max_steps=problem.max_steps if max_steps is None else max_steps, damping=problem.solver.damping,
-            offset=problem.solver.offset, held=held,
-            metrics=metrics))
-        return [material[:count] for material in out], compile_time, run_time
-    y0 = {name: to_device(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
-                                                for s in material]) for material in starts]))
-          for name in problem.outer}
-    executable, compile_time = compiled_solve(problem, y0, solve_data)
-    pins = no_pins(problem, y0)
-    if held:
-        for name in problem.outer:
-            value = np.stack([np.broadcast_to(np.asarray(h.get(name, np.nan), dtype=float), np.shape(y0[name])[1:])
-                              for h in held])
-            pins[name] = (to_device(np.isfinite(value)), to_device(np.nan_to_num(value)))
-    t0 = time.perf_counter()
-    out = jax.tree_util.tree_map(np.asarray, jax.block_until_ready(executable(y0, solve_data, pins)))
-    run_time = time.perf_counter() - t0
-    outcomes = []
-    for m, material in enumerate(starts):
-        outcomes.append([SolveOutcome({k: v[m, i] for k, v in out["params"].items()}, float(out["cost"][m, i]),
-                                      steps=int(out["steps"][m, i]), max_steps=bool(out["max_steps"][m, i]),
-                                      nonfinite=bool(out["nonfinite"][m, i])) for i in range(len(material))])
-    return outcomes, compile_time, run_time
+    return batch_solver(problem.solver).solve_starts(problem, starts, solve_data, held=held, metrics=metrics,
+                                                     max_steps=max_steps)
 
 
-def _timed(call):
-    """``call()``, the seconds its passes spent compiling (`compile_seconds`) and the rest of its time."""
-    start, compiled = time.perf_counter(), compile_seconds()
-    out = call()
-    compile_time = compile_seconds() - compiled
-    return out, compile_time, time.perf_counter() - start - compile_time
-
-
-def _normal(problem: Problem, outcome: dict, data: FitData):
+def _normal(problem: Problem, outcome: SolveOutcome, data: FitData):
     """The normal equations at an outcome: the solver's own when it gave them, else a pass over ``data``."""
     if not problem.free:
         return None
@@ -283,7 +231,7 @@ def _normal(problem: Problem, outcome: dict, data: FitData):
     return normal_equations_at(problem, outcome.params, data)
 
 
-def _answered(outcome: dict, params: dict) -> bool:
+def _answered(outcome: SolveOutcome, params: dict) -> bool:
     """Whether the solver's sums of an outcome on the whole data serve as those of the answer ``params``: they
     carry the metric sums, the solver's last pass evaluated the point itself (``exact``), and the canonical order
     left the parameters as they were (a reordering of lobes would move the Jacobian's columns)."""
@@ -292,7 +240,7 @@ def _answered(outcome: dict, params: dict) -> bool:
             and all(np.array_equal(np.asarray(params[k]), np.asarray(outcome.params[k])) for k in params))
 
 
-def _best(outcomes: list[dict]) -> dict:
+def _best(outcomes: list[SolveOutcome]) -> SolveOutcome:
     """The outcome the polish answers with: the one the default solver marked as its answer, else
     `brdffit.fitting.marquardt.answer`'s (the lowest cost, or a start that converged within `BEST_TIE` of it
     rather than one that ran out of steps). The solver's mark stands: its final pass at the answer can move that
@@ -378,8 +326,8 @@ def _held_start(problem: Problem, params: dict, held: dict) -> dict:
 
 
 # -------------------------------------------------------------------------------------------------------- revive
-def _revive(problem: Problem, solve_problem: Problem, kept: dict, search_data: FitData, material: int,
-            data: FitData, seed: int, starts: int, metrics: bool) -> tuple[dict | None, float, float]:
+def _revive(problem: Problem, solve_problem: Problem, kept: SolveOutcome, search_data: FitData, material: int,
+            data: FitData, seed: int, starts: int, metrics: bool) -> tuple[SolveOutcome | None, float, float]:
     """Search a lobe whose amplitudes all went to 0 again, the rest of one material's answer held: a grid over
     the lobe's own shape parameters (`search.grid`), every amplitude re-solved at each setting, the best separated
     settings polished with everything free. This is the nested search of Lafortune et al. (1997) and Ngan et
@@ -452,7 +400,7 @@ def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData)
     return [min(increases, key=increases.get)] if increases else []
 
 
-def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, data: FitData, starts: int,
+def _prune(problem: Problem, solve_problem: Problem, kept: SolveOutcome, dead: list, data: FitData, starts: int,
            metrics: bool):
     """Solve one material again with the ``dead`` amplitudes held at 0 and the parameters that act only through
     them (`Lobe.amplitude_partners`) held where they are: a problem with fewer free parameters."""
@@ -481,7 +429,7 @@ def _prune(problem: Problem, solve_problem: Problem, kept: dict, dead: list, dat
 
 
 # ---------------------------------------------------------------------------------------------------- the result
-def _result(problem: Problem, model: Model, measurements, data: FitData, params: dict, outcome: dict, normal,
+def _result(problem: Problem, model: Model, measurements, data: FitData, params: dict, outcome: SolveOutcome, normal,
             starts: list, times: dict, strategy: str, moved: dict) -> FitResult:
     """Diagnose the kept solution of one material and build its `FitResult` (``moved``: ``params`` on the device,
     a batch's answers moved together: a transfer each would add a dispatch per material to a `fit_many`)."""
@@ -705,7 +653,7 @@ def _answer(run: _Run, material: _Material, measurements, data: FitData) -> tupl
     if run.two_stage:
         run.bar.update(3, f"refining on all {measurements.n} samples")
         fixed = data._replace(fixed={k: to_device(v) for k, v in params.items() if k not in problem.free})
-        refined, compile_time, run_time = _timed(lambda: marquardt.solve(
+        refined, compile_time, run_time = timed(lambda: marquardt.solve(
             problem, [[params]], chunks(fixed), rtol=run.rtol, atol=run.atol, max_steps=problem.max_steps,
             damping=REFINE_DAMPING, metrics=True)[0][0])
         run.spent(compile_time, run_time)
@@ -721,7 +669,7 @@ def _answer(run: _Run, material: _Material, measurements, data: FitData) -> tupl
     else:
         # A pass at the answer itself, where the solver's last sums are not those of the answer. It gives the
         # status, the covariance and the metrics.
-        width = 1 if run.two_stage else _polish_width(run.starts, data.values.shape[0])
+        width = 1 if run.two_stage else marquardt.polish_width(run.starts, data.values.shape[0])
         normal = normal_equations_at(problem, params, data, width=width)
     return params, best, normal
 

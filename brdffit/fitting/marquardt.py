@@ -44,9 +44,10 @@ import numpy as np
 
 from ..defaults import FIT
 from .moments import applies, moment_sums
-from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of
+from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of, timed
 from .outcome import SolveOutcome
 from .problem import FitData, Problem
+from .search import POLISH_STARTS
 from .separable import solve_box
 
 __all__ = ["Marquardt", "solve", "answer", "MAX_DAMPING", "RELATIVE_OFFSET", "EXACT_MOVE", "BEST_TIE", "GAIN_RATIO"]
@@ -108,6 +109,40 @@ class Marquardt:
     atol: float = FIT.atol
     damping: float = 1e-3
     offset: float = RELATIVE_OFFSET
+
+    def solve_starts(self, problem: Problem, starts: list[list[dict]], data: FitData, *, held=None,
+                     metrics: bool = False, max_steps: int | None = None):
+        """The engine's solver interface (`brdffit.fitting.solvers.BatchSolver`): `solve` of every start of
+        every material, the starts padded to `polish_width` (repeating the last) so that one compiled pass serves
+        a search's starts, a given start and the hold rounds alike.
+
+        Returns:
+            ``(outcomes, compile_seconds, run_seconds)``: for each material one `SolveOutcome` a start.
+        """
+        count = len(starts[0])
+        width = polish_width(count, int(np.shape(data.values)[1]))
+        padded = [material + [material[-1]] * (width - count) for material in starts]
+        out, compile_time, run_time = timed(lambda: solve(
+            problem, padded, [data], rtol=self.rtol, atol=self.atol,
+            max_steps=problem.max_steps if max_steps is None else max_steps, damping=self.damping,
+            offset=self.offset, held=held, metrics=metrics))
+        return [material[:count] for material in out], compile_time, run_time
+
+
+# A single start on this many samples or more is solved alone, not padded to POLISH_STARTS (`polish_width`). A
+# selection screens on a subsample of 4,096 rows from twice that many on (`brdffit.select.SCREEN_SAMPLES`); below,
+# its refits run on the screen's own data shape and share its padded programs.
+SINGLE_START_SAMPLES = 8192
+
+
+def polish_width(count: int, samples: int) -> int:
+    """The number of points a solve of ``count`` starts on ``samples`` samples runs: the next multiple of
+    `POLISH_STARTS` (one compiled pass for a search's starts, a given start and the hold rounds), but a single
+    start on `SINGLE_START_SAMPLES` or more samples alone: there every padding copy costs a pass over the data at
+    each step, and no search of a smaller subsample shares its shape."""
+    if count == 1 and samples >= SINGLE_START_SAMPLES:
+        return 1
+    return -(-count // POLISH_STARTS) * POLISH_STARTS
 
 
 # A batch of several materials with more points than this is compacted: each pass evaluates only the points still

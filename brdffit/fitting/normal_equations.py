@@ -171,6 +171,14 @@ def compile_seconds() -> float:
     return getattr(_COMPILE_SECONDS, "value", 0.0)
 
 
+def timed(call):
+    """``call()``, the seconds its passes spent compiling (`compile_seconds`) and the rest of its time."""
+    start, compiled = time.perf_counter(), compile_seconds()
+    out = call()
+    compile_time = compile_seconds() - compiled
+    return out, compile_time, time.perf_counter() - start - compile_time
+
+
 def metric_sums_of(values: list, pieces: list[FitData], materials=None) -> np.ndarray:
     """The metric sums ``(M, S, R, C)`` of a pass's model values (`accumulate` with ``values=True``: one
     ``(M, S, N, C)`` array per piece) against the pieces' data (row i against material ``materials[i]``, when

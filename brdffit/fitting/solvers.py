@@ -1,12 +1,14 @@
 """The nonlinear solve: the one table from solver names (CLI, `fit(solver="lm")`) to solver objects (the engine's
-own Levenberg-Marquardt, `brdffit.fitting.marquardt`, and optimistix's solvers), and the compiled, batched
-optimistix solve of a problem's outer parameters."""
+own Levenberg-Marquardt, `brdffit.fitting.marquardt`, and optimistix's solvers), the one interface the pipeline
+solves through (`BatchSolver`, `batch_solver`), and the compiled, batched optimistix solve of a problem's outer
+parameters."""
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from .._lazy import module
 
@@ -20,11 +22,15 @@ problem_module = module("brdffit.fitting.problem")
 separable = module("brdffit.fitting.separable")
 model_module = module("brdffit.models.model")
 
+arrays = module("brdffit.arrays")
+outcome = module("brdffit.fitting.outcome")
+np = module("numpy")
+
 if TYPE_CHECKING:
     from .problem import FitData, Problem
 
-__all__ = ["SOLVERS", "make_solver", "coarse_solver", "solver_name", "working_tolerances", "compiled_solve",
-           "outer_params", "no_pins"]
+__all__ = ["SOLVERS", "BatchSolver", "OptimistixStarts", "batch_solver", "make_solver", "coarse_solver",
+           "solver_name", "working_tolerances", "compiled_solve", "outer_params", "no_pins"]
 
 # Floors of the convergence tolerances in units of the working precision's machine epsilon: rounding makes
 # successive float32 steps differ by a few ulps of the cost and of the parameters, so a float32 fit (run under
@@ -191,8 +197,8 @@ def compiled_solve(problem: Problem, y0: dict, data: FitData):
     spent compiling it.
 
     ``y0`` and the pins (`outer_params`) have two leading axes (material, start) on every leaf and ``data`` one
-    (material): the solve is vmapped over both. Executables are cached in this process, keyed by the problem and the shapes, so a second
-    fit of the same model and shapes compiles nothing (compile time 0).
+    (material): the solve is vmapped over both. Executables are cached in this process, keyed by the problem and
+    the shapes, so a second fit of the same model and shapes compiles nothing (compile time 0).
 
     Arguments:
         problem: the `Problem`.
@@ -213,3 +219,62 @@ def compiled_solve(problem: Problem, y0: dict, data: FitData):
     executable = jax.jit(batched).lower(y0, data, no_pins(problem, y0)).compile()
     _COMPILED[key] = executable
     return executable, time.perf_counter() - start
+
+
+class BatchSolver(Protocol):
+    """What the pipeline solves through (`brdffit.fitting.api._polish`): every start of every material of a batch,
+    each start's outcome a `brdffit.fitting.outcome.SolveOutcome`. The engine's `Marquardt` implements it, and
+    `OptimistixStarts` for any optimistix solver."""
+
+    def solve_starts(self, problem: Problem, starts: list, data: FitData, *, held=None, metrics: bool = False,
+                     max_steps: int | None = None) -> tuple:
+        """Solve the starts.
+
+        Arguments:
+            problem: the `Problem`; its outer parameters are solved, its amplitudes projected where it says so.
+            starts: for each material, its starts (physical values of every parameter).
+            data: `FitData` with a leading material axis, the fixed values of every material in ``fixed``.
+            held: for each material, outer name -> physical value to hold (NaN: free), the same for its starts.
+            metrics: ``data`` is the whole data: give the answers' metric sums too (where the solver can).
+            max_steps: a step limit below the problem's (where the solver can; the compiled programs stay).
+
+        Returns:
+            ``(outcomes, compile_seconds, run_seconds)``: for each material one `SolveOutcome` a start.
+        """
+
+
+@dataclasses.dataclass(frozen=True)
+class OptimistixStarts:
+    """An optimistix solver as a `BatchSolver`: one compiled solve (`compiled_solve`) of every start of every
+    material in unconstrained coordinates; held parameters are pinned inside it. ``metrics`` and ``max_steps``
+    are not used (its outcomes carry no normal equations; its step limit is the problem's, compiled in)."""
+
+    solver: object
+
+    def solve_starts(self, problem: Problem, starts: list, data: FitData, *, held=None, metrics: bool = False,
+                     max_steps: int | None = None) -> tuple:
+        specs = problem.specs
+        y0 = {name: arrays.to_device(np.stack([np.stack([np.asarray(specs[name].to_unconstrained(s[name]))
+                                                         for s in material]) for material in starts]))
+              for name in problem.outer}
+        executable, compile_time = compiled_solve(problem, y0, data)
+        pins = no_pins(problem, y0)
+        if held:
+            for name in problem.outer:
+                value = np.stack([np.broadcast_to(np.asarray(h.get(name, np.nan), dtype=float),
+                                                  np.shape(y0[name])[1:]) for h in held])
+                pins[name] = (arrays.to_device(np.isfinite(value)), arrays.to_device(np.nan_to_num(value)))
+        t0 = time.perf_counter()
+        out = jax.tree_util.tree_map(np.asarray, jax.block_until_ready(executable(y0, data, pins)))
+        run_time = time.perf_counter() - t0
+        outcomes = [[outcome.SolveOutcome({k: v[m, i] for k, v in out["params"].items()}, float(out["cost"][m, i]),
+                                          steps=int(out["steps"][m, i]), max_steps=bool(out["max_steps"][m, i]),
+                                          nonfinite=bool(out["nonfinite"][m, i])) for i in range(len(material))]
+                    for m, material in enumerate(starts)]
+        return outcomes, compile_time, run_time
+
+
+def batch_solver(solver) -> BatchSolver:
+    """The `BatchSolver` of a problem's solver: the engine's `Marquardt` is one; an optimistix solver is wrapped
+    in `OptimistixStarts`."""
+    return solver if hasattr(solver, "solve_starts") else OptimistixStarts(solver)
