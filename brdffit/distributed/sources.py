@@ -161,7 +161,7 @@ def _files(item: str) -> list[Path]:
     matches."""
     path = Path(item)
     if path.is_dir():
-        known = {ext for exts in FORMATS.values() for ext in exts}
+        known = {ext for f in FORMATS.values() for ext in f.extensions}
         return sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in known)
     if path.exists() or not glob.has_magic(item):
         return [path]

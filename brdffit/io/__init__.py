@@ -17,50 +17,82 @@ where relevant); numbers that break the rules of `Measurements` raise `brdffit.M
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 from ..measurements import Measurements
 from ._common import FormatError, check_not_lfs_pointer, read_head
-from .alta import read_alta, write_alta
-from .hdf5 import read_hdf5, read_hdf5_group, update_hdf5, write_hdf5
-from .merl import MerlTable, read_merl, write_merl
-from .rgl import RglTable, read_rgl
+from .alta import looks_like_alta, read_alta, write_alta
+from .hdf5 import is_hdf5, read_hdf5, read_hdf5_group, update_hdf5, write_hdf5
+from .merl import MerlTable, looks_like_merl, read_merl, write_merl
+from .rgl import RglTable, looks_like_rgl, read_rgl
 from .table import read_table, write_table
 
-__all__ = ["load", "save", "detect_format", "FormatError", "read_table", "write_table", "read_merl", "write_merl",
-           "MerlTable", "read_hdf5", "write_hdf5", "update_hdf5", "read_hdf5_group", "read_alta", "write_alta",
-           "read_rgl", "RglTable", "FORMATS"]
-
-# Extensions of each format (lower case, with the dot).
-FORMATS = {
-    "table": (".csv", ".tsv", ".txt", ".dat", ".tab"),
-    "merl": (".binary", ".merl"),
-    "hdf5": (".h5", ".hdf5", ".he5"),
-    "alta": (".alta",),  # ALTA text data in a .dat / .txt file is recognised by its header (_sniff)
-    "rgl": (".bsdf",),
-}
+__all__ = ["load", "save", "detect_format", "Format", "FORMATS", "FormatError", "read_table", "write_table",
+           "read_merl", "write_merl", "MerlTable", "read_hdf5", "write_hdf5", "update_hdf5", "read_hdf5_group",
+           "read_alta", "write_alta", "read_rgl", "RglTable"]
 
 
-def _sniff(head: bytes) -> str | None:
-    from .alta import looks_like_alta
-    from .hdf5 import is_hdf5
-    from .merl import looks_like_merl
-    from .rgl import looks_like_rgl
+@dataclasses.dataclass(frozen=True)
+class Format:
+    """A file format brdffit reads (and perhaps writes), declared once: `load`, `save`, `detect_format` and the
+    batch sources read it.
 
-    if is_hdf5(head):
-        return "hdf5"
-    if looks_like_merl(head):
-        return "merl"
-    if looks_like_rgl(head):
-        return "rgl"
-    if looks_like_alta(head):
-        return "alta"
-    return None
+    Attributes:
+        name: the ``format=`` name.
+        description: one line for help texts and docs.
+        extensions: the file extensions (lower case, with the dot) that name it when the content does not.
+        read: ``read(path, **options) -> Measurements``; its options are the format's (docs/formats.md).
+        sniff: ``sniff(head) -> bool`` on a file's first bytes, where the content tells the format; None for text
+            tables, which have no signature.
+        write: ``write(measurements, path, **options)``; None where brdffit does not write the format.
+        unwritable: why it is not written, and what to do instead (the error of `save`).
+    """
+
+    name: str
+    description: str
+    extensions: tuple[str, ...]
+    read: Callable[..., Measurements]
+    sniff: Callable[[bytes], bool] | None = None
+    write: Callable | None = None
+    unwritable: str = ""
+
+
+# In the order `detect_format` tries the signatures: HDF5, MERL and RGL-EPFL have magic bytes; ALTA's header is
+# text (an ALTA file in a .dat / .txt is recognised by its #DIM line).
+FORMATS = {f.name: f for f in (
+    Format("hdf5", "brdffit's HDF5 files (measurements, fits, posteriors)", (".h5", ".hdf5", ".he5"),
+           read_hdf5, is_hdf5, write_hdf5),
+    Format("merl", "MERL binary BRDF tables (Matusik et al. 2003)", (".binary", ".merl"),
+           lambda path, **options: read_merl(path).to_measurements(**options), looks_like_merl,
+           unwritable="a MERL table tabulates a BRDF on a fixed half/difference grid, not scattered samples; fit a "
+                      "model and call brdffit.io.write_merl(model, path), or save as .csv or .h5"),
+    Format("rgl", "RGL-EPFL .bsdf measured BRDFs (Dupuy & Jakob 2018)", (".bsdf",),
+           lambda path, **options: read_rgl(path).to_measurements(**options), looks_like_rgl,
+           unwritable="brdffit reads RGL-EPFL .bsdf files but does not write them; save as .csv or .h5"),
+    Format("alta", "ALTA text data (#DIM, #PARAM_IN, ... header)", (".alta",), read_alta, looks_like_alta,
+           write_alta),
+    Format("table", "CSV / TSV / whitespace tables, and brdffit's canonical CSV", (".csv", ".tsv", ".txt", ".dat",
+                                                                                 ".tab"),
+           read_table, None, write_table),
+)}
+
+
+def _by_extension(path: Path) -> Format | None:
+    ext = path.suffix.lower()
+    return next((f for f in FORMATS.values() if ext in f.extensions), None)
+
+
+def _named(format: str) -> Format:  # noqa: A002 - the natural name
+    if format not in FORMATS:
+        raise ValueError(f"unknown format {format!r}; use one of {', '.join(FORMATS)}")
+    return FORMATS[format]
 
 
 def detect_format(path, head: bytes | None = None) -> str:
-    """The format of a file (``"table"``, ``"merl"``, ``"hdf5"``, ``"alta"``, ``"rgl"``): its first bytes, else its
-    extension.
+    """The format of a file (a name in `FORMATS`): its first bytes where a format has a signature, else its
+    extension, else ``"table"`` for text.
 
     Raises:
         FileNotFoundError: no such file. FormatError: not a regular file, a Git LFS pointer, or content and extension
@@ -70,18 +102,15 @@ def detect_format(path, head: bytes | None = None) -> str:
     if head is None:
         head = read_head(path, 4096)  # an ALTA header may put #DIM after a few #URL / #CMD lines
     check_not_lfs_pointer(path, head)
-    sniffed = _sniff(head)
-    if sniffed:
-        return sniffed
-    ext = path.suffix.lower()
-    for name, extensions in FORMATS.items():
-        if ext in extensions:
-            return name
+    sniffed = next((f for f in FORMATS.values() if f.sniff is not None and f.sniff(head)), None) \
+        or _by_extension(path)
+    if sniffed is not None:
+        return sniffed.name
     if b"\0" not in head:
         return "table"  # text of an unknown extension: try it as a table
-    raise FormatError(path, f"cannot tell the format: extension {ext or '(none)'!r} is not one of "
-                            f"{', '.join(e for exts in FORMATS.values() for e in exts)} and the content is neither "
-                            "HDF5, MERL, RGL-EPFL nor text")
+    raise FormatError(path, f"cannot tell the format: extension {path.suffix.lower() or '(none)'!r} is not one of "
+                            f"{', '.join(e for f in FORMATS.values() for e in f.extensions)} and the content is "
+                            "neither HDF5, MERL, RGL-EPFL nor text")
 
 
 def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa: A002 - the natural name
@@ -112,17 +141,7 @@ def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa
     path = Path(path)
     if format is None:
         format = detect_format(path)  # refuses a missing path and anything but a regular file (_common.open_regular)
-    if format == "table":
-        return read_table(path, **options)
-    if format == "merl":
-        return read_merl(path).to_measurements(**options)
-    if format == "hdf5":
-        return read_hdf5(path, **options)
-    if format == "alta":
-        return read_alta(path, **options)
-    if format == "rgl":
-        return read_rgl(path).to_measurements(**options)
-    raise ValueError(f"unknown format {format!r}; use one of {', '.join(FORMATS)}")
+    return _named(format).read(path, **options)
 
 
 def save(measurements: Measurements, path, *, format: str | None = None, **options) -> None:  # noqa: A002
@@ -140,22 +159,13 @@ def save(measurements: Measurements, path, *, format: str | None = None, **optio
     """
     path = Path(path)
     if format is None:
-        ext = path.suffix.lower()
-        format = next((name for name, exts in FORMATS.items() if ext in exts), None)
-        if format is None:
-            raise ValueError(f"{path}: cannot tell the format from extension {ext or '(none)'!r}; use one of "
-                             f"{', '.join(FORMATS['table'] + FORMATS['hdf5'])} or pass format=")
-    if format == "table":
-        write_table(measurements, path, **options)
-    elif format == "hdf5":
-        write_hdf5(measurements, path, **options)
-    elif format == "alta":
-        write_alta(measurements, path, **options)
-    elif format == "merl":
-        raise ValueError(f"{path}: measurements cannot be saved as a MERL table (it tabulates a BRDF on a fixed "
-                         "half/difference grid, not scattered samples); fit a model and call "
-                         "brdffit.io.write_merl(model, path), or save as .csv or .h5")
-    elif format == "rgl":
-        raise ValueError(f"{path}: brdffit reads RGL-EPFL .bsdf files but does not write them; save as .csv or .h5")
-    else:
-        raise ValueError(f"unknown format {format!r}; use one of {', '.join(FORMATS)}")
+        found = _by_extension(path)
+        if found is None:
+            writable = [e for f in FORMATS.values() if f.write is not None for e in f.extensions]
+            raise ValueError(f"{path}: cannot tell the format from extension {path.suffix.lower() or '(none)'!r}; "
+                             f"use one of {', '.join(writable)} or pass format=")
+        format = found.name
+    target = _named(format)
+    if target.write is None:
+        raise ValueError(f"{path}: measurements cannot be saved as {target.name}: {target.unwritable}")
+    target.write(measurements, path, **options)
