@@ -32,7 +32,7 @@ from .io.hdf5 import is_lock_conflict, open_h5_waiting
 from .io.locking import LockTimeout, locked
 from .models.model import evaluate
 from .params import ParamSpec
-from .fitting.problem import Problem, flatten_free, make_fit_data, physical_params, residual_fn
+from .fitting.problem import FitData, Problem, flatten_free, make_fit_data, physical_params, residual_fn
 from .progress import Progress
 
 __all__ = ["posterior", "load_posterior", "Posterior", "StepBackend", "Interrupted", "raise_interrupted", "LIKELIHOODS",
@@ -481,6 +481,147 @@ def _log_prob_fn(problem: Problem, estimate: bool, likelihood: str, nu: float, p
     return jax.jit(jax.vmap(one, in_axes=(0, None)))
 
 
+def _noise_scale(noise, measurements, data: FitData, problem: Problem):
+    """The likelihood's noise scale in the loss's residual units (None: estimated per channel as log σ) and its
+    label in the summary (`posterior`'s ``noise``)."""
+    if noise == "estimate":
+        return None, "estimated per channel"
+    if noise == "known":
+        if measurements.sigma is None:
+            raise ValueError("noise='known' needs measurements with sigma")
+        sigma = np.where(np.isfinite(measurements.sigma), measurements.sigma, 1.0)
+        scale = np.where(np.asarray(data.mask), sigma * residual_scale(problem.loss, data), 1.0)
+        label = "known (measurement sigma)"
+    elif isinstance(noise, (int, float)) and noise > 0:
+        scale = np.where(np.asarray(data.mask), float(noise) * residual_scale(problem.loss, data), 1.0)
+        label = f"fixed sigma {float(noise):g} 1/sr"
+    else:
+        raise ValueError(f"noise must be 'estimate', 'known' or a positive number, got {noise!r}")
+    return jnp.asarray(np.where(scale > 0, scale, 1.0)), label
+
+
+def _stored_chain(store, run_name: str, nwalkers: int, ndim: int, resume: bool):
+    """The `StepBackend` of ``posteriors/<run_name>/chain`` in ``store``, prepared for this run (None without a
+    store); a stored chain of another shape is refused when resuming."""
+    if store is None:
+        return None
+    backend = StepBackend(str(store), name=f"posteriors/{run_name}/chain")
+    with locked(store):
+        if backend.initialized and backend.iteration > 0 and backend.shape != (nwalkers, ndim) and resume:
+            raise ValueError(f"{store}: the stored chain has shape {backend.shape}, this run needs "
+                             f"{(nwalkers, ndim)}; pass resume=False or another name")
+        backend.prepare(nwalkers, ndim, fresh=not resume)
+    return backend
+
+
+def _sample(sampler, backend, fresh_start, log_prob_numpy, nsteps: int, store, progress: bool,
+            nwalkers: int) -> float:
+    """Run the chain up to ``nsteps`` steps a walker (from a stored chain's last step, else from ``fresh_start()``,
+    whose log probability must be finite), stopping between steps on SIGINT/SIGTERM; the wall seconds.
+
+    Raises:
+        ValueError: a start where the posterior is NaN or zero. Interrupted: stopped by a signal (the message says
+            what ``store`` holds).
+    """
+    already, start = backend.resume_point() if backend is not None else (0, None)
+    if already == 0:
+        start = fresh_start()
+        initial = log_prob_numpy(start)
+        if np.any(np.isnan(initial)):
+            raise ValueError("the initial log probability is NaN for some walkers: check the data for NaN sigma "
+                             "or the user priors")
+        if not np.all(np.isfinite(initial)):
+            bad = int(np.flatnonzero(~np.isfinite(initial))[0])
+            raise ValueError(f"walker {bad} starts where the posterior is zero (outside a prior's support): "
+                             "the least-squares optimum lies outside the priors given")
+    remaining = max(nsteps - already, 0)
+    bar = Progress("MCMC", remaining, enabled=progress and remaining > 0, unit="steps")
+    t0 = time.perf_counter()
+    if remaining:
+        try:
+            with _stop_between_steps() as asked:
+                stored, left = already, remaining
+                while left:
+                    try:
+                        for step, _ in enumerate(sampler.sample(start, iterations=left), start=1):
+                            bar.update(min(max(stored + step - already, 0), remaining))
+                            if asked:
+                                break
+                        break
+                    except ChainMoved:  # another process stored steps meanwhile: go on from the last one stored
+                        stored, start = backend.resume_point()
+                        start = fresh_start() if stored == 0 else start
+                        left = max(nsteps - stored, 0)
+            if asked:
+                raise Interrupted(signum=asked[0])
+        except KeyboardInterrupt as stop:
+            signum = getattr(stop, "signum", signal.SIGINT)
+            if backend is None:
+                raise Interrupted("the chain was not stored (pass store= to keep and resume one)", signum) from None
+            raise Interrupted(f"{backend.iteration} of {nsteps} steps are stored in {store}; run the same command "
+                              "again to continue the chain", signum) from None
+    bar.close(f"({nwalkers} walkers)")
+    return time.perf_counter() - t0
+
+
+def _burn_and_thin(chain: np.ndarray, burn, thin) -> tuple:
+    """The integrated autocorrelation time of each dimension (emcee's; the chain's length where it has none), and
+    the burn-in and thinning: given, or ``"auto"``: twice the largest time (at most half the chain) and half the
+    smallest."""
+    steps = chain.shape[0]
+    emcee_log = logging.getLogger("emcee.autocorr")
+    level = emcee_log.level
+    emcee_log.setLevel(logging.ERROR)  # its "chain too short" message is in our own warnings
+    try:
+        tau = emcee.autocorr.integrated_time(chain, quiet=True)
+    finally:
+        emcee_log.setLevel(level)
+    tau = np.where(np.isfinite(tau) & (tau > 0), tau, float(steps))
+    burn_n = int(min(math.ceil(2 * tau.max()), steps // 2)) if burn == "auto" else int(burn)
+    thin_n = int(max(1, math.floor(0.5 * tau.min()))) if thin == "auto" else int(thin)
+    return tau, burn_n, thin_n
+
+
+def _diagnostics(chain: np.ndarray, tau: np.ndarray, burn: int, p: int, acceptance: float, samples: int):
+    """The chain's diagnostics (acceptance, autocorrelation times, effective sample sizes, split R-hat after the
+    burn-in) and the warnings they call for.
+
+    Returns:
+        ``(diagnostics, warnings)``: the `Posterior.diagnostics` dict and a list of sentences.
+    """
+    steps, nwalkers, ndim = chain.shape
+    after = chain[burn:]
+    ess = (after.shape[0] * nwalkers) / tau
+    r_hat = _split_r_hat(_to_reported(after, p)) if after.shape[0] > 1 else np.full(ndim, np.nan)
+    warnings = []
+    if steps < 50 * tau.max():
+        warnings.append(f"the chain ({steps} steps) is shorter than 50 autocorrelation times "
+                        f"(tau max = {tau.max():.1f}): run at least {int(50 * tau.max())} steps for reliable "
+                        "intervals")
+    if not 0.15 <= acceptance <= 0.6:
+        warnings.append(f"acceptance fraction {acceptance:.3f} is outside 0.15-0.6")
+    diagnostics = {
+        "acceptance_fraction": acceptance,
+        "tau": [float(t) for t in tau],
+        "tau_max": float(tau.max()),
+        "ess": [float(e) for e in ess],
+        "ess_min": float(ess.min()),
+        "r_hat": [float(r) for r in r_hat],
+        "r_hat_max": float(np.nanmax(r_hat)) if np.isfinite(r_hat).any() else float("nan"),
+        "steps": int(steps),
+        "walkers": int(nwalkers),
+        "samples": int(samples),
+    }
+    return diagnostics, warnings
+
+
+def _quantiles(x: np.ndarray) -> dict:
+    """Mean, median, standard deviation and the 2.5/16/84/97.5 % quantiles of one dimension's samples."""
+    q = np.percentile(x, QUANTILES)
+    return {"mean": float(x.mean()), "median": float(q[2]), "std": float(x.std(ddof=1)),
+            "q2.5": float(q[0]), "q16": float(q[1]), "q84": float(q[3]), "q97.5": float(q[4])}
+
+
 def posterior(fit_result: FitResult, measurements, *, nwalkers: int = POSTERIOR.walkers, nsteps: int = POSTERIOR.steps, burn="auto",
               thin="auto", likelihood: str = "gaussian", noise="estimate", prior="bounds", nu: float = 4.0,
               max_samples: int | None = None, store=None, name: str | None = None, resume: bool = True,
@@ -540,22 +681,7 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = POSTERIOR.
     data = make_fit_data(measurements, fixed, loss_epsilon(fit_result.loss, measurements.values))
     channels = model.channels
 
-    if noise == "estimate":
-        scale = None
-        noise_label = "estimated per channel"
-    elif noise == "known":
-        if measurements.sigma is None:
-            raise ValueError("noise='known' needs measurements with sigma")
-        sigma = np.where(np.isfinite(measurements.sigma), measurements.sigma, 1.0)
-        scale = np.where(np.asarray(data.mask), sigma * residual_scale(problem.loss, data), 1.0)
-        noise_label = "known (measurement sigma)"
-    elif isinstance(noise, (int, float)) and noise > 0:
-        scale = np.where(np.asarray(data.mask), float(noise) * residual_scale(problem.loss, data), 1.0)
-        noise_label = f"fixed sigma {float(noise):g} 1/sr"
-    else:
-        raise ValueError(f"noise must be 'estimate', 'known' or a positive number, got {noise!r}")
-    if scale is not None:
-        scale = jnp.asarray(np.where(scale > 0, scale, 1.0))
+    scale, noise_label = _noise_scale(noise, measurements, data, problem)
 
     fit_values = {k: jnp.asarray(model.params[k]) for k in free}
     flat0, _ = flatten_free(problem, fit_values)
@@ -580,15 +706,7 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = POSTERIOR.
     def log_prob_numpy(thetas):  # NumPy in, transferred by jit: an eager jnp.asarray adds a dispatch to every step
         return np.asarray(log_prob(np.asarray(thetas, dtype=float), context))
 
-    run_name = (name or model.spec).replace("/", "_")
-    backend = None
-    if store is not None:
-        backend = StepBackend(str(store), name=f"posteriors/{run_name}/chain")
-        with locked(store):
-            if backend.initialized and backend.iteration > 0 and backend.shape != (nwalkers, ndim) and resume:
-                raise ValueError(f"{store}: the stored chain has shape {backend.shape}, this run needs "
-                                 f"{(nwalkers, ndim)}; pass resume=False or another name")
-            backend.prepare(nwalkers, ndim, fresh=not resume)
+    backend = _stored_chain(store, (name or model.spec).replace("/", "_"), nwalkers, ndim, resume)
     sampler = emcee.EnsembleSampler(nwalkers, ndim, log_prob_numpy, vectorize=True, backend=backend)
 
     def fresh_start():
@@ -596,101 +714,26 @@ def posterior(fit_result: FitResult, measurements, *, nwalkers: int = POSTERIOR.
         return _initial_ball(fit_result, free, labels, flat0, lowers, uppers, nwalkers, ndim, p, data, problem,
                              seed)
 
-    already, start = backend.resume_point() if backend is not None else (0, None)
-    if already == 0:
-        start = fresh_start()
-        initial = log_prob_numpy(start)
-        if np.any(np.isnan(initial)):
-            raise ValueError("the initial log probability is NaN for some walkers: check the data for NaN sigma "
-                             "or the user priors")
-        if not np.all(np.isfinite(initial)):
-            bad = int(np.flatnonzero(~np.isfinite(initial))[0])
-            raise ValueError(f"walker {bad} starts where the posterior is zero (outside a prior's support): "
-                             "the least-squares optimum lies outside the priors given")
-    remaining = max(nsteps - already, 0)
-    bar = Progress("MCMC", remaining, enabled=progress and remaining > 0, unit="steps")
-    t0 = time.perf_counter()
-    if remaining:
-        try:
-            with _stop_between_steps() as asked:
-                stored, left = already, remaining
-                while left:
-                    try:
-                        for step, _ in enumerate(sampler.sample(start, iterations=left), start=1):
-                            bar.update(min(max(stored + step - already, 0), remaining))
-                            if asked:
-                                break
-                        break
-                    except ChainMoved:  # another process stored steps meanwhile: go on from the last one stored
-                        stored, start = backend.resume_point()
-                        start = fresh_start() if stored == 0 else start
-                        left = max(nsteps - stored, 0)
-            if asked:
-                raise Interrupted(signum=asked[0])
-        except KeyboardInterrupt as stop:
-            signum = getattr(stop, "signum", signal.SIGINT)
-            if backend is None:
-                raise Interrupted("the chain was not stored (pass store= to keep and resume one)", signum) from None
-            raise Interrupted(f"{backend.iteration} of {nsteps} steps are stored in {store}; run the same command "
-                              "again to continue the chain", signum) from None
-    bar.close(f"({nwalkers} walkers)")
-    wall = time.perf_counter() - t0
+    wall = _sample(sampler, backend, fresh_start, log_prob_numpy, nsteps, store, progress, nwalkers)
 
     with locked(store, shared=True) if backend is not None else contextlib.nullcontext():
         chain = sampler.get_chain()  # one chain: another process may store steps after it
         lp_chain = sampler.get_log_prob()
         accepted = sampler.acceptance_fraction
-    steps = chain.shape[0]
-    emcee_log = logging.getLogger("emcee.autocorr")
-    level = emcee_log.level
-    emcee_log.setLevel(logging.ERROR)  # its "chain too short" message is in our own warnings
-    try:
-        tau = emcee.autocorr.integrated_time(chain, quiet=True)
-    finally:
-        emcee_log.setLevel(level)
-    tau = np.where(np.isfinite(tau) & (tau > 0), tau, float(steps))
-    burn_n = int(min(math.ceil(2 * tau.max()), steps // 2)) if burn == "auto" else int(burn)
-    thin_n = int(max(1, math.floor(0.5 * tau.min()))) if thin == "auto" else int(thin)
+    tau, burn_n, thin_n = _burn_and_thin(chain, burn, thin)
     kept = chain[burn_n::thin_n]
     names = labels + ([f"noise_sigma[{c}]" for c in range(channels)] if noise == "estimate" else [])
     physical = _to_reported(chain, p)
     flat = _to_reported(kept, p).reshape(-1, ndim)
-    after = chain[burn_n:]
-    ess = (after.shape[0] * nwalkers) / tau
-    r_hat = _split_r_hat(_to_reported(after, p)) if after.shape[0] > 1 else np.full(ndim, np.nan)
-    acceptance = float(np.mean(accepted))
-    warnings = []
-    if steps < 50 * tau.max():
-        warnings.append(f"the chain ({steps} steps) is shorter than 50 autocorrelation times "
-                        f"(tau max = {tau.max():.1f}): run at least {int(50 * tau.max())} steps for reliable "
-                        "intervals")
-    if not 0.15 <= acceptance <= 0.6:
-        warnings.append(f"acceptance fraction {acceptance:.3f} is outside 0.15-0.6")
+    diagnostics, warnings = _diagnostics(chain, tau, burn_n, p, float(np.mean(accepted)), flat.shape[0])
     if subsample:
         warnings.append(f"the chain ran on a stratified subsample of {subsample[0]} of {subsample[1]} samples")
-    summary = {}
-    for k, n in enumerate(names):
-        x = flat[:, k]
-        q = np.percentile(x, QUANTILES)
-        summary[n] = {"mean": float(x.mean()), "median": float(q[2]), "std": float(x.std(ddof=1)),
-                      "q2.5": float(q[0]), "q16": float(q[1]), "q84": float(q[3]), "q97.5": float(q[4])}
+    summary = {n: _quantiles(flat[:, k]) for k, n in enumerate(names)}
     # The posterior's likelihood weights the residuals as the loss does, so its widths compare with the Laplace
     # standard errors (which `FitResult.stderr` holds only when the noise model matches the loss).
     laplace = dict(zip(labels, np.concatenate([np.ravel(fit_result.stderr_laplace[n]) for n in free])))
     laplace.update({n: float("nan") for n in names[p:]})
     values = dict(zip(labels, np.asarray(flat0, dtype=float)))
-    diagnostics = {
-        "acceptance_fraction": acceptance,
-        "tau": [float(t) for t in tau],
-        "tau_max": float(tau.max()),
-        "ess": [float(e) for e in ess],
-        "ess_min": float(ess.min()),
-        "r_hat": [float(r) for r in r_hat],
-        "r_hat_max": float(np.nanmax(r_hat)) if np.isfinite(r_hat).any() else float("nan"),
-        "steps": int(steps),
-        "walkers": int(nwalkers),
-        "samples": int(flat.shape[0]),
-    }
     return Posterior(names=names, samples=flat, chain=physical, log_prob=lp_chain, burn=burn_n, thin=thin_n,
                      summary=summary, correlation=np.corrcoef(flat, rowvar=False) if flat.shape[0] > 1 else
                      np.eye(ndim), laplace_stderr={k: float(v) for k, v in laplace.items()},
