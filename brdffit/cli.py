@@ -916,25 +916,24 @@ PTFE_EXAMPLE = ("../shared/data/nist-ptfe/PTFE.data.csv --columns theta_i=thetai
                 "--values f_r11")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of every ``brdffit`` command."""
-    parser = argparse.ArgumentParser(
-        prog="brdffit",
-        description="Fit analytic BRDF models to measured reflectance.",
-        epilog="Examples:\n  brdffit fit data/synthetic/plastic.h5\n  brdffit info data/synthetic/plastic.h5\n"
-               "  brdffit models",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument("--version", action="version", version=f"brdffit {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+def _models_command(sub) -> None:
+    """The ``brdffit models`` command's arguments."""
     _add(sub, "models", "list every lobe with its parameters, bounds and reference", ["brdffit models"],
          _cmd_models)
+
+
+def _info_command(sub) -> None:
+    """The ``brdffit info`` command's arguments."""
     p = _add(sub, "info", "describe the measurements in a file",
              ["brdffit info data/synthetic/plastic.h5", "brdffit info table.csv --json",
               f"brdffit info {PTFE_EXAMPLE} --where lambda=0.532"], _cmd_info)
     p.add_argument("file", help=MEASUREMENT_FILE)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     _add_table_options(p)
+
+
+def _fit_command(sub) -> None:
+    """The ``brdffit fit`` command's arguments."""
     p = _add(sub, "fit", "fit a model to the measurements in a file and write the result",
              ["brdffit fit data/synthetic/plastic.h5",
               "brdffit fit data/synthetic/plastic.h5 --model lambert+ggx --fixed f0=0.04 --out out/",
@@ -943,10 +942,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file", help=MEASUREMENT_FILE)
     p.add_argument("--model", default=DEFAULT_MODEL,
                    help="model spec, lobes joined with '+' (see `brdffit models`), or 'auto' (the default): "
-                        "choose among the standard candidates by BIC (`brdffit select`)")
+                        "choose among the standard candidates by the 'auto' criterion: BIC where the data state "
+                        "sigma, else the error on held-out directions (`brdffit select`)")
     p.add_argument("--lobes", metavar="K|auto",
                    help="number of Lafortune lobes in the model's Lafortune term, or 'auto' to choose 1.."
-                        "--max-lobes by BIC")
+                        "--max-lobes by the 'auto' criterion")
     p.add_argument("--max-lobes", type=bounded(int, 1), default=3, metavar="K", help="largest K tried by --lobes auto")
     _add_fit_options(p)
     p.add_argument("--multistart", type=bounded(int, 0), default=0, metavar="N", help="extra quasi-random starts")
@@ -961,6 +961,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON summary to stdout")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     _add_table_options(p)
+
+
+def _posterior_command(sub) -> None:
+    """The ``brdffit posterior`` command's arguments."""
     p = _add(sub, "posterior", "sample (or resume) the parameter posterior of a fit stored in a results file",
              ["brdffit posterior data/synthetic/plastic.brdffit/result.h5",
               "brdffit posterior out/result.h5 --steps 10000   # continues a stored chain"], _cmd_posterior)
@@ -971,6 +975,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"seed of the walkers' start (default {POSTERIOR.seed})")
     p.add_argument("--json", action="store_true", help="print the posterior summary as JSON")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
+
+
+def _report_command(sub) -> None:
+    """The ``brdffit report`` command's arguments."""
     p = _add(sub, "report", "write report.html and report.md (with figures) for a fit stored in a results file",
              ["brdffit report data/synthetic/plastic.brdffit/result.h5",
               "brdffit report out/result.h5 --out report-folder/"], _cmd_report)
@@ -979,6 +987,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (default: the results file's folder)")
     p.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
+
+
+def _synth_command(sub) -> None:
+    """The ``brdffit synth`` command's arguments."""
     p = _add(sub, "synth", "write synthetic measurements of a model",
              ["brdffit synth lambert+ggx --param alpha=0.2 --pattern half-diff --n 2000 --noise relative:0.01 "
               "--out ggx.h5"], _cmd_synth)
@@ -992,6 +1004,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=bounded(int, 0), default=0, help="seed (default 0)")
     p.add_argument("--out", required=True, help="output file (.h5 or .csv)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
+
+
+def _convert_command(sub) -> None:
+    """The ``brdffit convert`` command's arguments."""
     p = _add(sub, "convert", "convert measurements between CSV and HDF5, or tabulate a fit as a MERL file",
              ["brdffit convert table.csv table.h5", "brdffit convert out/result.h5 fitted.binary"], _cmd_convert)
     p.add_argument("input", help=MEASUREMENT_FILE + "; for a .binary output, a results file with a fit")
@@ -999,6 +1015,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", help="which fit of a results file to tabulate (default: the first)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     _add_table_options(p)
+
+
+def _export_command(sub) -> None:
+    """The ``brdffit export`` command's arguments."""
     p = _add(sub, "export", "write a fitted material in the form a renderer takes (json, Mitsuba 3 XML, pbrt-v4)",
              ["brdffit export data/synthetic/plastic.brdffit/result.h5 --to mitsuba",
               "brdffit export out/result.h5 --to pbrt --out material.pbrt"], _cmd_export)
@@ -1017,6 +1037,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="export a renderer material of an IMPLAUSIBLE fit (refused otherwise, exit "
                         f"{EXIT_IMPLAUSIBLE})")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
+
+
+def _render_command(sub) -> None:
+    """The ``brdffit render`` command's arguments."""
     p = _add(sub, "render", "render a sphere (or plane) preview of a fit, a MERL table or measured data",
              ["brdffit render data/synthetic/plastic.brdffit/result.h5 --out plastic.png",
               "brdffit render data/synthetic/plastic.h5 --tonemap filmic --npy   # the measured data, interpolated",
@@ -1038,6 +1062,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="PNG path (default: the input with .png)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     _add_table_options(p)
+
+
+def _select_command(sub) -> None:
+    """The ``brdffit select`` command's arguments."""
     p = _add(sub, "select", "fit candidate models and choose the smallest that is good enough",
              ["brdffit select data/synthetic/plastic.h5",
               "brdffit select data/synthetic/lafortune-retro.h5 --candidates "
@@ -1051,6 +1079,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print the selection as one JSON object")
     _add_table_options(p)
+
+
+def _batch_command(sub) -> None:
+    """The ``brdffit batch`` command's arguments."""
     p = _add(sub, "batch", "fit every material of a database on a Dask cluster into one results table",
              ["brdffit batch 'merl/*.binary' --model lambert+ggx --out merl.h5",
               "brdffit batch textures.h5 --model lambert+ggx --out texels.parquet --scheduler tcp://host:8786",
@@ -1077,6 +1109,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object: out, materials, statuses")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     _add_table_options(p)
+
+
+# Each command's arguments, in the order `brdffit --help` lists the commands.
+COMMANDS = (_models_command, _info_command, _fit_command, _posterior_command, _report_command, _synth_command,
+            _convert_command, _export_command, _render_command, _select_command, _batch_command)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every ``brdffit`` command."""
+    parser = argparse.ArgumentParser(
+        prog="brdffit",
+        description="Fit analytic BRDF models to measured reflectance.",
+        epilog="Examples:\n  brdffit fit data/synthetic/plastic.h5\n  brdffit info data/synthetic/plastic.h5\n"
+               "  brdffit models",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"brdffit {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for add in COMMANDS:
+        add(sub)
     return parser
 
 
