@@ -269,6 +269,73 @@ def _where_mask(table: _Table, where: Mapping) -> tuple[np.ndarray, dict]:
 
 
 @memory_guarded("reading the table")
+def _angle_columns(path: Path, table, columns: Mapping | None) -> tuple[dict, dict, int | None]:
+    """The angle and weight columns of `read_table`'s ``columns`` mapping (canonical names where a key is not
+    given; positions for a file without a header and without a mapping).
+
+    Returns:
+        ``(mapping, angle_cols, weights_col)``: the mapping as used, angle name -> column index, and the weights'
+        column index (None: no weights).
+    """
+    mapping = dict(columns or {})
+    unknown = set(mapping) - {*ANGLE_COLUMNS, WEIGHTS_COLUMN}
+    if unknown:
+        raise ValueError(f"columns: unknown key {sorted(unknown)[0]!r}; keys are "
+                         f"{', '.join(ANGLE_COLUMNS)} and {WEIGHTS_COLUMN}")
+    if table.names is None and not mapping:
+        mapping = {name: k for k, name in enumerate(ANGLE_COLUMNS)}
+        if table.n_columns < 5:
+            raise FormatError(path, f"a table without a header needs the 4 angle columns and at least one value "
+                                    f"column; this one has {table.n_columns} columns")
+    angle_cols = {}
+    for name in ANGLE_COLUMNS:
+        key = mapping.get(name, name)
+        if table.names is None and isinstance(key, str):
+            raise FormatError(path, f"the file has no header, so columns={{{name!r}: <index>}} must give indices")
+        angle_cols[name] = table.index(key, f"angle {name}")
+    weights_col = None
+    if WEIGHTS_COLUMN in mapping:
+        weights_col = table.index(mapping[WEIGHTS_COLUMN], "weights")
+    elif table.names and WEIGHTS_COLUMN in table.names:
+        weights_col = table.names.index(WEIGHTS_COLUMN)
+    return mapping, angle_cols, weights_col
+
+
+def _value_columns(path: Path, table, values, used: set) -> list[int]:
+    """The value columns: those named by ``values``, else every numeric column not ``used`` (angles, weights,
+    filters, the channel column) and not a σ column; none may be ``used``."""
+    if values is None:
+        value_cols = [c for c in range(table.n_columns) if c not in used
+                      and not (table.names and table.names[c].startswith(SIGMA_PREFIX))
+                      and not table.is_text_column(c)]
+        if not value_cols:
+            raise FormatError(path, "no value column: every column is an angle, weights, sigma or text; name the "
+                                    "values with values=[...]")
+    else:
+        value_cols = [table.index(v, "values") for v in _as_list(values)]
+        if not value_cols:
+            raise ValueError("values: name at least one value column")
+    clash = used & set(value_cols)
+    if clash:
+        raise ValueError(f"values: column {table.label(sorted(clash)[0])} is also used as an angle, weight or filter")
+    return value_cols
+
+
+def _canonical_angles(theta_i, phi_i, theta_o, phi_o, degrees: bool) -> tuple:
+    """The angles in radians with θ ≥ 0 (a negative θ is the same direction at φ + π, the instruments' signed
+    in-plane angle) and φ wrapped into [0, 2π), wrapped in the file's unit first so that 186.34° stays the double
+    nearest 186.34 (the arrays of θ and φ are changed in place)."""
+    half_turn = 180.0 if degrees else math.pi
+    for theta, phi in ((theta_i, phi_i), (theta_o, phi_o)):
+        flip = theta < 0
+        theta[flip] = -theta[flip]
+        phi[flip] += half_turn
+        phi[:] = np.mod(phi, 2 * half_turn)
+    if degrees:
+        return tuple(np.radians(a) for a in (theta_i, phi_i, theta_o, phi_o))
+    return theta_i, phi_i, theta_o, phi_o
+
+
 def read_table(path, *, columns: Mapping | None = None, values=None, sigma=None, where: Mapping | None = None,
                channel_column=None, channels: Sequence[str] | None = None, degrees: bool = True,
                delimiter: str | None = None, negative: str = "error", meta: Mapping | None = None) -> Measurements:
@@ -313,47 +380,12 @@ def read_table(path, *, columns: Mapping | None = None, values=None, sigma=None,
     table = _split_lines(path, _read_text(path), delimiter)
     file_meta = _meta_from_comments(path, table.comments)
 
-    mapping = dict(columns or {})
-    unknown = set(mapping) - {*ANGLE_COLUMNS, WEIGHTS_COLUMN}
-    if unknown:
-        raise ValueError(f"columns: unknown key {sorted(unknown)[0]!r}; keys are "
-                         f"{', '.join(ANGLE_COLUMNS)} and {WEIGHTS_COLUMN}")
-    if table.names is None and not mapping:
-        mapping = {name: k for k, name in enumerate(ANGLE_COLUMNS)}
-        if table.n_columns < 5:
-            raise FormatError(path, f"a table without a header needs the 4 angle columns and at least one value "
-                                    f"column; this one has {table.n_columns} columns")
-    angle_cols = {}
-    for name in ANGLE_COLUMNS:
-        key = mapping.get(name, name)
-        if table.names is None and isinstance(key, str):
-            raise FormatError(path, f"the file has no header, so columns={{{name!r}: <index>}} must give indices")
-        angle_cols[name] = table.index(key, f"angle {name}")
-    weights_col = None
-    if WEIGHTS_COLUMN in mapping:
-        weights_col = table.index(mapping[WEIGHTS_COLUMN], "weights")
-    elif table.names and WEIGHTS_COLUMN in table.names:
-        weights_col = table.names.index(WEIGHTS_COLUMN)
-
+    mapping, angle_cols, weights_col = _angle_columns(path, table, columns)
     where = dict(where or {})
     where_cols = {table.index(k, "where") for k in where}
     pivot_col = None if channel_column is None else table.index(channel_column, "channel_column")
     used = set(angle_cols.values()) | where_cols | ({weights_col} - {None}) | ({pivot_col} - {None})
-
-    if values is None:
-        value_cols = [c for c in range(table.n_columns) if c not in used
-                      and not (table.names and table.names[c].startswith(SIGMA_PREFIX))
-                      and not table.is_text_column(c)]
-        if not value_cols:
-            raise FormatError(path, "no value column: every column is an angle, weights, sigma or text; name the "
-                                    "values with values=[...]")
-    else:
-        value_cols = [table.index(v, "values") for v in _as_list(values)]
-        if not value_cols:
-            raise ValueError("values: name at least one value column")
-    clash = used & set(value_cols)
-    if clash:
-        raise ValueError(f"values: column {table.label(sorted(clash)[0])} is also used as an angle, weight or filter")
+    value_cols = _value_columns(path, table, values, used)
 
     sigma_cols = _sigma_columns(table, value_cols, sigma)
 
@@ -370,14 +402,7 @@ def read_table(path, *, columns: Mapping | None = None, values=None, sigma=None,
     sig = np.stack([column(c) for c in sigma_cols], axis=1) if sigma_cols else None
     wts = None if weights_col is None else column(weights_col, allow_missing=False)
 
-    half_turn = 180.0 if degrees else math.pi
-    for theta, phi in ((theta_i, phi_i), (theta_o, phi_o)):
-        flip = theta < 0
-        theta[flip] = -theta[flip]
-        phi[flip] += half_turn
-        phi[:] = np.mod(phi, 2 * half_turn)  # wrap in the file's unit: 186.34 deg stays the double nearest 186.34
-    if degrees:
-        theta_i, phi_i, theta_o, phi_o = (np.radians(a) for a in (theta_i, phi_i, theta_o, phi_o))
+    theta_i, phi_i, theta_o, phi_o = _canonical_angles(theta_i, phi_i, theta_o, phi_o, degrees)
 
     n_negative = 0
     if negative == "missing":
