@@ -30,7 +30,7 @@ import numpy as np
 from ..arrays import on_host
 from ..metrics import metric_sums
 from ..models.model import evaluate_pair
-from .problem import BUCKET_CHUNK, FitData, Problem, chunk_data, physical_params, residuals_of
+from .problem import BUCKET_CHUNK, FitData, Problem, physical_params, residuals_of, sample_pieces
 from ..programs import Program
 
 __all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "timed_first_calls",
@@ -201,9 +201,10 @@ def metric_sums_of(values: list, pieces: list[FitData], materials=None) -> np.nd
 
 
 def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
-    """One material's ``data`` in equally shaped chunks of ``size`` samples, each with a leading material axis of
-    1 (bounds the memory of the tangents; split once and reuse the list when accumulating repeatedly)."""
-    return chunk_data(data, size)
+    """`sample_pieces` of one material's ``data`` (no material axis): equally shaped chunks of ``size`` samples,
+    each with a leading material axis of 1 (bounds the memory of the tangents; split once and reuse the list when
+    accumulating repeatedly)."""
+    return sample_pieces(jax.tree_util.tree_map(lambda a: a[None], on_host(data)), size)
 
 
 def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bool = False,

@@ -22,7 +22,7 @@ from .losses import get_loss, robust_residuals
 from ..programs import Program
 
 __all__ = ["Problem", "FitData", "make_fit_data", "bucket", "BUCKET_CHUNK", "physical_params", "residual_fn", "residuals_at", "stack_data",
-           "sample_pieces", "take_materials", "take_samples", "chunk_data",
+           "sample_pieces", "take_materials", "take_samples",
            "flatten_free"]
 
 _PER_SAMPLE = ("pair", "values", "mask", "cos_i", "sqrt_weight", "sigma")
@@ -256,12 +256,6 @@ def sample_pieces(data: FitData, size: int) -> list[FitData]:
     return [FitData(**on_device(dict(fields, **{k: jax.tree_util.tree_map(lambda a: cut(a, start), fields[k])
                                                  for k in _PER_SAMPLE})))
             for start in range(0, max(n, 1), width)]
-
-
-def chunk_data(data: FitData, size: int) -> list[FitData]:
-    """One material's ``data`` (no material axis) in `sample_pieces` of ``size`` samples, each with a leading
-    material axis of 1 (the layout of `stack_data`)."""
-    return sample_pieces(jax.tree_util.tree_map(lambda a: a[None], on_host(data)), size)
 
 
 def flatten_free(problem: Problem, tree: dict, names=None):
