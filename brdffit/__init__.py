@@ -11,7 +11,7 @@ Public API:
 - fitting: `fit`, `fit_many`, `FitResult`, `FitError`;
 - databases on a Dask cluster: `fit_database` (`brdffit.distributed`);
 - uncertainty: `posterior`, `Posterior`;
-- model selection: `select`, `Selection`, `fit_lobes`, `Scene` (and `scene.interpolate`, `scene.scene_error`);
+- model selection: `select`, `Selection`, `fit_lobes`, `Scene` (and `scene.scene_error`, `interpolation.interpolate`);
 - physical checks: `properties`;
 - previews and renderer export: `render`, `export`.
 """
@@ -35,7 +35,8 @@ __version__ = "0.1.0"
 
 _PUBLIC = {
     "geometry": "geometry", "io": "io", "models": "models", "params": "params", "properties": "properties",
-    "render": "render", "scene": "scene", "synth": "synth", "export": "export",
+    "plausibility": "plausibility", "render": "render", "scene": "scene", "interpolation": "interpolation",
+    "synth": "synth", "export": "export",
     "FitError": "fitting:FitError", "FitResult": "fitting:FitResult", "fit": "fitting:fit",
     "fit_lobes": "fitting:fit_lobes", "fit_many": "fitting:fit_many", "fit_database": "distributed:fit_database",
     "MeasurementError": "measurements:MeasurementError", "Measurements": "measurements:Measurements",

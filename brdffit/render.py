@@ -22,7 +22,8 @@ from .io._common import atomic_path
 from .io.merl import MerlTable
 from .measurements import Measurements
 from .models import Model
-from .scene import Scene, interpolate
+from .interpolation import interpolate
+from .scene import Scene
 
 __all__ = [
     "render",
@@ -97,12 +98,12 @@ def render(scene: Scene, source, *, k: int = 8, isotropic: bool = True) -> np.nd
     Arguments:
         scene: a `brdffit.scene.Scene` (`Scene.sphere`, `Scene.plane`, or a direction list).
         source: what reflects: a `brdffit.Model` (evaluated exactly), `Measurements` (interpolated at the scene's
-            directions with `brdffit.scene.interpolate`, k nearest samples) or a
+            directions with `brdffit.interpolation.interpolate`, k nearest samples) or a
             `brdffit.io.merl.MerlTable` (`MerlTable.lookup`, the value of the cell holding each direction pair;
             missing cells reflect nothing).
         k: neighbours of the interpolation of `Measurements` (ignored otherwise).
         isotropic: interpolate `Measurements` in isotropic coordinates (False for anisotropic data, e.g. brushed
-            metal; see `brdffit.scene.interpolate`).
+            metal; see `brdffit.interpolation.interpolate`).
 
     Returns:
         The linear radiance image ``(H, W, C)`` (float64, black outside the object) for sphere and plane scenes, or

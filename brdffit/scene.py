@@ -1,4 +1,4 @@
-r"""Scenes in which a material is judged, the radiance a BRDF gives in them, and interpolation of measured data.
+r"""Scenes in which a material is judged and the radiance a BRDF gives in them.
 
 A `Scene` is a flat list of (shading point, light) rows: for each row the direction to the light ``wi`` and to the
 viewer ``wo`` in the local shading frame of the point (docs/conventions.md: z = normal, x = tangent), the
@@ -11,8 +11,8 @@ docs/conventions.md, with the incident radiance a delta in direction):
 Constructors: `Scene.from_directions` / `Scene.from_angles` (a list of light/view pairs, one pixel each),
 `Scene.sphere` (an orthographic view of a unit sphere under directional lights) and `Scene.plane` (a flat square
 under directional or point lights). `scene_error` compares two radiance images (relative RMS, CIE76 ΔE*ab after
-a common exposure, maximum relative error); `interpolate` estimates a measured BRDF at the rows of a scene so that
-a fitted model can be compared with the measurement in that scene (docs/scenes.md).
+a common exposure, maximum relative error); `Scene.radiance_interpolated` shows a measurement in a scene through
+`brdffit.interpolation.interpolate`, so that a fitted model can be compared with it there (docs/scenes.md).
 """
 
 from __future__ import annotations
@@ -22,27 +22,20 @@ import math
 
 import jax
 import numpy as np
-from scipy.spatial import cKDTree
 
+from .interpolation import _normalise_rows, interpolate
 from .measurements import Measurements
 from .models import Model, evaluate_dirs
 
 __all__ = [
     "Scene",
     "scene_error",
-    "interpolate",
     "linear_srgb_to_lab",
     "METRICS",
-    "THETA_H_WEIGHT",
 ]
 
 # Metrics understood by `scene_error`.
 METRICS = ("relative", "delta-e", "max-relative")
-
-# Weight of θh (radians) against θd and |cosθi − cosθo|/2 in the interpolation features. A specular lobe varies
-# fastest with θh, so distances along θh count more; 3 gave the smallest error on lambert+ward data with α from
-# 0.1 to 0.3 among 1, 1.5, 2, 3, 4, 5 (docs/scenes.md).
-THETA_H_WEIGHT = 3.0
 
 # Rows of a scene evaluated at once by `Scene.radiance_of` (bounds the memory of large scenes).
 _CHUNK = 1 << 18
@@ -50,27 +43,11 @@ _CHUNK = 1 << 18
 # A pixel of the `max-relative` metric counts only where the reference exceeds this fraction of its maximum.
 _MAX_RELATIVE_FLOOR = 0.01
 
-# Distances below this are treated as an exact hit by the inverse-distance weights.
-_MIN_DISTANCE = 1e-12
-
 
 def _unit_vectors(theta, phi) -> np.ndarray:
     theta, phi = np.broadcast_arrays(np.asarray(theta, dtype=float), np.asarray(phi, dtype=float))
     s = np.sin(theta)
     return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
-
-
-def _normalise_rows(name: str, w) -> np.ndarray:
-    w = np.array(w, dtype=float)
-    if w.ndim == 1 and w.shape == (3,):
-        w = w[None, :]
-    if w.ndim != 2 or w.shape[1] != 3:
-        raise ValueError(f"{name} must have shape (M, 3), got {w.shape}")
-    norm = np.linalg.norm(w, axis=1, keepdims=True)
-    if not np.all(np.isfinite(w)) or np.any(norm == 0.0):
-        row = int(np.flatnonzero(~np.all(np.isfinite(w), axis=1) | (norm[:, 0] == 0.0))[0])
-        raise ValueError(f"{name}: row {row} is not a finite non-zero direction: {w[row].tolist()}")
-    return w / norm
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -389,11 +366,11 @@ class Scene:
         return self.radiance(f)
 
     def radiance_interpolated(self, measurements: Measurements, k: int = 8, isotropic: bool = True) -> np.ndarray:
-        """Radiance of measured data in this scene: `radiance` of `interpolate` at the rows.
+        """Radiance of measured data in this scene: `radiance` of `brdffit.interpolation.interpolate` at the rows.
 
         Arguments:
             measurements: the measured BRDF.
-            k, isotropic: as for `interpolate`.
+            k, isotropic: as for `brdffit.interpolation.interpolate`.
 
         Returns:
             ``(n_pixels, C)`` radiance.
@@ -529,107 +506,3 @@ def scene_error(radiance, reference, metric: str = "relative") -> float:
         lab_ref = linear_srgb_to_lab(ref[lit] / y99)
         return float(np.mean(np.linalg.norm(lab - lab_ref, axis=1)))
     raise ValueError(f"unknown metric {metric!r}; use one of {', '.join(METRICS)}")
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# Interpolation of measured data
-# ---------------------------------------------------------------------------------------------------------------
-
-
-def _features(wi: np.ndarray, wo: np.ndarray, isotropic: bool) -> np.ndarray:
-    r"""Coordinates of direction pairs in which nearby points have similar BRDF values.
-
-    With h = (ωi + ωo)/|ωi + ωo| and δ = (ωi − ωo)/2 (so |δ| = sinθd and δ ⊥ h), the Rusinkiewicz (1998) angles
-    satisfy cosθi − cosθo = 2 δz = −2 sinθh sinθd cosφd. Swapping ωi and ωo (reciprocity) keeps h and flips δ,
-    so every feature below is built from h, |δ| and products with an even number of δ factors: reciprocity holds
-    exactly, in floating point too.
-
-    Isotropic: (w θh, θd, |cosθi − cosθo|/2) = (w θh, θd, sinθh sinθd |cosφd|), invariant under rotation about
-    the normal and under mirroring in a plane through it (the usual assumption behind "f depends on θi, θo and
-    |φo − φi|"). The third coordinate carries the φd dependence with its natural weight sinθh: at θh = 0 every φd is
-    the same configuration up to a rotation, so there it vanishes. w = `THETA_H_WEIGHT`.
-
-    Anisotropic: (w θh cosφh, w θh sinφh, θd, sinθh sinθd cos2φd, sinθh sinθd sin2φd): h as a polar embedding
-    (continuous at the normal) and φd modulo π (reciprocity) as a doubled angle. With P = sinθh sinθd cosφd = −δz
-    and Q = sinθh sinθd sinφd = (h × δ)z, the last two are (P² − Q², 2PQ)/(sinθh sinθd).
-    """
-    s = wi + wo
-    h = s / np.maximum(np.linalg.norm(s, axis=1, keepdims=True), 1e-300)
-    delta = 0.5 * (wi - wo)
-    theta_h = np.arccos(np.clip(h[:, 2], -1.0, 1.0))
-    theta_d = np.arcsin(np.clip(np.linalg.norm(delta, axis=1), 0.0, 1.0))
-    p = -delta[:, 2]
-    if isotropic:
-        return np.stack([THETA_H_WEIGHT * theta_h, theta_d, np.abs(p)], axis=1)
-    q = h[:, 0] * delta[:, 1] - h[:, 1] * delta[:, 0]
-    radius = np.hypot(p, q)
-    safe = np.where(radius > 0.0, radius, 1.0)
-    sin_h = np.hypot(h[:, 0], h[:, 1])
-    safe_h = np.where(sin_h > 0.0, sin_h, 1.0)
-    hx = np.where(sin_h > 0.0, h[:, 0] / safe_h, 0.0)
-    hy = np.where(sin_h > 0.0, h[:, 1] / safe_h, 0.0)
-    return np.stack([THETA_H_WEIGHT * theta_h * hx, THETA_H_WEIGHT * theta_h * hy, theta_d,
-                     (p * p - q * q) / safe, 2.0 * p * q / safe], axis=1)
-
-
-def interpolate(measurements: Measurements, wi, wo, k: int = 8, isotropic: bool = True,
-                power: float = 2.0) -> np.ndarray:
-    r"""Estimate a measured BRDF at new direction pairs (scattered-data interpolation).
-
-    Inverse-distance weighting (Shepard 1968) of the k nearest measured samples, found with
-    `scipy.spatial.cKDTree` in coordinates that respect the symmetries of a BRDF (`_features`): reciprocity
-    always, and with ``isotropic`` rotation about the normal (and mirror symmetry). The coordinates are
-    half/difference angles, (3 θh, θd, |cosθi − cosθo|/2) for isotropic data, which resolve the specular peak
-    better than (θi, θo, |φo − φi|) (docs/scenes.md has the measured accuracy):
-
-        f(q) = Σ_j w_j f_j / Σ_j w_j,   w_j = 1 / max(d_j, 1e-12)^power.
-
-    Missing (NaN) values are ignored channel by channel. A query with either direction at or below the horizon
-    gives 0. Outside the measured range (e.g. beyond the largest measured θ) the estimate is that of the nearest
-    samples: no extrapolation.
-
-    Arguments:
-        measurements: the measured BRDF.
-        wi: ``(M, 3)`` directions to the light, local frame (normalised here).
-        wo: ``(M, 3)`` directions to the detector.
-        k: number of neighbours (fewer if fewer samples are valid).
-        isotropic: use the isotropic coordinates; False keeps the azimuth of the half vector (anisotropic data).
-        power: exponent of the inverse-distance weights.
-
-    Returns:
-        ``(M, C)`` NumPy array of f_r estimates in 1/sr.
-
-    Raises:
-        ValueError: bad shapes, k < 1, or a channel with no measured value at all.
-    """
-    wi, wo = _normalise_rows("wi", wi), _normalise_rows("wo", wo)
-    if wi.shape != wo.shape:
-        raise ValueError(f"wi and wo must have the same shape, got {wi.shape} and {wo.shape}")
-    k = int(k)
-    if k < 1:
-        raise ValueError(f"k must be >= 1, got {k}")
-    values = np.asarray(measurements.values, dtype=float)
-    out = np.zeros((wi.shape[0], values.shape[1]))
-    above = (wi[:, 2] > 0.0) & (wo[:, 2] > 0.0)
-    if not above.any():
-        return out
-    sample_features = _features(measurements.wi(), measurements.wo(), isotropic)
-    query = _features(wi[above], wo[above], isotropic)
-    valid = np.isfinite(values)
-    # One tree per distinct pattern of missing values (usually one for all channels).
-    groups: dict[bytes, list[int]] = {}
-    for c in range(values.shape[1]):
-        groups.setdefault(np.packbits(valid[:, c]).tobytes(), []).append(c)
-    for channels in groups.values():
-        rows = np.flatnonzero(valid[:, channels[0]])
-        if rows.size == 0:
-            names = ", ".join(measurements.channels[c] for c in channels)
-            raise ValueError(f"channel(s) {names} have no measured value to interpolate")
-        kk = min(k, rows.size)
-        dist, idx = cKDTree(sample_features[rows]).query(query, k=kk)
-        dist, idx = dist.reshape(len(query), kk), idx.reshape(len(query), kk)
-        weight = 1.0 / np.maximum(dist, _MIN_DISTANCE) ** power
-        weight /= weight.sum(axis=1, keepdims=True)
-        neighbours = values[rows][:, channels][idx]  # (Q, k, len(channels))
-        out[np.ix_(np.flatnonzero(above), channels)] = np.einsum("qk,qkc->qc", weight, neighbours)
-    return out

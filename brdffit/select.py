@@ -367,7 +367,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
         scene_metric: ``"relative"`` (relative RMS radiance error), ``"max-relative"`` or ``"delta-e"`` (mean
             CIE ΔE*ab; 3 channels) (`brdffit.scene.scene_error`).
         reference: what a candidate's scene radiance is compared with: ``"data"`` (the measurements interpolated
-            at the scene's directions, `brdffit.scene.interpolate`) or ``"best"`` (the best-scoring candidate).
+            at the scene's directions, `brdffit.interpolation.interpolate`) or ``"best"`` (the best-scoring candidate).
         seed: seed of the held-out split, folds and fits.
         screen: with ``aic``/``bic``, fit every candidate to the training rows first (at most `SCREEN_SAMPLES` of
             them) and refit to all the data only the candidates that can still be chosen (docs/model-selection.md);
@@ -376,7 +376,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
             albedo ≤ 1 over the measured incidences, ks·F ≤ 1): an implausible one is chosen only when no
             plausible one is within the margin, with a warning. With the other criteria, leave out fits that
             conserve energy where the data were measured but whose directional
-            albedo exceeds `EXTRAPOLATION_ALBEDO` beyond the data's largest θi (`brdffit.properties.plausibility`)
+            albedo exceeds `EXTRAPOLATION_ALBEDO` beyond the data's largest θi (`brdffit.plausibility.plausibility`)
             while a converged candidate remains; such a candidate's verdict says so.
         progress: show a progress line on stderr, one update per candidate (and per scene refit).
         **fit_options: passed to every `brdffit.fit` (solver, fixed, max_steps, ...).
@@ -468,7 +468,8 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
     by_scene = None
     scene_results = {}
     if scene is not None:
-        from .scene import interpolate, scene_error
+        from .interpolation import interpolate
+        from .scene import scene_error
 
         if reference == "data":
             seen = interpolate(measurements, scene.wi, scene.wo)

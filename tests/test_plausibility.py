@@ -1,10 +1,11 @@
-"""Plausibility of fitted models in every summary and report (brdffit.properties.plausibility)."""
+"""Plausibility of fitted models in every summary and report (brdffit.plausibility.plausibility)."""
 
 import numpy as np
 import pytest
 
 import brdffit
 from brdffit import properties as P
+from brdffit.plausibility import plausibility
 
 
 def _ward_fit(ks: float, alpha: float, seed: int):
@@ -62,22 +63,22 @@ def test_plausible_fit_is_not_flagged(plausible):
 def test_albedo_above_one_only_beyond_the_data_is_a_caution():
     # Lambert + a Fresnel lobe is not energy-coupled: towards grazing F -> 1 and the sum passes 1.
     model = brdffit.models.get("lambert+cook-torrance", channels=1, rho_d=0.55, ks=1.0, m=0.15, f0=0.04)
-    check = P.plausibility(model, theta_max=np.deg2rad(70.0))
+    check = plausibility(model, theta_max=np.deg2rad(70.0))
     assert check["energy"].level == "caution" and check["energy"].value > 1.1
     assert "beyond them" in check["energy"].message
-    assert P.plausibility(model)["energy"].level == "implausible"  # when every θi counts as measured
+    assert plausibility(model)["energy"].level == "implausible"  # when every θi counts as measured
 
 
 def test_ks_above_one_within_its_errors_is_plausible():
     model = brdffit.models.get("lambert+ward", channels=1, rho_d=0.3, ks=1.004, alpha=0.5)
-    assert P.plausibility(model, stderr={"ks": np.array([0.003])})["specular"].level == "ok"
-    assert P.plausibility(model, stderr={"ks": np.array([0.001])})["specular"].level == "implausible"
+    assert plausibility(model, stderr={"ks": np.array([0.003])})["specular"].level == "ok"
+    assert plausibility(model, stderr={"ks": np.array([0.001])})["specular"].level == "implausible"
 
 
 def test_parameters_at_bounds_get_advice():
     model = brdffit.models.get("lambert+cook-torrance", channels=3, rho_d=[1.0, 0.5, 0.5], ks=[0.0, 0.3, 0.3],
                                m=0.001, f0=1.0)
-    check = P.plausibility(model, bounds_hit=["rho_d[0]", "ks[0]", "m", "f0"])["bounds"]
+    check = plausibility(model, bounds_hit=["rho_d[0]", "ks[0]", "m", "f0"])["bounds"]
     assert check.level == "caution" and check.value == 4
     assert "rho_d[0] = 1 at 1" in check.advice and "ks[0] = 0: its lobe adds nothing" in check.advice
     assert "m = 0.001 at its lower bound" in check.advice and "f0 = 1 on its bound" in check.advice

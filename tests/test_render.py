@@ -9,7 +9,8 @@ import pytest
 from brdffit import models, synth
 from brdffit import render as R
 from brdffit.io.merl import MerlTable
-from brdffit.scene import Scene, interpolate, scene_error
+from brdffit.interpolation import interpolate
+from brdffit.scene import Scene, scene_error
 
 RES = 48
 

@@ -11,7 +11,8 @@ import pytest
 
 import brdffit
 from brdffit import Measurements, evaluate_dirs, models, synth
-from brdffit.scene import Scene, interpolate, linear_srgb_to_lab, scene_error
+from brdffit.interpolation import interpolate
+from brdffit.scene import Scene, linear_srgb_to_lab, scene_error
 
 DEG = math.pi / 180.0
 RHO = np.array([0.2, 0.5, 0.8])

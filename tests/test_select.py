@@ -303,7 +303,7 @@ def test_heldout_prefers_a_plausible_candidate_within_the_margin():
     warning naming the closest plausible one."""
     from types import SimpleNamespace
 
-    from brdffit.properties import Check, Plausibility
+    from brdffit.plausibility import Check, Plausibility
     from brdffit.select import _choose_by_heldout
 
     def fitted(level):

@@ -110,10 +110,10 @@ class FitResult:
         return self.noise_model.covariance if self.noise_model is not None else "laplace"
 
     def plausibility(self):
-        """The `brdffit.properties.Plausibility` of the fitted model(s): energy conservation, ks·F, parameters
+        """The `brdffit.plausibility.Plausibility` of the fitted model(s): energy conservation, ks·F, parameters
         at bounds, each with what to do (computed on first use, then kept)."""
         if self._plausibility is None:
-            from ..properties import plausibility
+            from ..plausibility import plausibility
 
             self._plausibility = plausibility(self.models, bounds_hit=self.bounds_hit, stderr=self.stderr,
                                               theta_max=self.theta_i_max)

@@ -42,7 +42,7 @@ class Lobe(abc.ABC):
       them, instead of having its own (space-separated: ``"lambert+ggx+ggx(share=f0)"`` is two GGX lobes with one
       Fresnel term). The model's `Layout` resolves it; amplitudes cannot be shared.
     - ``bounded``: every amplitude the lobe declares without an upper bound (ks) is bounded by 1, so that ks·F ≤ 1
-      where its Fresnel factor reaches 1 (`brdffit.properties.plausibility`'s specular check holds by
+      where its Fresnel factor reaches 1 (`brdffit.plausibility.plausibility`'s specular check holds by
       construction): ``"lambert+ggx(bounded=true)"`` is the best fit a renderer can take as physically
       plausible, where the unbounded one needs ks > 1 to follow the data. The `Layout` applies it.
     """
