@@ -432,7 +432,34 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
         best, threshold, chosen = _choose_by_heldout(usable, margin, plausible, done, implausible, warnings)
         done[chosen["spec"]] = fit(measurements, chosen["spec"], init=done[chosen["spec"]].model, **options)
         chosen.update(_full_fit_fields(done[chosen["spec"]], train_error=False))
-    while criterion != "heldout":
+    if criterion != "heldout":
+        best, threshold, chosen, usable = _choose_by_criterion(rows, usable, criterion, margin, plausible, done,
+                                                               implausible, warnings, screened, measurements,
+                                                               options, bar)
+    for row in rows:
+        row["verdict"] = _verdict(row, chosen, best, threshold, criterion, usable, implausible)
+    by_scene, scene_results = None, {}
+    if scene is not None:
+        by_scene, scene_results = _choose_by_scene(scene, reference, tolerance, scene_metric, rows, usable, best,
+                                                   measurements, done, fit_options, bar, warnings)
+    bar.close(f"chose {by_scene or chosen['spec']}")
+    return Selection(table=rows, chosen=by_scene or chosen["spec"], criterion=criterion, margin=margin,
+                     best=best["spec"], chosen_by_criterion=chosen["spec"], chosen_by_scene=by_scene,
+                     results=done, warnings=warnings, scene_results=scene_results, holdout=holdout,
+                     heldout_scale=_radiance_scale(measurements, fold_rows[0]) if loss == "cosine" else None)
+
+
+def _choose_by_criterion(rows, usable, criterion, margin, plausible, done, implausible, warnings, screened,
+                         measurements, options, bar):
+    """The ``aic``/``bic``/``cv`` choice: the simplest candidate within the margin (``cv``: one standard error) of
+    the best; a choice or a bar that extrapolates implausibly (`_implausibility`) is passed over while another
+    converged candidate remains, and the candidates a lower bar brings back are refitted (`_refit_contenders`).
+
+    Returns:
+        ``(best, threshold, chosen, usable)``: the best row, the largest score within the margin, the chosen row
+        and the rows still eligible.
+    """
+    while True:
         best = min(usable, key=lambda r: r["score"])
         if criterion == "cv":
             se = best["heldout_se"] if math.isfinite(best["heldout_se"]) else 0.0
@@ -463,42 +490,44 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
                 row["score"] = row["heldout_error"] if criterion in ("cv", "heldout") else row[criterion]
             usable = [r for r in rows if Status(r["status"]).converged and math.isfinite(r["score"])
                       and r["spec"] not in implausible] or usable
-    for row in rows:
-        row["verdict"] = _verdict(row, chosen, best, threshold, criterion, usable, implausible)
-    by_scene = None
-    scene_results = {}
-    if scene is not None:
-        from .interpolation import interpolate
-        from .scene import scene_error
+    return best, threshold, chosen, usable
 
-        if reference == "data":
-            seen = interpolate(measurements, scene.wi, scene.wo)
-        else:
-            seen = np.asarray(evaluate_dirs(done[best["spec"]].model, scene.wi, scene.wo))
-        ref = scene.radiance(seen)
-        scene_data = _scene_measurements(scene, seen, measurements.channels)
-        for i, row in enumerate(rows):
-            bar.update(len(candidates) + i, f"fitting {row['spec']} to the scene")
-            # Each candidate at its best for what the scene sees: fitted to the reference at the scene's
-            # directions (cosine loss with the light intensity as weight, i.e. the error in radiance), starting
-            # from its full-data fit.
-            scene_fit = fit(scene_data, row["spec"], init=done[row["spec"]].model, loss="cosine",
-                            **{k: v for k, v in fit_options.items() if k != "loss"})
-            scene_results[row["spec"]] = scene_fit
-            row["scene_error"] = float(scene_error(scene.radiance_of(scene_fit.model), ref, scene_metric))
-        within = [r for r in usable if r["scene_error"] <= tolerance]
-        if within:
-            by_scene = _simplest(within, lambda r: True)["spec"]
-        else:
-            closest = min(usable, key=lambda r: r["scene_error"])
-            by_scene = closest["spec"]
-            warnings.append(f"no candidate stays within the scene tolerance {tolerance:g} ({scene_metric}); "
-                            f"the closest is {by_scene} ({closest['scene_error']:.4g})")
-    bar.close(f"chose {by_scene or chosen['spec']}")
-    return Selection(table=rows, chosen=by_scene or chosen["spec"], criterion=criterion, margin=margin,
-                     best=best["spec"], chosen_by_criterion=chosen["spec"], chosen_by_scene=by_scene,
-                     results=done, warnings=warnings, scene_results=scene_results, holdout=holdout,
-                     heldout_scale=_radiance_scale(measurements, fold_rows[0]) if loss == "cosine" else None)
+
+def _choose_by_scene(scene, reference, tolerance, scene_metric, rows, usable, best, measurements, done,
+                     fit_options, bar, warnings):
+    """The choice by what a scene shows: every candidate refitted to the reference radiance at the scene's
+    directions (the data interpolated, or the best fit's model), and the simplest usable one within
+    ``tolerance`` of it in ``scene_metric``; else the closest, with a warning. Each row gets its ``scene_error``.
+
+    Returns:
+        ``(spec, scene_results)``: the chosen spec and each candidate's scene fit.
+    """
+    from .interpolation import interpolate
+    from .scene import scene_error
+
+    scene_results = {}
+    if reference == "data":
+        seen = interpolate(measurements, scene.wi, scene.wo)
+    else:
+        seen = np.asarray(evaluate_dirs(done[best["spec"]].model, scene.wi, scene.wo))
+    ref = scene.radiance(seen)
+    scene_data = _scene_measurements(scene, seen, measurements.channels)
+    for i, row in enumerate(rows):
+        bar.update(len(rows) + i, f"fitting {row['spec']} to the scene")
+        # Each candidate at its best for what the scene sees: fitted to the reference at the scene's
+        # directions (cosine loss with the light intensity as weight, i.e. the error in radiance), starting
+        # from its full-data fit.
+        scene_fit = fit(scene_data, row["spec"], init=done[row["spec"]].model, loss="cosine",
+                        **{k: v for k, v in fit_options.items() if k != "loss"})
+        scene_results[row["spec"]] = scene_fit
+        row["scene_error"] = float(scene_error(scene.radiance_of(scene_fit.model), ref, scene_metric))
+    within = [r for r in usable if r["scene_error"] <= tolerance]
+    if within:
+        return _simplest(within, lambda r: True)["spec"], scene_results
+    closest = min(usable, key=lambda r: r["scene_error"])
+    warnings.append(f"no candidate stays within the scene tolerance {tolerance:g} ({scene_metric}); "
+                    f"the closest is {closest['spec']} ({closest['scene_error']:.4g})")
+    return closest["spec"], scene_results
 
 
 def _choose_by_heldout(usable, margin, plausible, done, implausible, warnings):
