@@ -309,7 +309,8 @@ def _verdict(row: dict, chosen: dict, best: dict, threshold: float, criterion: s
         return f"worse than {best['spec']}: {gap}, beyond the " + ("standard error" if criterion == "cv" else "margin")
     if row["n_params"] > chosen["n_params"]:
         return f"as good, but {row['n_params']} parameters against {chosen['n_params']}"
-    return f"as good and as small, but slower to evaluate ({row['cost_ns']:.3g} against {chosen['cost_ns']:.3g} ns)"
+    label = {"aic": "AIC", "bic": "BIC"}.get(criterion, name)
+    return f"as good and as small, but a higher {label} ({row['score']:.6g} against {chosen['score']:.6g})"
 
 
 def _implausibility(result: FitResult) -> str:
@@ -336,8 +337,15 @@ def _implausible_where_measured(result: FitResult) -> str:
     return "; ".join(f"IMPLAUSIBLE {c.name}: {c.message}" for c in result.plausibility().implausible)
 
 
+def _simplicity(row: dict) -> tuple:
+    """The order of "simplest": fewest parameters, then the better score. Not the evaluation cost: ``cost_ns`` is a
+    timing, and two candidates of a similar cost (GGX with Schlick's or a dielectric's Fresnel) would swap places
+    from one run to the next."""
+    return row["n_params"], row["score"]
+
+
 def _simplest(rows: list[dict], eligible) -> dict:
-    return min((r for r in rows if eligible(r)), key=lambda r: (r["n_params"], r["cost_ns"]))
+    return min((r for r in rows if eligible(r)), key=_simplicity)
 
 
 def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto", *, loss: str = FIT.loss,
@@ -540,7 +548,7 @@ def _choose_by_heldout(usable, margin, plausible, done, implausible, warnings):
     """
     best = min(usable, key=lambda r: r["score"])
     threshold = best["score"] * (1.0 + margin)
-    within = sorted((r for r in usable if r["score"] <= threshold), key=lambda r: (r["n_params"], r["cost_ns"]))
+    within = sorted((r for r in usable if r["score"] <= threshold), key=_simplicity)
     for row in within:
         why = _implausible_where_measured(done[row["spec"]]) if plausible else ""
         if not why:
