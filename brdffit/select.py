@@ -337,6 +337,11 @@ def _implausible_where_measured(result: FitResult) -> str:
     return "; ".join(f"IMPLAUSIBLE {c.name}: {c.message}" for c in result.plausibility().implausible)
 
 
+def _score(row: dict, criterion: str) -> float:
+    """A row's score under ``criterion``: its held-out error for ``cv`` and ``heldout``, else its AIC or BIC."""
+    return row["heldout_error"] if criterion in ("cv", "heldout") else row[criterion]
+
+
 def _simplicity(row: dict) -> tuple:
     """The order of "simplest": fewest parameters, then the better score. Not the evaluation cost: ``cost_ns`` is a
     timing, and two candidates of a similar cost (GGX with Schlick's or a dielectric's Fresnel) would swap places
@@ -425,7 +430,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
     else:
         rows, screened = _fitted_rows(candidates, measurements, fold_rows, options, done, bar), None
     for row in rows:
-        row["score"] = row["heldout_error"] if criterion in ("cv", "heldout") else row[criterion]
+        row["score"] = _score(row, criterion)
     finite = [r for r in rows if r["status"] != Status.NONFINITE and math.isfinite(r["score"])]
     if not finite:
         raise ValueError("no candidate produced a finite score; check the data and candidates")
@@ -440,7 +445,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
         best, threshold, chosen = _choose_by_heldout(usable, margin, plausible, done, implausible, warnings)
         done[chosen["spec"]] = fit(measurements, chosen["spec"], init=done[chosen["spec"]].model, **options)
         chosen.update(_full_fit_fields(done[chosen["spec"]], train_error=False))
-    if criterion != "heldout":
+    else:
         best, threshold, chosen, usable = _choose_by_criterion(rows, usable, criterion, margin, plausible, done,
                                                                implausible, warnings, screened, measurements,
                                                                options, bar)
@@ -495,7 +500,7 @@ def _choose_by_criterion(rows, usable, criterion, margin, plausible, done, impla
             _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar,
                               excluded=set(implausible))
             for row in rows:
-                row["score"] = row["heldout_error"] if criterion in ("cv", "heldout") else row[criterion]
+                row["score"] = _score(row, criterion)
             usable = [r for r in rows if Status(r["status"]).converged and math.isfinite(r["score"])
                       and r["spec"] not in implausible] or usable
     return best, threshold, chosen, usable
