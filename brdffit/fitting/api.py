@@ -545,6 +545,13 @@ class _Run:
         return not self.two_stage
 
 
+def _record(start: dict, outcome: SolveOutcome, status: Status | None = None, **stage) -> dict:
+    """One entry of `FitResult.starts`: a solve's start, its cost, status (the solver's own unless diagnosed) and
+    steps, and what the stage that made it did (``revived``, ``held``, ``pruned``)."""
+    return {"init": _json_params(start), "cost": outcome.cost, "status": outcome.status if status is None else status,
+            "steps": outcome.steps, **stage}
+
+
 def _polish_stage(run: _Run, starts: list[list[dict]]) -> list[_Material]:
     """Stage 3: polish every start of every material; each material keeps its solver's answer."""
     run.bar.update(1, f"polishing {run.starts} start{'s' if run.starts > 1 else ''}"
@@ -552,8 +559,7 @@ def _polish_stage(run: _Run, starts: list[list[dict]]) -> list[_Material]:
     outcomes, compile_time, run_time = _polish(run.solve_problem, starts, stack_data(run.solve_items),
                                                metrics=run.metrics)
     run.spent(compile_time, run_time)
-    return [_Material(run.problem, _best(o), [{"init": _json_params(s), "cost": a.cost, "status": a.status,
-                                               "steps": a.steps} for s, a in zip(material_starts, o)])
+    return [_Material(run.problem, _best(o), [_record(s, a) for s, a in zip(material_starts, o)])
             for material_starts, o in zip(starts, outcomes)]
 
 
@@ -564,8 +570,7 @@ def _revive_stage(run: _Run, materials: list[_Material]) -> list[_Material]:
                                                   run.solve_items[m], run.seed, run.starts, run.metrics)
         run.spent(compile_time, run_time)
         if revived is not None:
-            material.records.append({"init": _json_params(material.kept.params), "cost": revived.cost,
-                                     "status": revived.status, "steps": revived.steps, "revived": True})
+            material.records.append(_record(material.kept.params, revived, revived=True))
             material.kept = revived
     return materials
 
@@ -604,9 +609,8 @@ def _hold_stage(run: _Run, materials: list[_Material]) -> list[_Material]:
             retry_status = diagnose(problem, retry.params, retry.cost, retry.max_steps, retry.nonfinite,
                                     retry_normal.jtj, retry_normal.jtr)[0]
             kept = material.kept
-            material.records.append({"init": _json_params(_held_start(problem, kept.params, held)),
-                                     "cost": retry.cost, "status": retry_status, "steps": retry.steps,
-                                     "held": sorted(held)})
+            material.records.append(_record(_held_start(problem, kept.params, held), retry, retry_status,
+                                            held=sorted(held)))
             if retry.cost <= kept.cost or retry_status.converged:
                 retry = dataclasses.replace(retry, steps=retry.steps + kept.steps, notes=kept.notes + (
                     f"{', '.join(sorted(held))} held (on a bound, or where a lobe whose amplitudes all went to 0 "
@@ -633,8 +637,7 @@ def _prune_stage(run: _Run, materials: list[_Material]) -> list[_Material]:
         material.problem, pruned, compile_time, run_time = _prune(run.problem, run.solve_problem, material.kept,
                                                                   dead, run.solve_items[m], run.starts, run.metrics)
         run.spent(compile_time, run_time)
-        material.records.append({"init": _json_params(pruned.params), "cost": pruned.cost,
-                                 "status": pruned.status, "steps": pruned.steps, "pruned": dead})
+        material.records.append(_record(pruned.params, pruned, pruned=dead))
         material.kept = pruned
         material.normal = _normal(material.problem, pruned, run.solve_items[m])
     return materials
