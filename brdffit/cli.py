@@ -16,7 +16,7 @@ from typing import NamedTuple
 from . import __version__
 from .compilation_cache import cache_dir, enable_compilation_cache
 from .criteria import CRITERIA
-from .defaults import FIT, POSTERIOR
+from .defaults import FIT, POSTERIOR, TABULATED
 from .distributed import DEFAULT_BATCH
 from .output_folder import (FOLDER, OutputFolderError, check_output_folder, check_still_free, check_writable,
                             default_out, staged_folder)
@@ -265,11 +265,12 @@ TABULATED_OPTIONS = (
                  "what the fit is given: the file's interpolation at importance-weighted direction pairs "
                  "(directions, the default) or the file's own grid nodes with their weights (grid)", _sampling,
                  formats=("merl", "rgl")),
-    _TableOption("--pairs", "pairs", "N", "the number of direction pairs of --sampling directions (default 16384)",
+    _TableOption("--pairs", "pairs", "N",
+                 f"the number of direction pairs of --sampling directions (default {TABULATED.pairs})",
                  bounded(int, 1), formats=("merl", "rgl")),
     _TableOption("--max-theta", "max_theta", "DEG",
-                 "the largest polar angle of the direction pairs, degrees (default 80)", _max_theta,
-                 formats=("merl", "rgl")),
+                 f"the largest polar angle of the direction pairs, degrees (default {TABULATED.max_theta_deg:g})",
+                 _max_theta, formats=("merl", "rgl")),
 )
 TABULATED_GROUP = "tabulated files (MERL .binary, RGL-EPFL .bsdf; brdffit.io.tabulated)"
 READ_OPTIONS = TABLE_OPTIONS + TABULATED_OPTIONS
@@ -1073,8 +1074,8 @@ def _select_command(sub) -> None:
     p.add_argument("file", help=MEASUREMENT_FILE)
     p.add_argument("--candidates", help="model specs separated by ';' (default: the standard candidate list)")
     p.add_argument("--criterion", default="auto", choices=CRITERIA,
-                   help="selection criterion: auto (bic where the data state their σ, else heldout), heldout, aic, "
-                        "bic, cv (default auto)")
+                   help=f"selection criterion: {', '.join(CRITERIA)} (default auto: bic where the data state their "
+                        "σ, else heldout)")
     p.add_argument("--folds", type=bounded(int, 2), default=5, help="folds of --criterion cv (default 5)")
     _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print the selection as one JSON object")

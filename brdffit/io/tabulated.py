@@ -37,19 +37,17 @@ from typing import Callable
 
 import numpy as np
 
+from ..defaults import TABULATED
 from ..measurements import Measurements
 
 __all__ = ["SAMPLINGS", "DEFAULT_SAMPLING", "DEFAULT_PAIRS", "DEFAULT_MAX_THETA", "PEAK_ROUGHNESS", "PEAK_FRACTION",
            "direction_pairs", "importance_pairs", "over_directions", "check_sampling"]
 
 SAMPLINGS = ("directions", "grid")
-DEFAULT_SAMPLING = "directions"
-# Pairs a fit is given by default. With this many a selection screens its candidates on a subsample of 4,096
-# training pairs (brdffit.select.SCREEN_SAMPLES) and measures their held-out error on 3,277 pairs; on the shared
-# RGL-EPFL files the default fit then predicts held-out directions as well as or better than with half as many
-# (docs/formats.md), at about the same time.
-DEFAULT_PAIRS = 16384
-DEFAULT_MAX_THETA = math.radians(80.0)
+# The defaults are declared in `brdffit.defaults.TABULATED` (the CLI's help reads them there without NumPy).
+DEFAULT_SAMPLING = TABULATED.sampling
+DEFAULT_PAIRS = TABULATED.pairs
+DEFAULT_MAX_THETA = math.radians(TABULATED.max_theta_deg)
 # The peak components of `importance_pairs`: GGX half vectors of these roughnesses (a glossy and a near-mirror
 # peak), half of the pairs in all. The uniform half keeps every direction sampled (weights at most 2).
 PEAK_ROUGHNESS = (0.2, 0.04)
