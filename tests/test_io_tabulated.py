@@ -1,13 +1,15 @@
 """What a fit of a tabulated file is given (brdffit.io.tabulated): direction pairs uniform in solid angle or drawn
 about the specular direction with importance weights, whose (weighted) mean is the integral over directions
-(checked against product Gauss quadrature), a known model recovered from a
-MERL table and from an RGL-EPFL table made from it, the nodes' fit of an RGL-EPFL table of a material that no
-candidate represents against the best fit over directions, and on the real RGL-EPFL files a fit to the pairs that predicts unseen directions better
-than a fit to the file's grid nodes."""
+(checked against product Gauss quadrature), a known model recovered from a MERL table and from an RGL-EPFL table
+made from it, the nodes' fit of an RGL-EPFL table of a material that no candidate represents against the best fit
+over directions, and on the real RGL-EPFL files a fit to the pairs that predicts unseen directions better than a fit
+to the file's grid nodes. The materials and held-out pairs are the independent references' (tests/reference_brdfs.py,
+scripts/reference_fit.py)."""
 
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,16 +19,14 @@ import brdffit
 from brdffit import io as bio
 from brdffit.io import tabulated
 
+import reference_brdfs as ref
+
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "scripts"))
+from reference_fit import uniform_pairs  # noqa: E402  (the independent reference's held-out pairs)
+
 DATA = ROOT.parent / "shared" / "data"
 MAX = math.radians(80.0)
-
-
-def _uniform_pairs(n, rng, max_theta=MAX):
-    """Independent pseudo-random pairs uniform in solid angle (the held-out directions of the checks below)."""
-    u = rng.random((4, n))
-    cos_i, cos_o = 1 - u[0] * (1 - math.cos(max_theta)), 1 - u[2] * (1 - math.cos(max_theta))
-    return np.arccos(cos_i), 2 * np.pi * u[1] - np.pi, np.arccos(cos_o), 2 * np.pi * u[3] - np.pi
 
 
 def _cosine_error(f, data, theta_i):
@@ -118,7 +118,7 @@ def test_merl_table_of_a_known_model_is_recovered(tmp_path):
     params = result.model.params
     assert float(params["alpha"]) == pytest.approx(0.2, rel=0.03)
     np.testing.assert_allclose(np.asarray(params["rho_d"]), [0.3, 0.2, 0.1], rtol=0.03)
-    held = _uniform_pairs(20_000, np.random.default_rng(11))
+    held = uniform_pairs(20_000, np.random.default_rng(11))
     data = np.asarray(brdffit.evaluate(truth, *held))
     assert _cosine_error(np.asarray(brdffit.evaluate(result.model, *held)), data, held[0]) < 0.03
 
@@ -129,35 +129,23 @@ _RGL_THETA_I = np.radians([0.0, 27.7, 39.9, 49.9, 59.3, 68.6, 78.5, 90.0])
 
 
 def _ggx_d(cos_m, alpha):
-    """The GGX (Trowbridge-Reitz) distribution, Walter et al. 2007 eq. 33."""
-    c2 = cos_m * cos_m
-    t2 = (1 - c2) / np.maximum(c2, 1e-300)
-    return np.where(cos_m > 0, alpha * alpha / (math.pi * c2 * c2 * (alpha * alpha + t2) ** 2), 0.0)
-
-
-def _smith_g1(cos_v, alpha):
-    """GGX's Smith masking, Walter et al. 2007 eq. 34."""
-    t2 = (1 - cos_v * cos_v) / np.maximum(cos_v * cos_v, 1e-300)
-    return 2 / (1 + np.sqrt(1 + alpha * alpha * t2))
-
-
-def _directions(theta, phi):
-    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=-1)
+    """GGX's D (`reference_brdfs.microfacet_D`, Walter et al. 2007 eq. 33) of normals with these cosines; 0 below
+    the horizon."""
+    with np.errstate(all="ignore"):
+        return np.where(cos_m > 0, ref.microfacet_D("ggx", np.arccos(np.clip(cos_m, -1.0, 1.0)), alpha), 0.0)
 
 
 def _material(rho, lobes):
     """f_r(ωi, ωo) (N, 3) of Lambert ρ/π plus GGX lobes ks D G₁(ωi) G₁(ωo) F / (4 cosθi cosθo) with Schlick's F
-    (Walter et al. 2007 eq. 20), each lobe ``(ks, alpha, f0)``: in NumPy, apart from brdffit's models."""
+    (Walter et al. 2007 eq. 20), each lobe ``(ks, alpha, f0)``: `reference_brdfs`' NumPy re-derivations, apart from
+    brdffit's models."""
     def f(wi, wo):
-        h = wi + wo
-        h = h / np.linalg.norm(h, axis=-1, keepdims=True)
-        ci, co = wi[..., 2], wo[..., 2]
-        value = np.full(ci.shape, rho / math.pi)
+        angles = (*tabulated.vector_angles(np.atleast_2d(wi)), *tabulated.vector_angles(np.atleast_2d(wo)))
+        value = ref.lambert(*angles, [rho] * 3)
         for ks, alpha, f0 in lobes:
-            fresnel = f0 + (1 - f0) * (1 - np.sum(wi * h, axis=-1)) ** 5
-            value = value + ks * _ggx_d(h[..., 2], alpha) * _smith_g1(ci, alpha) * _smith_g1(co, alpha) * fresnel \
-                / (4 * ci * co)
-        return np.where((ci > 0) & (co > 0), value, 0.0)[..., None] * np.ones(3)
+            value = value + ref.cook_torrance(*angles, [ks] * 3, alpha, distribution="ggx", shadowing="smith",
+                                              fresnel="schlick", f0=f0)
+        return value
     return f
 
 
@@ -177,9 +165,9 @@ def _rgl_table(f, warp, samples=32, unit=128):
 
     u1, u2 = np.meshgrid(np.linspace(0, 1, unit), np.linspace(0, 1, unit))  # rows along u₂, columns along u₁
     theta_m = math.pi / 2 * u1 * u1
-    m = _directions(theta_m, 2 * math.pi * u2 - math.pi)
-    vndf = np.stack([np.maximum(m @ _directions(t, 0.0), 0) * d(np.cos(theta_m)) * 2 * math.pi ** 2 * u1
-                     * np.sin(theta_m) for t in _RGL_THETA_I])[None]
+    m = tabulated.unit_vectors(theta_m, 2 * math.pi * u2 - math.pi)
+    vndf = np.stack([np.maximum(m @ tabulated.unit_vectors(t, 0.0), 0) * d(np.cos(theta_m)) * 2 * math.pi ** 2
+                     * u1 * np.sin(theta_m) for t in _RGL_THETA_I])[None]
     fields = dict(theta_i=_RGL_THETA_I, phi_i=np.zeros(1), ndf=d(np.cos(theta_m)), sigma=sigma(theta_m), vndf=vndf,
                   jacobian=True)
     count = len(_RGL_THETA_I)
@@ -189,7 +177,7 @@ def _rgl_table(f, warp, samples=32, unit=128):
     rgb = np.zeros((1, count, 3, samples, samples))
     for t, theta in enumerate(_RGL_THETA_I):
         nodes = ones._nodes(t, theta, 0.0, s1, s2, np.ones_like(s1))  # the value of rgb = 1 at each node
-        wi = np.broadcast_to(_directions(theta, 0.0), nodes["wo"].shape)
+        wi = np.broadcast_to(tabulated.unit_vectors(theta, 0.0), nodes["wo"].shape)
         with np.errstate(all="ignore"):
             good = (nodes["wo"][:, 2] > 0) & np.isfinite(nodes["values"][:, 0]) & (nodes["values"][:, 0] > 0)
             rgb[0, t] = np.where(good[:, None], f(wi, nodes["wo"]) / nodes["values"], 0.0).T.reshape(3, samples,
@@ -214,8 +202,9 @@ def test_rgl_table_of_a_known_model_is_recovered():
     rho, ks, alpha, f0 = 0.3, 0.5, 0.15, 0.04
     table = _rgl_table(_material(rho, [(ks, alpha, f0)]), [(0.5, alpha), (0.5, None)])
     nodes = table.grid_measurements()
-    np.testing.assert_allclose(nodes.values, _material(rho, [(ks, alpha, f0)])(
-        _directions(nodes.theta_i, nodes.phi_i), _directions(nodes.theta_o, nodes.phi_o)), rtol=1e-9, atol=1e-12)
+    truth = _material(rho, [(ks, alpha, f0)])(tabulated.unit_vectors(nodes.theta_i, nodes.phi_i),
+                                              tabulated.unit_vectors(nodes.theta_o, nodes.phi_o))
+    np.testing.assert_allclose(nodes.values, truth, rtol=1e-9, atol=1e-12)
     exact = brdffit.fit(nodes, "lambert+ggx").model.params
     assert float(exact["alpha"]) == pytest.approx(alpha, rel=1e-5)
     default = brdffit.fit(table.to_measurements(), "lambert+ggx").model.params
@@ -282,7 +271,7 @@ def test_rgl_fit_to_directions_predicts_unseen_directions_better_than_nodes(name
     if not path.is_file():
         pytest.skip(f"real RGL-EPFL file not found at {path} (../shared/data)")
     table = bio.read_rgl(path)
-    held = _uniform_pairs(50_000, np.random.default_rng(202))
+    held = uniform_pairs(50_000, np.random.default_rng(202))
     data = table.lookup(*held)
     errors = {}
     for sampling in ("grid", "directions"):
