@@ -47,12 +47,18 @@ def program_directory() -> Path | None:
     return Path(base) / _FOLDER if base else None
 
 
+def _source_files() -> list[Path]:
+    """brdffit's Python source files: those of the package's own folder, not of the folder it is installed in (a
+    site-packages or a checkout with its virtual environment holds thousands of other packages' files)."""
+    return sorted(Path(__file__).resolve().parent.rglob("*.py"))
+
+
 @functools.lru_cache(maxsize=1)
 def _source_stamp() -> str:
-    """A digest of brdffit's Python source files: any edit gives every program a new key."""
-    root = Path(__file__).resolve().parents[1]
+    """A digest of brdffit's Python source files (`_source_files`): any edit gives every program a new key."""
+    root = Path(__file__).resolve().parent
     digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
+    for path in _source_files():
         digest.update(str(path.relative_to(root)).encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()

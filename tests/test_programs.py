@@ -5,6 +5,7 @@ compiled (or traced) as plain ``jax.jit`` would."""
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -139,3 +140,13 @@ def test_static_arguments_key_the_program_and_addresses_are_not_kept(kept_in):
     assert len(list(kept_in.glob("*.bin"))) == 2
     np.testing.assert_allclose(program(object(), jnp.ones(3)), 1.0)  # repr names an address: memory only
     assert len(list(kept_in.glob("*.bin"))) == 2
+
+
+def test_the_source_stamp_reads_the_package_only():
+    """The key's source stamp digests brdffit's own files: every module of the package, and nothing of the folder
+    it is installed in (a checkout's virtual environment, or site-packages, would be thousands of files)."""
+    package = Path(programs.__file__).resolve().parent
+    files = programs._source_files()
+    assert all(package in path.parents for path in files)
+    assert package / "programs.py" in files and package / "fitting" / "api.py" in files
+    assert len(files) == len(list(package.rglob("*.py")))
