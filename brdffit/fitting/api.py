@@ -181,7 +181,7 @@ def _starts(problem: Problem, model: Model, fixed_values: dict, init, multistart
 def _robust_scale(problem: Problem, start: dict, data: FitData) -> float:
     """1.4826 times the median absolute residual at the start (the robust loss's default scale)."""
     plain = dataclasses.replace(problem, robust=None)
-    r = np.asarray(residuals_at(plain, {k: to_device(v) for k, v in start.items()}, data))
+    r = np.asarray(residuals_at(plain, start, data))
     mask = np.asarray(data.mask)
     return float(max(1.4826 * np.median(np.abs(r[mask])), 1e-12)) if mask.any() else 1.0
 
@@ -391,7 +391,7 @@ def _dead_amplitudes(problem: Problem, params: dict, cost: float, data: FitData)
             partners = layout.partners(j, slot.local)
             size = layout[slot.name].size + layout.size([n for n in partners if n in problem.outer])
             trial = dict(params, **{slot.name: np.zeros(layout[slot.name].shape)})
-            r = np.asarray(residuals_at(problem, {k_: to_device(v) for k_, v in trial.items()}, data))
+            r = np.asarray(residuals_at(problem, trial, data))
             increase = float(np.sum(r * r)) - cost
             if increase <= min(2.0 * size * variance, PRUNE_COST_FRACTION * cost):
                 increases[slot.name] = float(increase)
@@ -665,7 +665,7 @@ def _answer(run: _Run, material: _Material, measurements, data: FitData) -> tupl
                                    exact=refined.exact)
         params = canonical(problem, refined.params)
     if not problem.free:
-        r = np.asarray(residuals_at(problem, {k: to_device(v) for k, v in params.items()}, data))
+        r = np.asarray(residuals_at(problem, params, data))
         best = dataclasses.replace(best, cost=float(np.sum(r * r)))
     elif _answered(best, params):
         normal = best.normal

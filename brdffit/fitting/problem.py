@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import host_arrays, on_device, on_host
+from ..arrays import host_arrays, on_device, on_host, to_device
 from ..geometry import LocalPair, spherical_to_vector
 from ..models.layout import Layout, layout
 from ..models.model import Model, evaluate_pair
@@ -301,8 +301,9 @@ _residuals = Program(residual_fn, "residuals", static_argnums=(0,))
 
 def residuals_at(problem: Problem, params: dict, data: FitData):
     """`residual_fn` compiled, one program per problem structure (`Problem.structure`: every solver and stage
-    shares it) and data shape."""
-    return _residuals(problem.structure, params, data)
+    shares it) and data shape. ``params`` may hold host values (NumPy arrays, numbers): they are moved to the
+    device here, once per call, as `brdffit.arrays.to_device` gives them."""
+    return _residuals(problem.structure, {k: to_device(v) for k, v in params.items()}, data)
 
 
 def residuals_of(problem: Problem, f_model, data: FitData):
