@@ -41,7 +41,7 @@ from . import terms as tm
 
 __all__ = ["write", "evaluate_in_mitsuba", "check_channels", "EXPORTABLE"]
 
-EXPORTABLE = ("lambert (any number, summed) and cook-torrance or ggx lobes with any Fresnel mode, any number, "
+EXPORTABLE = ("lambert (any number, summed) and isotropic cook-torrance or ggx lobes with any Fresnel mode, any number, "
               "summed")
 # Where a principled part shares a blend with other parts, their weight is at least this much.
 _MIN_OTHER_WEIGHT = 1e-3

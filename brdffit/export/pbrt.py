@@ -28,7 +28,7 @@ from .mitsuba import check_channels
 
 __all__ = ["write", "EXPORTABLE"]
 
-EXPORTABLE = "lambert (any number, summed) and cook-torrance or ggx lobes with any Fresnel mode, summed"
+EXPORTABLE = "lambert (any number, summed) and isotropic cook-torrance or ggx lobes with any Fresnel mode, summed"
 # With a diffuse part beside the conductors, the conductors' weights sum to at most 1 minus this.
 _MIN_DIFFUSE_WEIGHT = 1e-3
 

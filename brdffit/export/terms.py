@@ -76,8 +76,8 @@ def terms(model: Model, exportable: str) -> list[Term]:
     """
     out = []
     for j, lobe in enumerate(model.lobes):
-        if lobe.name != "lambert" and lobe.name not in MICROFACET_LOBES:
-            raise ExportError(f"lobe {lobe.name!r} of model {model.spec!r} has no equivalent in Mitsuba 3 or "
+        if lobe.name != "lambert" and (lobe.name not in MICROFACET_LOBES or lobe.anisotropic):
+            raise ExportError(f"lobe {lobe.token()!r} of model {model.spec!r} has no equivalent in Mitsuba 3 or "
                               f"pbrt-v4; exportable: {exportable}; or export with fit=True (--fit), which fits "
                               "the renderer's own model to it (docs/export.md)")
         local = model.layout.local_params(model.params, j)
@@ -251,7 +251,7 @@ def lobe_peaks(lobe, params: dict) -> list[Peak]:
 
     name = lobe.name
     if name in MICROFACET_LOBES:
-        found = [Peak("half", value(lobe.roughness_name))]
+        found = [Peak("half", value(width)) for width in lobe.roughness_names]
     elif name in ("ward", "ward-duer"):
         found = [Peak("half", value("alpha"))]
     elif name == "ward-aniso":

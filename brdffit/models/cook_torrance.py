@@ -9,7 +9,7 @@ from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
 from .lobe import Lobe
-from .microfacet import DISTRIBUTIONS, SHADOWING
+from .microfacet import ANISOTROPIC, DISTRIBUTIONS, SHADOWING
 from .specs import KS, roughness
 
 __all__ = ["CookTorrance", "GGX", "FRESNEL_MODES"]
@@ -26,8 +26,11 @@ class CookTorrance(Lobe):
 
     Options:
         distribution: ``"beckmann"`` (default), ``"ggx"`` or ``"blinn"`` (`brdffit.models.microfacet`).
-        shadowing: ``"v-cavity"`` (default, Cook-Torrance 1982), ``"smith"`` (separable, for the chosen D) or
-            ``"none"``.
+        shadowing: ``"v-cavity"`` (default, Cook-Torrance 1982), ``"smith"`` (separable, for the chosen D),
+            ``"smith-correlated"`` (height-correlated, Heitz 2014 Eq. 99, as pbrt-v4 renders) or ``"none"``.
+        anisotropic: widths ``<r>_x`` along the tangent and ``<r>_y`` along the bitangent instead of one ``<r>``
+            (``m`` or ``alpha``), for the Beckmann and GGX distributions (Heitz 2014, §5.3); an isotropic lobe
+            keeps αx = αy by declaring one width.
         fresnel: ``"schlick"`` (parameter ``f0``), ``"dielectric"`` (``eta``) or ``"conductor"`` (``eta``, ``k``
             per channel).
         material: a named preset (`brdffit.models.fresnel.CONDUCTORS` or ``DIELECTRICS``) that sets the default
@@ -43,6 +46,7 @@ class CookTorrance(Lobe):
     shadowing: str = "v-cavity"
     fresnel: str = "schlick"
     material: str | None = None
+    anisotropic: bool = False
 
     def __post_init__(self):
         for option, allowed in (("distribution", DISTRIBUTIONS), ("shadowing", SHADOWING),
@@ -50,14 +54,26 @@ class CookTorrance(Lobe):
             if getattr(self, option) not in allowed:
                 raise ValueError(f"{self.name}: {option} must be one of {', '.join(allowed)}, "
                                  f"got {getattr(self, option)!r}")
+        if self.anisotropic and self.distribution not in ANISOTROPIC:
+            raise ValueError(f"{self.name}: anisotropic=true needs distribution={' or '.join(ANISOTROPIC)}, got "
+                             f"{self.distribution!r}")
         presets = {"conductor": fr.CONDUCTORS, "dielectric": fr.DIELECTRICS}.get(self.fresnel, {})
         if self.material is not None and self.material not in presets:
             raise ValueError(f"{self.name}: material {self.material!r} needs fresnel='conductor' (one of "
                              f"{', '.join(fr.CONDUCTORS)}) or fresnel='dielectric' (one of "
                              f"{', '.join(fr.DIELECTRICS)})")
 
+    @property
+    def roughness_names(self) -> tuple[str, ...]:
+        """The width parameters: ``(r,)``, or ``(r_x, r_y)`` for an anisotropic lobe."""
+        r = self.roughness_name
+        return (f"{r}_x", f"{r}_y") if self.anisotropic else (r,)
+
     def param_specs(self):
-        specs = [KS, roughness(self.roughness_name)]
+        docs = {1: ("microfacet roughness (RMS slope width)",),
+                2: ("microfacet roughness along the tangent x", "microfacet roughness along the bitangent y")}
+        names = self.roughness_names
+        specs = [KS, *(roughness(name, doc=doc) for name, doc in zip(names, docs[len(names)]))]
         if self.fresnel == "schlick":
             specs.append(ParamSpec("f0", 0.04, 0.0, 1.0, unit="1", doc="Fresnel reflectance at normal incidence"))
         elif self.fresnel == "dielectric":
@@ -81,9 +97,10 @@ class CookTorrance(Lobe):
         return fr.conductor(c, params["eta"], params["k"])
 
     def __call__(self, params, pair: LocalPair):
-        m = params[self.roughness_name]
+        widths = tuple(params[name] for name in self.roughness_names)
+        m = widths if self.anisotropic else widths[0]
         dist = DISTRIBUTIONS[self.distribution]
-        d = dist.D(pair.cos_h, m)
+        d = dist.density_of(pair, m)
         g = SHADOWING[self.shadowing](pair, dist, m)
         geometric = d * g / (4.0 * pair.cos_i * pair.cos_o)
         return params["ks"] * self.fresnel_term(params, pair.cos_d) * geometric[..., None]

@@ -2,7 +2,12 @@
 
 Each distribution bundles, as pbrt-v4's microfacet distributions do, the normal distribution D(h) and Smith's
 auxiliary function Λ(ω), from which G1 and the separable G follow. Roughness is Walter et al.'s (2007) width
-parameter (Beckmann m, GGX α).
+parameter (Beckmann m, GGX α). The Beckmann and GGX distributions also have their anisotropic forms, widths αx along
+the tangent x and αy along the bitangent y of docs/conventions.md (Heitz, Understanding the masking-shadowing
+function in microfacet-based BRDFs, JCGT 3(2), 2014, §5.3 and Eqs. 80-86: the slopes stretched by (αx, αy), and Λ
+that of the isotropic distribution at the projected width α(φ) = √(cos²φ αx² + sin²φ αy²)).
+
+A roughness ``m`` below is a scalar (isotropic) or a pair ``(αx, αy)``; `lambda_of` and `density_of` take either.
 """
 
 from __future__ import annotations
@@ -16,7 +21,8 @@ from ..geometry import TINY, LocalPair, safe_div, safe_sqrt
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 jax_special = module("jax.scipy.special")
 
-__all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "DISTRIBUTIONS", "v_cavity", "smith", "SHADOWING"]
+__all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "DISTRIBUTIONS", "ANISOTROPIC", "v_cavity", "smith",
+           "smith_correlated", "SHADOWING"]
 
 # Above this Beckmann a = 1/(m tanθ) the shadowing is 1 to double precision (erfc(27) ~ 1e-319).
 _BECKMANN_A_MAX = 27.0
@@ -29,11 +35,24 @@ def _tan2(cos_theta):
 
 
 def _beckmann_lambda(cos_v, m):
-    # Walter et al. 2007, Eq. 25 integrated: Λ(a) = (erf(a) − 1)/2 + exp(−a²)/(2a√π), a = 1/(m tanθv),
-    # written with erfc so that both terms vanish smoothly for large a.
+    # Walter et al. 2007, Eq. 25 integrated: Λ(a) = (erf(a) − 1)/2 + exp(−a²)/(2a√π), a = 1/(m tanθv).
     sin_v = safe_sqrt(1.0 - cos_v * cos_v)
-    a = jnp.minimum(safe_div(cos_v, m * sin_v, fallback=_BECKMANN_A_MAX), _BECKMANN_A_MAX)
+    return _beckmann_lambda_of_a(safe_div(cos_v, m * sin_v, fallback=_BECKMANN_A_MAX))
+
+
+def _beckmann_lambda_of_a(a):
+    # Walter et al. 2007's Λ(a), written with erfc so that both terms vanish smoothly for large a.
+    a = jnp.minimum(a, _BECKMANN_A_MAX)
     return 0.5 * (jnp.exp(-a * a) / (a * jnp.sqrt(jnp.pi)) - jax_special.erfc(a))
+
+
+def _stretched(w, m):
+    """(ωx αx)² + (ωy αy)² and ωz of the unit vectors ``w`` (..., 3) for widths ``m = (αx, αy)``: α(φ)² tan²θ is
+    the first over the square of the second (Heitz 2014, Eq. 80). ωz is clamped to TINY, as `LocalPair`'s cosines
+    are, so that Λ stays finite (and its gradient defined) at the horizon."""
+    ax, ay = m
+    wx, wy = w[..., 0], w[..., 1]
+    return (wx * ax) ** 2 + (wy * ay) ** 2, jnp.maximum(w[..., 2], TINY)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,6 +68,23 @@ class Distribution(abc.ABC):
     @abc.abstractmethod
     def Lambda(self, cos_v, m):
         """Smith's Λ for a direction with cosine ``cos_v`` (Walter et al. 2007, Eq. 18)."""
+
+    def D_aniso(self, h, m):
+        """The anisotropic distribution at unit half vectors ``h`` (..., 3), widths ``m = (αx, αy)``; normalised as
+        `D`. Only the distributions in `ANISOTROPIC` have one."""
+        raise NotImplementedError(f"the {self.name} distribution has no anisotropic form")
+
+    def Lambda_aniso(self, w, m):
+        """Smith's Λ of the anisotropic distribution for unit directions ``w`` (..., 3), widths ``m = (αx, αy)``."""
+        raise NotImplementedError(f"the {self.name} distribution has no anisotropic form")
+
+    def density_of(self, pair: LocalPair, m):
+        """D(h) of a pair, isotropic for a scalar ``m`` and anisotropic for a pair ``(αx, αy)``."""
+        return self.D_aniso(pair.h, m) if isinstance(m, tuple) else self.D(pair.cos_h, m)
+
+    def lambda_of(self, w, cos_v, m):
+        """Λ of the direction ``w`` (cosine ``cos_v``), isotropic for a scalar ``m``, anisotropic for a pair."""
+        return self.Lambda_aniso(w, m) if isinstance(m, tuple) else self.Lambda(cos_v, m)
 
     def G1(self, cos_v, m):
         """Smith masking of one direction, G1 = 1/(1 + Λ)."""
@@ -72,6 +108,18 @@ class Beckmann(Distribution):
     def Lambda(self, cos_v, m):
         return _beckmann_lambda(cos_v, m)
 
+    def D_aniso(self, h, m):
+        # Heitz 2014, Eq. 81: exp(−(hx²/αx² + hy²/αy²)/hz²)/(π αx αy hz⁴).
+        ax, ay = m
+        hx, hy, hz = h[..., 0], h[..., 1], jnp.maximum(h[..., 2], TINY)
+        z2 = hz * hz
+        return jnp.exp(-((hx / ax) ** 2 + (hy / ay) ** 2) / z2) / (jnp.pi * ax * ay * z2 * z2)
+
+    def Lambda_aniso(self, w, m):
+        # Heitz 2014, Eqs. 80 and 86: the isotropic Λ(a) at a = 1/(α(φ) tanθ) = ωz/√((ωx αx)² + (ωy αy)²).
+        across, z = _stretched(w, m)
+        return _beckmann_lambda_of_a(safe_div(z, safe_sqrt(across), fallback=_BECKMANN_A_MAX))
+
 
 @dataclasses.dataclass(frozen=True)
 class GGX(Distribution):
@@ -88,6 +136,17 @@ class GGX(Distribution):
         # Walter et al. 2007, Eq. 34: G1 = 2/(1 + √(1 + α² tan²θv)), i.e. Λ = (√(1 + α² tan²θv) − 1)/2.
         c2 = jnp.maximum(cos_v * cos_v, 1e-30)
         return 0.5 * (jnp.sqrt(1.0 + m * m * (1.0 - c2) / c2) - 1.0)
+
+    def D_aniso(self, h, m):
+        # Heitz 2014, Eq. 85: 1/(π αx αy hz⁴ (1 + (hx²/αx² + hy²/αy²)/hz²)²) = 1/(π αx αy (hx²/αx² + hy²/αy² + hz²)²).
+        ax, ay = m
+        t = (h[..., 0] / ax) ** 2 + (h[..., 1] / ay) ** 2 + h[..., 2] ** 2
+        return 1.0 / (jnp.pi * ax * ay * t * t)
+
+    def Lambda_aniso(self, w, m):
+        # Heitz 2014, Eq. 86: (−1 + √(1 + α(φ)² tan²θ))/2.
+        across, z = _stretched(w, m)
+        return 0.5 * (jnp.sqrt(1.0 + across / jnp.maximum(z * z, 1e-30)) - 1.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -109,6 +168,8 @@ class BlinnPhong(Distribution):
 
 
 DISTRIBUTIONS = {d.name: d for d in (Beckmann(), GGX(), BlinnPhong())}
+# The distributions with an anisotropic form (`Distribution.D_aniso`).
+ANISOTROPIC = ("beckmann", "ggx")
 
 
 def v_cavity(pair: LocalPair, distribution: Distribution, m):
@@ -119,8 +180,17 @@ def v_cavity(pair: LocalPair, distribution: Distribution, m):
 
 
 def smith(pair: LocalPair, distribution: Distribution, m):
-    """Separable Smith shadowing-masking of ``distribution`` (Walter et al. 2007, Eq. 23)."""
-    return distribution.G(pair.cos_i, pair.cos_o, m)
+    """Separable Smith shadowing-masking of ``distribution``, G1(ωi) G1(ωo) (Walter et al. 2007, Eq. 23)."""
+    return (1.0 / (1.0 + distribution.lambda_of(pair.wi, pair.cos_i, m))
+            * (1.0 / (1.0 + distribution.lambda_of(pair.wo, pair.cos_o, m))))
+
+
+def smith_correlated(pair: LocalPair, distribution: Distribution, m):
+    """Height-correlated Smith shadowing-masking of ``distribution``, 1/(1 + Λ(ωi) + Λ(ωo)) (Heitz 2014, Eq. 99;
+    pbrt-v4's ``TrowbridgeReitzDistribution::G``): a point seen from ωo is more likely lit from ωi, as both see
+    the high points of the surface. Never below the separable form (Λ ≥ 0)."""
+    return 1.0 / (1.0 + distribution.lambda_of(pair.wi, pair.cos_i, m)
+                  + distribution.lambda_of(pair.wo, pair.cos_o, m))
 
 
 def no_shadowing(pair: LocalPair, distribution: Distribution, m):
@@ -128,4 +198,4 @@ def no_shadowing(pair: LocalPair, distribution: Distribution, m):
     return jnp.ones_like(pair.cos_h)
 
 
-SHADOWING = {"v-cavity": v_cavity, "smith": smith, "none": no_shadowing}
+SHADOWING = {"v-cavity": v_cavity, "smith": smith, "smith-correlated": smith_correlated, "none": no_shadowing}

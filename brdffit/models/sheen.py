@@ -1,0 +1,83 @@
+"""Sheen lobes for cloth and felt: Burley's Schlick-shaped sheen and the "Charlie" microfacet sheen of Estevez and
+Kulla."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from .._lazy import module
+from ..geometry import TINY, LocalPair
+from ..params import ParamSpec
+from .lobe import Lobe
+from .specs import KS
+
+jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
+
+__all__ = ["Sheen", "CharlieSheen", "charlie_lambda"]
+
+# Estevez & Kulla (2017), Table 1: the coefficients (a, b, c, d, e) of their fit of the Charlie distribution's
+# log Λ, at r = (1 − α)² = 0 and at r = 1 (linearly interpolated between).
+_CHARLIE_FIT = ((21.5473, 3.82987, 0.19823, -1.97760, -4.32054),
+                (25.3245, 3.32435, 0.16801, -1.27393, -4.85967))
+
+
+@dataclasses.dataclass(frozen=True)
+class Sheen(Lobe):
+    """Burley's sheen (Physically-based shading at Disney, SIGGRAPH 2012 course notes, and its reference code, the
+    BRDF Explorer's disney.brdf): f = ks (1 − cosθd)⁵, θd the angle between ωi and the half vector, a Schlick-shaped grazing
+    retro-reflection added to the diffuse (the Disney BRDF's ks = sheen · mix(1, tint, sheen_tint), without 1/π).
+    Reciprocal."""
+
+    name = "sheen"
+    reference = "Burley, Physically-based shading at Disney, SIGGRAPH 2012 course notes (the Disney BRDF's sheen)"
+
+    def param_specs(self):
+        return (dataclasses.replace(KS, doc="sheen amplitude"),)
+
+    def __call__(self, params, pair: LocalPair):
+        return params["ks"] * ((1.0 - pair.cos_d) ** 5)[..., None]
+
+
+def charlie_lambda(cos_v, alpha):
+    """Smith's Λ of the Charlie distribution, Estevez & Kulla (2017)'s fit: exp(L(cosθ)) for cosθ < 1/2, else
+    exp(2 L(1/2) − L(1 − cosθ)), L(x) = a/(1 + b x^c) + d x + e, (a, ..., e) interpolated linearly in (1 − α)²
+    between the rows of their Table 1 (`_CHARLIE_FIT`)."""
+    r = (1.0 - alpha) ** 2
+    a, b, c, d, e = (lo + (hi - lo) * r for lo, hi in zip(*_CHARLIE_FIT))
+
+    def log_lambda(x):
+        # x^c as 0 at x = 0 (normal incidence, where 1 − cosθ = 0), with the gradient 0 there (x^c ln x: NaN).
+        positive = x > 0.0
+        power = jnp.where(positive, jnp.exp(c * jnp.log(jnp.where(positive, x, 1.0))), 0.0)
+        return a / (1.0 + b * power) + d * x + e
+
+    low = cos_v < 0.5
+    return jnp.exp(jnp.where(low, log_lambda(cos_v), 2.0 * log_lambda(0.5) - log_lambda(1.0 - cos_v)))
+
+
+@dataclasses.dataclass(frozen=True)
+class CharlieSheen(Lobe):
+    """The "Charlie" sheen of Estevez & Kulla (Production friendly microfacet sheen BRDF, Sony Imageworks 2017):
+    a microfacet lobe of fibres, f = ks D(h) G / (4 cosθi cosθo), with the inverted-Gaussian-like distribution
+
+    D(h) = (2 + 1/α) sin^(1/α)θh / (2π)
+
+    and height-correlated Smith masking G = 1/(1 + Λ(ωi) + Λ(ωo)) with their fitted Λ (`charlie_lambda`). Their
+    terminator softening (Λ raised to 1 + 2(1 − cosθ)⁸) is a shading-normal device and is left out, as glTF's
+    KHR_materials_sheen and MaterialX's ``sheen_bsdf`` leave it out. Reciprocal."""
+
+    name = "charlie-sheen"
+    reference = ("Estevez & Kulla, Production friendly microfacet sheen BRDF, Sony Pictures Imageworks, 2017, "
+                 "Eqs. 2-3 and Table 1")
+
+    def param_specs(self):
+        return (dataclasses.replace(KS, doc="sheen amplitude"),
+                ParamSpec("alpha", 0.5, 0.01, 1.0, unit="1", scale=True,
+                          doc="fibre roughness (1/α is the exponent of sinθh)"))
+
+    def __call__(self, params, pair: LocalPair):
+        alpha = params["alpha"]
+        sin2 = jnp.maximum(1.0 - pair.cos_h * pair.cos_h, TINY)
+        d = (2.0 + 1.0 / alpha) * jnp.exp(0.5 / alpha * jnp.log(sin2)) / (2.0 * jnp.pi)
+        g = 1.0 / (1.0 + charlie_lambda(pair.cos_i, alpha) + charlie_lambda(pair.cos_o, alpha))
+        return params["ks"] * (d * g / (4.0 * pair.cos_i * pair.cos_o))[..., None]
