@@ -47,7 +47,11 @@ EQUATIONS = {
         "             beckmann Λ = (erf(a) − 1)/2 + exp(−a²)/(2a√π),  a = 1/(m tanθ)\n"
         "             ggx      Λ = (√(1 + m² tan²θ) − 1)/2\n"
         "             blinn    Λ = Beckmann's Λ with a = √(αp/2 + 1)/tanθ (Walter et al.'s approximation)\n"
+        "G smith-correlated = 1/(1 + Λ(ωi) + Λ(ωo))  (height-correlated)\n"
         "G none     = 1\n"
+        "anisotropic=True (beckmann, ggx), widths αx = m_x, αy = m_y, e = ((h·x/αx)² + (h·y/αy)²)/ch²:\n"
+        "D beckmann = exp(−e) / (π αx αy ch⁴),  D ggx = 1 / (π αx αy ch⁴ (1 + e)²)\n"
+        "Λ          = the isotropic Λ at m = α(φ) = √(cos²φ αx² + sin²φ αy²), φ the azimuth of the direction\n"
         "F schlick    = f0 + (1 − f0)(1 − cd)⁵\n"
         "F dielectric = (r_s² + r_p²)/2 for a dielectric of index η seen from vacuum (1 under total reflection)\n"
         "F conductor  = (|r_s|² + |r_p|²)/2 for the complex index η + iκ"
@@ -67,6 +71,14 @@ EQUATIONS = {
         " / max(cxy_j², cz_j²)^(n_j/2)\n"
         "anisotropic=True: cx_j ωi.x ωo.x + cy_j ωi.y ωo.y in place of the cxy_j term, "
         "normalised by max(cx_j², cy_j², cz_j²)^(n_j/2)"
+    ),
+    "burley": ("f = ρd/π · (1 + (F_D90 − 1)(1 − ci)⁵) · (1 + (F_D90 − 1)(1 − co)⁵),  "
+               "F_D90 = 0.5 + 2 roughness cd²"),
+    "sheen": "f = ks · (1 − cd)⁵",
+    "charlie-sheen": (
+        "f = ks · D(h) · G / (4 ci co),  D = (2 + 1/α) sin^(1/α)θh / (2π),  G = 1/(1 + Λ(ωi) + Λ(ωo))\n"
+        "Λ(θ) = exp(L(cosθ)) for cosθ < ½, else exp(2 L(½) − L(1 − cosθ)),  L(x) = a/(1 + b x^c) + d x + e,\n"
+        "(a, b, c, d, e) linear in (1 − α)² between Estevez & Kulla's Table 1 rows"
     ),
     "toon-diffuse": "f = (ρshade + (ρd − ρshade) · S((ci − threshold)/width)) / π,  S(u) = 1/(1 + e^(−u))",
     "toon-specular": "f = ks · S((r·ωo − threshold)/width) / π,  S(u) = 1/(1 + e^(−u))",
@@ -97,6 +109,13 @@ NOTES = {
                  "[−2, 2]. Fits start lobes apart, fit K lobes from K − 1 (brdffit.fit_lobes) and report them "
                  "sorted by exponent. "
                  "With lobes=K the parameters are ks_j, cxy_j (or cx_j, cy_j), cz_j, n_j for j = 1..K.",
+    "burley": "The diffuse of the Disney BRDF (and of Mitsuba 3's and Blender's principled BSDFs): brighter "
+              "towards grazing on the retro-reflective side for a rough surface (F_D90 up to 2.5), darker for a "
+              "smooth one (F_D90 = 0.5). Reciprocal; not energy conserving at grazing for large roughness.",
+    "sheen": "The Disney BRDF's sheen: a Schlick-shaped grazing term added to the diffuse (no 1/π), for cloth.",
+    "charlie-sheen": "A microfacet lobe of fibres (an inverted distribution: most normals near the horizon), for "
+                     "cloth, velvet and felt. Estevez & Kulla's terminator softening is a shading-normal device and "
+                     "is left out, as glTF's KHR_materials_sheen and MaterialX leave it out.",
     "toon-diffuse": "Non-photorealistic two-tone shading. width is held fixed by fits unless it is freed. Not "
                     "reciprocal: it switches on ci alone.",
     "toon-specular": "A flat highlight disc; width is held fixed by fits unless it is freed. Reciprocal, since "
@@ -116,8 +135,8 @@ OPTION_VALUES = {
 
 # Option settings whose parameters differ from the default ones: their extra parameters get a table of their own.
 VARIANTS = {
-    "cook-torrance": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}],
-    "ggx": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}],
+    "cook-torrance": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}, {"anisotropic": True}],
+    "ggx": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}, {"anisotropic": True}],
     "lafortune": [{"anisotropic": True}],
 }
 
@@ -231,6 +250,12 @@ def render() -> str:
         "",
         "Energy conservation (whether the directional albedo stays at or below 1) depends on the parameters; the "
         "measured albedos of each lobe are in [properties.md](properties.md).",
+        "",
+        "## Not provided",
+        "",
+        "He-Torrance (He, Torrance, Sillion & Greenberg, SIGGRAPH 1991): its physical-optics term is an infinite "
+        "sum over the surface's autocorrelation, with its own convergence and wavelength handling, a project of its "
+        "own; the microfacet lobes above cover the geometric-optics regime it reduces to for rough surfaces.",
         "",
     ]
     return "\n".join(out)

@@ -33,6 +33,10 @@ __all__ = [
     "cook_torrance",
     "ashikhmin_shirley",
     "lafortune",
+    "burley",
+    "sheen",
+    "charlie_sheen",
+    "charlie_lambda",
     "toon_diffuse",
     "toon_specular",
     "fresnel_schlick",
@@ -40,7 +44,9 @@ __all__ = [
     "fresnel_conductor",
     "fresnel_conductor_scalar",
     "microfacet_D",
+    "microfacet_D_aniso",
     "smith_lambda",
+    "smith_lambda_aniso",
     "smith_G1",
     "smith_lambda_numeric",
     "slope_marginal",
@@ -300,6 +306,31 @@ def smith_G1(distribution: str, theta_v, m):
     return 1.0 / (1.0 + smith_lambda(distribution, theta_v, m))
 
 
+def microfacet_D_aniso(distribution: str, theta_h, phi_h, alpha_x, alpha_y):
+    """Anisotropic Beckmann and GGX of Heitz, Understanding the masking-shadowing function in microfacet-based
+    BRDFs, JCGT 3(2), 2014, Eqs. 83 and 85, as functions of (θh, φh), with
+    e = tan²θh (cos²φh/αx² + sin²φh/αy²):
+
+    - beckmann: D = exp(−e)/(π αx αy cos⁴θh)
+    - ggx: D = 1/(π αx αy cos⁴θh (1 + e)²)
+    """
+    theta_h, phi_h = np.asarray(theta_h, dtype=float), np.asarray(phi_h, dtype=float)
+    c4 = np.cos(theta_h) ** 4
+    e = np.tan(theta_h) ** 2 * (np.cos(phi_h) ** 2 / alpha_x**2 + np.sin(phi_h) ** 2 / alpha_y**2)
+    if distribution == "beckmann":
+        return np.exp(-e) / (math.pi * alpha_x * alpha_y * c4)
+    if distribution == "ggx":
+        return 1.0 / (math.pi * alpha_x * alpha_y * c4 * (1.0 + e) ** 2)
+    raise ValueError(distribution)
+
+
+def smith_lambda_aniso(distribution: str, theta_v, phi_v, alpha_x, alpha_y):
+    """Smith's Λ of the anisotropic distributions (Heitz 2014, Eq. 80 and §5.3): the isotropic Λ of
+    `smith_lambda` at the projected roughness α(φv) = √(cos²φv αx² + sin²φv αy²)."""
+    alpha = np.sqrt(np.cos(phi_v) ** 2 * alpha_x**2 + np.sin(phi_v) ** 2 * alpha_y**2)
+    return smith_lambda(distribution, theta_v, alpha)
+
+
 def slope_marginal(distribution: str, q, m):
     """Marginal density P2(q) of one slope component (x-slope q) of the isotropic microfacet slope distribution
     P22(x, y) = D(h) cos⁴θh (tan²θh = x² + y²), integrated over the other slope by hand:
@@ -339,19 +370,30 @@ def cook_torrance(theta_i, phi_i, theta_o, phi_o, ks, m, *, distribution="beckma
     """Cook & Torrance, A reflectance model for computer graphics, ACM TOG 1(1), 1982, with Walter et al. 2007's
     normalisation (Eq. 20): f = ks F(θd) D(θh) G / (4 cosθi cosθo).
 
+    ``m``: the width, or a pair (αx, αy) for the anisotropic distributions (`microfacet_D_aniso`,
+    `smith_lambda_aniso`).
     G: ``v-cavity`` Cook & Torrance 1982, p. 10: G = min(1, 2 cosθh cosθo/cosθd, 2 cosθh cosθi/cosθd);
-    ``smith`` Walter et al. 2007, Eq. 23: G1(θi) G1(θo); ``none``: 1.
+    ``smith`` Walter et al. 2007, Eq. 23: G1(θi) G1(θo); ``smith-correlated`` Heitz 2014, Eq. 99:
+    1/(1 + Λ(ωi) + Λ(ωo)); ``none``: 1.
     F at cosθd = ωo·h: Schlick (f0), exact dielectric from vacuum into η (`fresnel_dielectric`) or exact
     conductor η + iκ (`fresnel_conductor`, complex arithmetic).
     """
     g = Pair(theta_i, phi_i, theta_o, phi_o)
     with np.errstate(all="ignore"):
-        d = microfacet_D(distribution, g.th, m)
+        if isinstance(m, tuple):
+            d = microfacet_D_aniso(distribution, g.th, g.ph, *m)
+            lam_i = smith_lambda_aniso(distribution, g.ti, g.pi_, *m)
+            lam_o = smith_lambda_aniso(distribution, g.to, g.po, *m)
+        else:
+            d = microfacet_D(distribution, g.th, m)
+            lam_i, lam_o = smith_lambda(distribution, g.ti, m), smith_lambda(distribution, g.to, m)
         if shadowing == "v-cavity":
             ch = np.cos(g.th)
             gg = np.minimum(1.0, np.minimum(2 * ch * g.co / g.cos_d, 2 * ch * g.ci / g.cos_d))
         elif shadowing == "smith":
-            gg = smith_G1(distribution, g.ti, m) * smith_G1(distribution, g.to, m)
+            gg = 1.0 / (1.0 + lam_i) / (1.0 + lam_o)
+        elif shadowing == "smith-correlated":
+            gg = 1.0 / (1.0 + lam_i + lam_o)
         elif shadowing == "none":
             gg = np.ones_like(g.th)
         else:
@@ -405,6 +447,52 @@ def lafortune(theta_i, phi_i, theta_o, phi_o, lobes):
     return _masked(g, total)
 
 
+@_quiet
+def burley(theta_i, phi_i, theta_o, phi_o, rho_d, roughness):
+    """Burley, Physically-based shading at Disney, SIGGRAPH 2012 course notes, §5.3:
+    f = ρd/π (1 + (F_D90 − 1)(1 − cosθi)⁵)(1 + (F_D90 − 1)(1 − cosθo)⁵), F_D90 = 0.5 + 2 roughness cos²θd."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    f90 = 0.5 + 2.0 * roughness * g.cos_d**2
+    shape = (1.0 + (f90 - 1.0) * (1.0 - g.ci) ** 5) * (1.0 + (f90 - 1.0) * (1.0 - g.co) ** 5)
+    return _masked(g, _col(rho_d) / math.pi * shape[:, None])
+
+
+@_quiet
+def sheen(theta_i, phi_i, theta_o, phi_o, ks):
+    """The Disney BRDF's sheen (Burley 2012; BRDF Explorer, disney.brdf): f = ks (1 − cosθd)⁵."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    return _masked(g, _col(ks) * ((1.0 - g.cos_d) ** 5)[:, None])
+
+
+def charlie_lambda(theta_v, alpha):
+    """Estevez & Kulla, Production friendly microfacet sheen BRDF, 2017, Table 1: Λ(θ) = exp(L(cosθ)) for cosθ < ½,
+    else exp(2 L(½) − L(1 − cosθ)), L(x) = a/(1 + b x^c) + d x + e, each coefficient interpolated linearly in
+    r = (1 − α)² from (21.5473, 3.82987, 0.19823, −1.97760, −4.32054) at r = 0 to (25.3245, 3.32435, 0.16801,
+    −1.27393, −4.85967) at r = 1."""
+    r = (1.0 - alpha) ** 2
+    a = 21.5473 + (25.3245 - 21.5473) * r
+    b = 3.82987 + (3.32435 - 3.82987) * r
+    c = 0.19823 + (0.16801 - 0.19823) * r
+    d = -1.97760 + (-1.27393 + 1.97760) * r
+    e = -4.32054 + (-4.85967 + 4.32054) * r
+
+    def big_l(x):
+        return a / (1.0 + b * x**c) + d * x + e
+
+    mu = np.cos(np.asarray(theta_v, dtype=float))
+    return np.where(mu < 0.5, np.exp(big_l(mu)), np.exp(2.0 * big_l(0.5) - big_l(1.0 - mu)))
+
+
+@_quiet
+def charlie_sheen(theta_i, phi_i, theta_o, phi_o, ks, alpha):
+    """Estevez & Kulla 2017, Eqs. 2-3: f = ks D G/(4 cosθi cosθo), D = (2 + 1/α) sin^(1/α)θh/(2π),
+    G = 1/(1 + Λ(θi) + Λ(θo)) with `charlie_lambda` (no terminator softening)."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    d = (2.0 + 1.0 / alpha) * np.sin(g.th) ** (1.0 / alpha) / (2.0 * math.pi)
+    gg = 1.0 / (1.0 + charlie_lambda(g.ti, alpha) + charlie_lambda(g.to, alpha))
+    return _masked(g, _col(ks) * (d * gg / (4.0 * g.ci * g.co))[:, None])
+
+
 # --------------------------------------------------------------------------------------------------------------
 # Two-tone (toon) lobes, issue 2's definition (after Lake et al., NPAR 2000, with a logistic step)
 
@@ -438,8 +526,10 @@ def _lafortune_ref(ti, pi_, to, po, p, lobes=1, anisotropic=False):
     return lafortune(ti, pi_, to, po, spec)
 
 
-def _ct_ref(ti, pi_, to, po, p, roughness="m", distribution="beckmann", shadowing="v-cavity", fresnel="schlick"):
-    return cook_torrance(ti, pi_, to, po, p["ks"], p[roughness], distribution=distribution, shadowing=shadowing,
+def _ct_ref(ti, pi_, to, po, p, roughness="m", distribution="beckmann", shadowing="v-cavity", fresnel="schlick",
+            anisotropic=False):
+    width = (p[f"{roughness}_x"], p[f"{roughness}_y"]) if anisotropic else p[roughness]
+    return cook_torrance(ti, pi_, to, po, p["ks"], width, distribution=distribution, shadowing=shadowing,
                          fresnel=fresnel, f0=p.get("f0"), eta=p.get("eta"), k=p.get("k"))
 
 
@@ -458,6 +548,9 @@ REFERENCES = {
     "ashikhmin-shirley-aniso": lambda ti, pi_, to, po, p: ashikhmin_shirley(ti, pi_, to, po, p["rs"], p["nu"],
                                                                             p["nv"]),
     "lafortune": _lafortune_ref,
+    "burley": lambda ti, pi_, to, po, p: burley(ti, pi_, to, po, p["rho_d"], p["roughness"]),
+    "sheen": lambda ti, pi_, to, po, p: sheen(ti, pi_, to, po, p["ks"]),
+    "charlie-sheen": lambda ti, pi_, to, po, p: charlie_sheen(ti, pi_, to, po, p["ks"], p["alpha"]),
     "toon-diffuse": lambda ti, pi_, to, po, p: toon_diffuse(ti, pi_, to, po, p["rho_d"], p["rho_shade"],
                                                             p["threshold"], p["width"]),
     "toon-specular": lambda ti, pi_, to, po, p: toon_specular(ti, pi_, to, po, p["ks"], p["threshold"],

@@ -1,4 +1,4 @@
-"""Diffuse lobes: Lambert and Oren-Nayar."""
+"""Diffuse lobes: Lambert, Oren-Nayar and Burley's diffuse with retro-reflection."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from .specs import RHO_D
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["Lambert", "OrenNayar"]
+__all__ = ["Lambert", "OrenNayar", "Burley"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,3 +56,28 @@ class OrenNayar(Lobe):
         dot_xy = pair.wi[..., 0] * pair.wo[..., 0] + pair.wi[..., 1] * pair.wo[..., 1]
         term = jnp.maximum(dot_xy, 0.0) / jnp.maximum(pair.cos_i, pair.cos_o)
         return params["rho_d"] / jnp.pi * (a + b * term)[..., None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Burley(Lobe):
+    """Burley's diffuse (Physically-based shading at Disney, SIGGRAPH 2012 course, §5.3), the diffuse of the
+    Disney BRDF and of Mitsuba 3's and Blender's principled BSDFs:
+
+    f = ρd/π (1 + (F_D90 − 1)(1 − cosθi)⁵)(1 + (F_D90 − 1)(1 − cosθo)⁵),  F_D90 = 0.5 + 2 r cos²θd,
+
+    θd the angle between ωi and the half vector. A rough surface (r = 1) brightens towards grazing on the retro-
+    reflective side (F_D90 up to 2.5); a smooth one darkens towards grazing (F_D90 = 0.5). Reciprocal; not energy
+    conserving at grazing incidence for large r (Burley's own remark)."""
+
+    name = "burley"
+    reference = "Burley, Physically-based shading at Disney, SIGGRAPH 2012 course notes, §5.3"
+
+    def param_specs(self):
+        return (RHO_D, ParamSpec("roughness", 0.5, 0.0, 1.0, unit="1",
+                                 doc="roughness of the retro-reflection term (F_D90 = 0.5 + 2 r cos²θd)"))
+
+    def __call__(self, params, pair: LocalPair):
+        f90 = 0.5 + 2.0 * params["roughness"] * pair.cos_d * pair.cos_d
+        light = 1.0 + (f90 - 1.0) * (1.0 - pair.cos_i) ** 5
+        view = 1.0 + (f90 - 1.0) * (1.0 - pair.cos_o) ** 5
+        return params["rho_d"] / jnp.pi * (light * view)[..., None]

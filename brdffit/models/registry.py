@@ -12,11 +12,12 @@ import re
 from .._lazy import module
 from .ashikhmin_shirley import AshikhminShirley, AshikhminShirleyAniso
 from .cook_torrance import GGX, CookTorrance
-from .diffuse import Lambert, OrenNayar
+from .diffuse import Burley, Lambert, OrenNayar
 from .lafortune import Lafortune
 from .lobe import Lobe
 from .layout import layout
 from .phong import BlinnPhong, Phong
+from .sheen import CharlieSheen, Sheen
 from .toon import ToonDiffuse, ToonSpecular
 from .ward import Ward, WardAniso, WardDuer
 
@@ -31,6 +32,7 @@ _LOBES: dict[str, type[Lobe]] = {
     for cls in (
         Lambert,
         OrenNayar,
+        Burley,
         Phong,
         BlinnPhong,
         Ward,
@@ -41,6 +43,8 @@ _LOBES: dict[str, type[Lobe]] = {
         AshikhminShirley,
         AshikhminShirleyAniso,
         Lafortune,
+        Sheen,
+        CharlieSheen,
         ToonDiffuse,
         ToonSpecular,
     )
