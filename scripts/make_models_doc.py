@@ -42,15 +42,19 @@ EQUATIONS = {
         "D beckmann = exp(−tan²θh/m²) / (π m² ch⁴)\n"
         "D ggx      = m² / (π (ch² (m² − 1) + 1)²)\n"
         "D blinn    = (αp + 2)/(2π) · ch^αp,  αp = 2/m² − 2\n"
+        "D std      = (1 + tan²θh/(m² (γ − 1)))^(−γ) / (π m² ch⁴)  (Student-t slopes; γ = 2 is GGX, γ → ∞ Beckmann)\n"
         "G v-cavity = min(1, 2 ch co / cd, 2 ch ci / cd)\n"
         "G smith    = G1(ωi) G1(ωo),  G1 = 1/(1 + Λ):\n"
         "             beckmann Λ = (erf(a) − 1)/2 + exp(−a²)/(2a√π),  a = 1/(m tanθ)\n"
         "             ggx      Λ = (√(1 + m² tan²θ) − 1)/2\n"
         "             blinn    Λ = Beckmann's Λ with a = √(αp/2 + 1)/tanθ (Walter et al.'s approximation)\n"
+        "             std      Λ = c (γ − 1 + μ²)^(3/2−γ) / ((2γ − 3) μ) − ½ I_x(γ − 1, ½),  μ = 1/(m tanθ),\n"
+        "                        c = (γ − 1)^γ Γ(γ − ½)/(√π Γ(γ)),  x = (γ − 1)/(γ − 1 + μ²)  (exact)\n"
         "G smith-correlated = 1/(1 + Λ(ωi) + Λ(ωo))  (height-correlated)\n"
         "G none     = 1\n"
-        "anisotropic=True (beckmann, ggx), widths αx = m_x, αy = m_y, e = ((h·x/αx)² + (h·y/αy)²)/ch²:\n"
-        "D beckmann = exp(−e) / (π αx αy ch⁴),  D ggx = 1 / (π αx αy ch⁴ (1 + e)²)\n"
+        "anisotropic=True (beckmann, ggx, std), widths αx = m_x, αy = m_y, e = ((h·x/αx)² + (h·y/αy)²)/ch²:\n"
+        "D beckmann = exp(−e) / (π αx αy ch⁴),  D ggx = 1 / (π αx αy ch⁴ (1 + e)²),\n"
+        "D std      = (1 + e/(γ − 1))^(−γ) / (π αx αy ch⁴)\n"
         "Λ          = the isotropic Λ at m = α(φ) = √(cos²φ αx² + sin²φ αy²), φ the azimuth of the direction\n"
         "F schlick    = f0 + (1 − f0)(1 − cd)⁵\n"
         "F dielectric = (r_s² + r_p²)/2 for a dielectric of index η seen from vacuum (1 under total reflection)\n"
@@ -99,7 +103,11 @@ NOTES = {
                      "option material=NAME takes the default η (and κ) from a preset, see the tables at the end. "
                      "distribution=blinn with shadowing=smith uses Walter et al.'s Beckmann approximation of the "
                      "Blinn distribution's Smith term: against the exact G1 (by quadrature) it errs by about 5e-4 "
-                     "at m = 0.05, 1.3% at m = 0.2, 10% at m = 0.5 and up to 50% at m = 0.9 near grazing.",
+                     "at m = 0.05, 1.3% at m = 0.2, 10% at m = 0.5 and up to 50% at m = 0.9 near grazing. "
+                     "distribution=std (Ribardière et al., CGF 2017) adds the tail exponent gamma; its Λ is exact "
+                     "(the Student-t tail as an incomplete beta function, where the paper fits a rational "
+                     "approximation), and its derivative in γ is a central difference of that function (JAX has "
+                     "none in the parameters), good to about 1e-9.",
     "ashikhmin-shirley": "The specular term only (add a diffuse lobe for the rest); F is evaluated at ωi·h.",
     "ashikhmin-shirley-aniso": "nu is the exponent along the tangent x, nv along the bitangent y; at h = n the "
                                "exponent is taken as (nu + nv)/2.",
@@ -135,7 +143,8 @@ OPTION_VALUES = {
 
 # Option settings whose parameters differ from the default ones: their extra parameters get a table of their own.
 VARIANTS = {
-    "cook-torrance": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}, {"anisotropic": True}],
+    "cook-torrance": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}, {"anisotropic": True},
+                      {"distribution": "std"}],
     "ggx": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}, {"anisotropic": True}],
     "lafortune": [{"anisotropic": True}],
 }

@@ -45,6 +45,9 @@ __all__ = [
     "fresnel_conductor_scalar",
     "microfacet_D",
     "microfacet_D_aniso",
+    "std_D",
+    "std_lambda",
+    "std_marginal",
     "smith_lambda",
     "smith_lambda_aniso",
     "smith_G1",
@@ -254,6 +257,43 @@ def blinn_exponent(m):
     return 2.0 / (m * m) - 2.0
 
 
+def std_D(theta_h, phi_h, alpha_x, alpha_y, gamma):
+    """Ribardière, Bringier, Meneveaux & Simonot, STD: Student's t-distribution of slopes for microfacet based
+    BSDFs, CGF 36(2), 2017, Eq. 9 (with Heitz 2014's anisotropic stretch):
+    D = (γ − 1)^γ / (π αx αy cos⁴θh (γ − 1 + tan²θh (cos²φh/αx² + sin²φh/αy²))^γ)."""
+    theta_h, phi_h = np.asarray(theta_h, dtype=float), np.asarray(phi_h, dtype=float)
+    e = np.tan(theta_h) ** 2 * (np.cos(phi_h) ** 2 / alpha_x**2 + np.sin(phi_h) ** 2 / alpha_y**2)
+    return (gamma - 1.0) ** gamma / (math.pi * alpha_x * alpha_y * np.cos(theta_h) ** 4 * (gamma - 1.0 + e) ** gamma)
+
+
+def std_lambda(theta_v, phi_v, alpha_x, alpha_y, gamma):
+    """Smith's Λ of the STD, with SciPy: Ribardière et al. 2017, Eq. 13, Λ = (1/μ) ∫_μ^∞ (q − μ) P2(q) dq,
+    μ = 1/(α(φ) tanθ), with the marginal P2(q) = c (γ − 1 + q²)^(½−γ), c = (γ − 1)^γ Γ(γ − ½)/(√π Γ(γ)):
+    the first moment in closed form, c (γ − 1 + μ²)^(3/2−γ)/(2γ − 3), and the tail as the Student-t survival
+    function with 2γ − 2 degrees of freedom at μ√2 (scipy.stats.t)."""
+    from scipy import stats
+
+    alpha = np.sqrt(np.cos(phi_v) ** 2 * alpha_x**2 + np.sin(phi_v) ** 2 * alpha_y**2)
+    with np.errstate(divide="ignore"):
+        mu = 1.0 / (alpha * np.tan(np.asarray(theta_v, dtype=float)))
+    c = (gamma - 1.0) ** gamma * special.gamma(gamma - 0.5) / (math.sqrt(math.pi) * special.gamma(gamma))
+    first = c * (gamma - 1.0 + mu * mu) ** (1.5 - gamma) / ((2.0 * gamma - 3.0) * mu)
+    return np.where(np.isinf(mu), 0.0, first - stats.t.sf(mu * math.sqrt(2.0), 2.0 * gamma - 2.0))
+
+
+def std_marginal(q, m, gamma):
+    """The one-slope marginal of the isotropic STD, P2(q) = ∫ P22(q, y) dy (P22 = D cos⁴θh), integrated by
+    quadrature (scipy.integrate.quad), not in closed form: what `std_lambda` assumes is checked against it."""
+    # P22 = (γ − 1)^γ (γ − 1 + r²/m²)^−γ / (π m²); over y with y = c tan u, c² = m²(γ − 1) + q², the integrand
+    # becomes the bounded, smooth (c²/(m²(γ − 1)))^−γ cos^(2γ−2)u · c/(π m²) on [0, π/2) (twice, for y < 0).
+    c2 = m * m * (gamma - 1.0) + q * q
+    scale = math.exp(-gamma * math.log(c2 / (m * m * (gamma - 1.0)))) * math.sqrt(c2) / (math.pi * m * m)
+    value, _ = integrate.quad(lambda u: math.cos(u) ** (2.0 * gamma - 2.0), 0.0, 0.5 * math.pi, epsabs=0.0,
+                              epsrel=1e-12, limit=200)
+    value = 2.0 * scale * value
+    return value
+
+
 def microfacet_D(distribution: str, theta_h, m):
     """Normal distribution functions of Walter et al. 2007 as functions of θh:
 
@@ -366,12 +406,12 @@ def smith_lambda_numeric(distribution: str, theta_v: float, m: float) -> float:
 
 @_quiet
 def cook_torrance(theta_i, phi_i, theta_o, phi_o, ks, m, *, distribution="beckmann", shadowing="v-cavity",
-                  fresnel="schlick", f0=None, eta=None, k=None):
+                  fresnel="schlick", f0=None, eta=None, k=None, gamma=None):
     """Cook & Torrance, A reflectance model for computer graphics, ACM TOG 1(1), 1982, with Walter et al. 2007's
     normalisation (Eq. 20): f = ks F(θd) D(θh) G / (4 cosθi cosθo).
 
     ``m``: the width, or a pair (αx, αy) for the anisotropic distributions (`microfacet_D_aniso`,
-    `smith_lambda_aniso`).
+    `smith_lambda_aniso`); ``distribution="std"`` with its tail exponent ``gamma`` (`std_D`, `std_lambda`).
     G: ``v-cavity`` Cook & Torrance 1982, p. 10: G = min(1, 2 cosθh cosθo/cosθd, 2 cosθh cosθi/cosθd);
     ``smith`` Walter et al. 2007, Eq. 23: G1(θi) G1(θo); ``smith-correlated`` Heitz 2014, Eq. 99:
     1/(1 + Λ(ωi) + Λ(ωo)); ``none``: 1.
@@ -380,7 +420,11 @@ def cook_torrance(theta_i, phi_i, theta_o, phi_o, ks, m, *, distribution="beckma
     """
     g = Pair(theta_i, phi_i, theta_o, phi_o)
     with np.errstate(all="ignore"):
-        if isinstance(m, tuple):
+        if distribution == "std":
+            ax, ay = m if isinstance(m, tuple) else (m, m)
+            d = std_D(g.th, g.ph, ax, ay, gamma)
+            lam_i, lam_o = std_lambda(g.ti, g.pi_, ax, ay, gamma), std_lambda(g.to, g.po, ax, ay, gamma)
+        elif isinstance(m, tuple):
             d = microfacet_D_aniso(distribution, g.th, g.ph, *m)
             lam_i = smith_lambda_aniso(distribution, g.ti, g.pi_, *m)
             lam_o = smith_lambda_aniso(distribution, g.to, g.po, *m)
@@ -530,7 +574,7 @@ def _ct_ref(ti, pi_, to, po, p, roughness="m", distribution="beckmann", shadowin
             anisotropic=False):
     width = (p[f"{roughness}_x"], p[f"{roughness}_y"]) if anisotropic else p[roughness]
     return cook_torrance(ti, pi_, to, po, p["ks"], width, distribution=distribution, shadowing=shadowing,
-                         fresnel=fresnel, f0=p.get("f0"), eta=p.get("eta"), k=p.get("k"))
+                         fresnel=fresnel, f0=p.get("f0"), eta=p.get("eta"), k=p.get("k"), gamma=p.get("gamma"))
 
 
 REFERENCES = {

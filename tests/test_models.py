@@ -71,6 +71,14 @@ CT_CASES = [
     Case("cook-torrance", {"distribution": d, "shadowing": s, "fresnel": "schlick", "anisotropic": True},
          {"ks": KS, "m_x": 0.12, "m_y": 0.45, "f0": 0.08})
     for d, s in itertools.product(("beckmann", "ggx"), ("v-cavity", "smith", "smith-correlated"))
+] + [
+    Case("cook-torrance", {"distribution": "std", "shadowing": s, "fresnel": "schlick"},
+         {"ks": KS, "m": 0.3, "gamma": 3.5, "f0": 0.08})
+    for s in ("v-cavity", "smith", "smith-correlated", "none")
+] + [
+    Case("cook-torrance", {"distribution": "std", "shadowing": "smith-correlated", "fresnel": "conductor",
+                           "anisotropic": True},
+         {"ks": KS, "m_x": 0.4, "m_y": 0.1, "gamma": 1.8, **_fresnel_params("conductor")}),
 ]
 
 OTHER_CASES = [
@@ -142,6 +150,7 @@ def _values(case_id):
 # The lobes and options of the modern microfacet, Burley and sheen models: against the reference at random
 # directions above the horizon to 1e-12 relative (the fixed configurations above hold every lobe to 1e-10).
 MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen")
+          or case.options.get("distribution") == "std"
           or case.options.get("anisotropic") is True and case.spec != "lafortune"
           or case.options.get("shadowing") == "smith-correlated"]
 

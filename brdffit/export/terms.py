@@ -28,6 +28,8 @@ __all__ = ["ExportError", "Term", "terms", "assemble", "evaluate_dirs", "reflect
            "deviation_pairs", "is_exact", "number", "rgb"]
 
 MICROFACET_LOBES = ("cook-torrance", "ggx")
+# The distributions the renderers' microfacet materials take (Beckmann or GGX; Blinn as Beckmann of the same m).
+RENDERED_DISTRIBUTIONS = ("beckmann", "ggx", "blinn")
 # Direction pairs of the measured deviation (uniform in solid angle on each hemisphere).
 DEVIATION_PAIRS = 2000
 DEVIATION_SEED = 20260
@@ -76,7 +78,8 @@ def terms(model: Model, exportable: str) -> list[Term]:
     """
     out = []
     for j, lobe in enumerate(model.lobes):
-        if lobe.name != "lambert" and (lobe.name not in MICROFACET_LOBES or lobe.anisotropic):
+        if lobe.name != "lambert" and (lobe.name not in MICROFACET_LOBES or lobe.anisotropic
+                                       or lobe.distribution not in RENDERED_DISTRIBUTIONS):
             raise ExportError(f"lobe {lobe.token()!r} of model {model.spec!r} has no equivalent in Mitsuba 3 or "
                               f"pbrt-v4; exportable: {exportable}; or export with fit=True (--fit), which fits "
                               "the renderer's own model to it (docs/export.md)")

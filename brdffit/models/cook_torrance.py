@@ -25,7 +25,8 @@ class CookTorrance(Lobe):
     f = ks F(ωo·h) D(h) G(ωi, ωo) / (4 cosθi cosθo).
 
     Options:
-        distribution: ``"beckmann"`` (default), ``"ggx"`` or ``"blinn"`` (`brdffit.models.microfacet`).
+        distribution: ``"beckmann"`` (default), ``"ggx"``, ``"blinn"`` or ``"std"`` (Student-t, with its tail
+            exponent ``gamma`` as a parameter) (`brdffit.models.microfacet`).
         shadowing: ``"v-cavity"`` (default, Cook-Torrance 1982), ``"smith"`` (separable, for the chosen D),
             ``"smith-correlated"`` (height-correlated, Heitz 2014 Eq. 99, as pbrt-v4 renders) or ``"none"``.
         anisotropic: widths ``<r>_x`` along the tangent and ``<r>_y`` along the bitangent instead of one ``<r>``
@@ -74,6 +75,9 @@ class CookTorrance(Lobe):
                 2: ("microfacet roughness along the tangent x", "microfacet roughness along the bitangent y")}
         names = self.roughness_names
         specs = [KS, *(roughness(name, doc=doc) for name, doc in zip(names, docs[len(names)]))]
+        tail = DISTRIBUTIONS[self.distribution].tail
+        if tail is not None:
+            specs.append(tail)
         if self.fresnel == "schlick":
             specs.append(ParamSpec("f0", 0.04, 0.0, 1.0, unit="1", doc="Fresnel reflectance at normal incidence"))
         elif self.fresnel == "dielectric":
@@ -100,8 +104,9 @@ class CookTorrance(Lobe):
         widths = tuple(params[name] for name in self.roughness_names)
         m = widths if self.anisotropic else widths[0]
         dist = DISTRIBUTIONS[self.distribution]
-        d = dist.density_of(pair, m)
-        g = SHADOWING[self.shadowing](pair, dist, m)
+        tail = params[dist.tail.name] if dist.tail is not None else None
+        d = dist.density_of(pair, m, tail)
+        g = SHADOWING[self.shadowing](pair, dist, m, tail)
         geometric = d * g / (4.0 * pair.cos_i * pair.cos_o)
         return params["ks"] * self.fresnel_term(params, pair.cos_d) * geometric[..., None]
 

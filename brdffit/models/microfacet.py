@@ -14,14 +14,18 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import functools
+from typing import ClassVar
 
 from .._lazy import module
 from ..geometry import TINY, LocalPair, safe_div, safe_sqrt
+from ..params import ParamSpec
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 jax_special = module("jax.scipy.special")
+jax = module("jax")
 
-__all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "DISTRIBUTIONS", "ANISOTROPIC", "v_cavity", "smith",
+__all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "StudentT", "DISTRIBUTIONS", "ANISOTROPIC", "v_cavity", "smith",
            "smith_correlated", "SHADOWING"]
 
 # Above this Beckmann a = 1/(m tanθ) the shadowing is 1 to double precision (erfc(27) ~ 1e-319).
@@ -57,42 +61,46 @@ def _stretched(w, m):
 
 @dataclasses.dataclass(frozen=True)
 class Distribution(abc.ABC):
-    """A microfacet normal distribution with its Smith shadowing function."""
+    """A microfacet normal distribution with its Smith shadowing function.
+
+    A distribution with a shape parameter of its own besides the width (the Student-t's tail exponent γ) declares
+    it as `tail`; its functions then take its value as ``tail`` (None for the others)."""
 
     name = ""
+    tail: ClassVar[ParamSpec | None] = None
 
     @abc.abstractmethod
-    def D(self, cos_h, m):
+    def D(self, cos_h, m, tail=None):
         """Normalised distribution of microfacet normals, ∫ D(h) cosθh dωh = 1."""
 
     @abc.abstractmethod
-    def Lambda(self, cos_v, m):
+    def Lambda(self, cos_v, m, tail=None):
         """Smith's Λ for a direction with cosine ``cos_v`` (Walter et al. 2007, Eq. 18)."""
 
-    def D_aniso(self, h, m):
+    def D_aniso(self, h, m, tail=None):
         """The anisotropic distribution at unit half vectors ``h`` (..., 3), widths ``m = (αx, αy)``; normalised as
         `D`. Only the distributions in `ANISOTROPIC` have one."""
         raise NotImplementedError(f"the {self.name} distribution has no anisotropic form")
 
-    def Lambda_aniso(self, w, m):
+    def Lambda_aniso(self, w, m, tail=None):
         """Smith's Λ of the anisotropic distribution for unit directions ``w`` (..., 3), widths ``m = (αx, αy)``."""
         raise NotImplementedError(f"the {self.name} distribution has no anisotropic form")
 
-    def density_of(self, pair: LocalPair, m):
+    def density_of(self, pair: LocalPair, m, tail=None):
         """D(h) of a pair, isotropic for a scalar ``m`` and anisotropic for a pair ``(αx, αy)``."""
-        return self.D_aniso(pair.h, m) if isinstance(m, tuple) else self.D(pair.cos_h, m)
+        return self.D_aniso(pair.h, m, tail) if isinstance(m, tuple) else self.D(pair.cos_h, m, tail)
 
-    def lambda_of(self, w, cos_v, m):
+    def lambda_of(self, w, cos_v, m, tail=None):
         """Λ of the direction ``w`` (cosine ``cos_v``), isotropic for a scalar ``m``, anisotropic for a pair."""
-        return self.Lambda_aniso(w, m) if isinstance(m, tuple) else self.Lambda(cos_v, m)
+        return self.Lambda_aniso(w, m, tail) if isinstance(m, tuple) else self.Lambda(cos_v, m, tail)
 
-    def G1(self, cos_v, m):
+    def G1(self, cos_v, m, tail=None):
         """Smith masking of one direction, G1 = 1/(1 + Λ)."""
-        return 1.0 / (1.0 + self.Lambda(cos_v, m))
+        return 1.0 / (1.0 + self.Lambda(cos_v, m, tail))
 
-    def G(self, cos_i, cos_o, m):
+    def G(self, cos_i, cos_o, m, tail=None):
         """Separable Smith shadowing-masking G1(ωi) G1(ωo) (Walter et al. 2007, Eq. 23)."""
-        return self.G1(cos_i, m) * self.G1(cos_o, m)
+        return self.G1(cos_i, m, tail) * self.G1(cos_o, m, tail)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,21 +109,21 @@ class Beckmann(Distribution):
 
     name = "beckmann"
 
-    def D(self, cos_h, m):
+    def D(self, cos_h, m, tail=None):
         c2 = cos_h * cos_h
         return jnp.exp(-_tan2(cos_h) / (m * m)) / (jnp.pi * m * m * c2 * c2)
 
-    def Lambda(self, cos_v, m):
+    def Lambda(self, cos_v, m, tail=None):
         return _beckmann_lambda(cos_v, m)
 
-    def D_aniso(self, h, m):
+    def D_aniso(self, h, m, tail=None):
         # Heitz 2014, Eq. 81: exp(−(hx²/αx² + hy²/αy²)/hz²)/(π αx αy hz⁴).
         ax, ay = m
         hx, hy, hz = h[..., 0], h[..., 1], jnp.maximum(h[..., 2], TINY)
         z2 = hz * hz
         return jnp.exp(-((hx / ax) ** 2 + (hy / ay) ** 2) / z2) / (jnp.pi * ax * ay * z2 * z2)
 
-    def Lambda_aniso(self, w, m):
+    def Lambda_aniso(self, w, m, tail=None):
         # Heitz 2014, Eqs. 80 and 86: the isotropic Λ(a) at a = 1/(α(φ) tanθ) = ωz/√((ωx αx)² + (ωy αy)²).
         across, z = _stretched(w, m)
         return _beckmann_lambda_of_a(safe_div(z, safe_sqrt(across), fallback=_BECKMANN_A_MAX))
@@ -127,23 +135,23 @@ class GGX(Distribution):
 
     name = "ggx"
 
-    def D(self, cos_h, m):
+    def D(self, cos_h, m, tail=None):
         a2 = m * m
         t = cos_h * cos_h * (a2 - 1.0) + 1.0
         return a2 / (jnp.pi * t * t)
 
-    def Lambda(self, cos_v, m):
+    def Lambda(self, cos_v, m, tail=None):
         # Walter et al. 2007, Eq. 34: G1 = 2/(1 + √(1 + α² tan²θv)), i.e. Λ = (√(1 + α² tan²θv) − 1)/2.
         c2 = jnp.maximum(cos_v * cos_v, 1e-30)
         return 0.5 * (jnp.sqrt(1.0 + m * m * (1.0 - c2) / c2) - 1.0)
 
-    def D_aniso(self, h, m):
+    def D_aniso(self, h, m, tail=None):
         # Heitz 2014, Eq. 85: 1/(π αx αy hz⁴ (1 + (hx²/αx² + hy²/αy²)/hz²)²) = 1/(π αx αy (hx²/αx² + hy²/αy² + hz²)²).
         ax, ay = m
         t = (h[..., 0] / ax) ** 2 + (h[..., 1] / ay) ** 2 + h[..., 2] ** 2
         return 1.0 / (jnp.pi * ax * ay * t * t)
 
-    def Lambda_aniso(self, w, m):
+    def Lambda_aniso(self, w, m, tail=None):
         # Heitz 2014, Eq. 86: (−1 + √(1 + α(φ)² tan²θ))/2.
         across, z = _stretched(w, m)
         return 0.5 * (jnp.sqrt(1.0 + across / jnp.maximum(z * z, 1e-30)) - 1.0)
@@ -159,41 +167,126 @@ class BlinnPhong(Distribution):
 
     name = "blinn"
 
-    def D(self, cos_h, m):
+    def D(self, cos_h, m, tail=None):
         exponent = 2.0 / (m * m) - 2.0
         return (exponent + 2.0) / (2.0 * jnp.pi) * jnp.exp(exponent * jnp.log(cos_h))
 
-    def Lambda(self, cos_v, m):
+    def Lambda(self, cos_v, m, tail=None):
         return _beckmann_lambda(cos_v, m)
 
 
-DISTRIBUTIONS = {d.name: d for d in (Beckmann(), GGX(), BlinnPhong())}
+# The largest μ = 1/(α tanθ) the Student-t Λ is evaluated at (normal incidence, where Λ = 0 to double precision).
+_STD_MU_MAX = 1e100
+
+
+def _half_beta(a, x):
+    """The regularised incomplete beta function I_x(a, ½), differentiable in a as well as x (`_half_beta_jvp`)."""
+    return jax_special.betainc(a, 0.5, x)
+
+
+def _half_beta_jvp(primals, tangents):
+    # ∂I/∂x = x^(a−1) (1 − x)^(−½) / B(a, ½); ∂I/∂a has no closed form (a ₃F₂), and JAX's betainc does not
+    # differentiate in a: a central difference of relative step 1e-5 (truncation and rounding both near 1e-10
+    # relative), enough for a fit's Jacobian. 0 at x = 0 and x = 1, where I is 0 or 1 for every a.
+    a, x = primals
+    da, dx = tangents
+    value = _half_beta(a, x)
+    step = 1e-5 * a
+    d_a = (jax_special.betainc(a + step, 0.5, x) - jax_special.betainc(a - step, 0.5, x)) / (2.0 * step)
+    inside = (x > 0.0) & (x < 1.0)
+    safe = jnp.where(inside, x, 0.5)
+    d_x = jnp.where(inside, jnp.exp((a - 1.0) * jnp.log(safe) - 0.5 * jnp.log1p(-safe)
+                                    - jax_special.betaln(a, 0.5)), 0.0)
+    return value, d_a * da + d_x * dx
+
+
+@functools.lru_cache(maxsize=1)
+def _differentiable_half_beta():
+    """`_half_beta` with its derivatives `_half_beta_jvp` (built on first use: JAX is loaded lazily here)."""
+    function = jax.custom_jvp(_half_beta)
+    function.defjvp(_half_beta_jvp)
+    return function
+
+
+def _std_lambda_of_mu(mu, gamma):
+    """Smith's Λ of the Student-t slope distribution at μ = 1/(α tanθ) (Ribardière et al. 2017, Eqs. 13-15),
+    exactly: Λ = (1/μ) ∫_μ^∞ (q − μ) P2(q) dq with the one-slope marginal
+    P2(q) = c (γ − 1 + q²)^(½−γ), c = (γ − 1)^γ Γ(γ − ½)/(√π Γ(γ)), so that
+
+        Λ = c (γ − 1 + μ²)^(3/2−γ) / ((2γ − 3) μ) − S(μ),
+
+    S(μ) = ∫_μ^∞ P2 the Student-t tail with 2γ − 2 degrees of freedom at μ√2, ½ I_x(γ − 1, ½) with
+    x = (γ − 1)/(γ − 1 + μ²). (The paper approximates the second integral by a fitted rational function.)"""
+    g1 = gamma - 1.0
+    mu = jnp.minimum(mu, _STD_MU_MAX)
+    log_c = gamma * jnp.log(g1) + jax_special.gammaln(gamma - 0.5) - jax_special.gammaln(gamma) \
+        - 0.5 * jnp.log(jnp.pi)
+    first = jnp.exp(log_c + (1.5 - gamma) * jnp.log(g1 + mu * mu)) / ((2.0 * gamma - 3.0) * mu)
+    return first - 0.5 * _differentiable_half_beta()(g1, g1 / (g1 + mu * mu))
+
+
+@dataclasses.dataclass(frozen=True)
+class StudentT(Distribution):
+    """The Student-t distribution of slopes, "STD" (Ribardière, Bringier, Meneveaux & Simonot, STD: Student's
+    t-distribution of slopes for microfacet based BSDFs, Computer Graphics Forum 36(2), 2017, Eq. 9):
+
+        D = (1 + tan²θh/(α² (γ − 1)))^(−γ) / (π α² cos⁴θh),
+
+    a tail exponent γ > 3/2 between GGX (γ = 2, exactly) and Beckmann (γ → ∞, its limit); Λ exact
+    (`_std_lambda_of_mu`). Anisotropic: tan²θh/α² becomes (hx²/αx² + hy²/αy²)/hz² (Heitz 2014, §5.3)."""
+
+    name = "std"
+    tail: ClassVar[ParamSpec] = ParamSpec("gamma", 2.0, 1.51, 40.0, unit="1",
+                                          doc="tail exponent γ of the Student-t slopes (2: GGX; large: Beckmann)")
+
+    def _density(self, e, ax, ay, cos_h, gamma):
+        c2 = cos_h * cos_h
+        return jnp.exp(-gamma * jnp.log1p(e / (gamma - 1.0))) / (jnp.pi * ax * ay * c2 * c2)
+
+    def D(self, cos_h, m, tail=None):
+        return self._density(_tan2(cos_h) / (m * m), m, m, cos_h, tail)
+
+    def Lambda(self, cos_v, m, tail=None):
+        sin_v = safe_sqrt(1.0 - cos_v * cos_v)
+        return _std_lambda_of_mu(safe_div(cos_v, m * sin_v, fallback=_STD_MU_MAX), tail)
+
+    def D_aniso(self, h, m, tail=None):
+        ax, ay = m
+        hz = jnp.maximum(h[..., 2], TINY)
+        return self._density(((h[..., 0] / ax) ** 2 + (h[..., 1] / ay) ** 2) / (hz * hz), ax, ay, hz, tail)
+
+    def Lambda_aniso(self, w, m, tail=None):
+        across, z = _stretched(w, m)
+        return _std_lambda_of_mu(safe_div(z, safe_sqrt(across), fallback=_STD_MU_MAX), tail)
+
+
+DISTRIBUTIONS = {d.name: d for d in (Beckmann(), GGX(), BlinnPhong(), StudentT())}
 # The distributions with an anisotropic form (`Distribution.D_aniso`).
-ANISOTROPIC = ("beckmann", "ggx")
+ANISOTROPIC = ("beckmann", "ggx", "std")
 
 
-def v_cavity(pair: LocalPair, distribution: Distribution, m):
+def v_cavity(pair: LocalPair, distribution: Distribution, m, tail=None):
     """Cook & Torrance (1982) V-cavity shadowing: min(1, 2 ch co/(ωo·h), 2 ch ci/(ωo·h)); independent of D."""
     g_o = 2.0 * pair.cos_h * pair.cos_o / pair.cos_d
     g_i = 2.0 * pair.cos_h * pair.cos_i / pair.cos_d
     return jnp.minimum(1.0, jnp.minimum(g_o, g_i))
 
 
-def smith(pair: LocalPair, distribution: Distribution, m):
+def smith(pair: LocalPair, distribution: Distribution, m, tail=None):
     """Separable Smith shadowing-masking of ``distribution``, G1(ωi) G1(ωo) (Walter et al. 2007, Eq. 23)."""
-    return (1.0 / (1.0 + distribution.lambda_of(pair.wi, pair.cos_i, m))
-            * (1.0 / (1.0 + distribution.lambda_of(pair.wo, pair.cos_o, m))))
+    return (1.0 / (1.0 + distribution.lambda_of(pair.wi, pair.cos_i, m, tail))
+            * (1.0 / (1.0 + distribution.lambda_of(pair.wo, pair.cos_o, m, tail))))
 
 
-def smith_correlated(pair: LocalPair, distribution: Distribution, m):
+def smith_correlated(pair: LocalPair, distribution: Distribution, m, tail=None):
     """Height-correlated Smith shadowing-masking of ``distribution``, 1/(1 + Λ(ωi) + Λ(ωo)) (Heitz 2014, Eq. 99;
     pbrt-v4's ``TrowbridgeReitzDistribution::G``): a point seen from ωo is more likely lit from ωi, as both see
     the high points of the surface. Never below the separable form (Λ ≥ 0)."""
-    return 1.0 / (1.0 + distribution.lambda_of(pair.wi, pair.cos_i, m)
-                  + distribution.lambda_of(pair.wo, pair.cos_o, m))
+    return 1.0 / (1.0 + distribution.lambda_of(pair.wi, pair.cos_i, m, tail)
+                  + distribution.lambda_of(pair.wo, pair.cos_o, m, tail))
 
 
-def no_shadowing(pair: LocalPair, distribution: Distribution, m):
+def no_shadowing(pair: LocalPair, distribution: Distribution, m, tail=None):
     """No shadowing-masking: G = 1."""
     return jnp.ones_like(pair.cos_h)
 
