@@ -84,6 +84,18 @@ EQUATIONS = {
         "Λ(θ) = exp(L(cosθ)) for cosθ < ½, else exp(2 L(½) − L(1 − cosθ)),  L(x) = a/(1 + b x^c) + d x + e,\n"
         "(a, b, c, d, e) linear in (1 − α)² between Estevez & Kulla's Table 1 rows"
     ),
+    "principled": (
+        "f = (1 − metallic) base_color/π · ((1 − w(ci)/2)(1 − w(co)/2) + R (w(ci) + w(co) + w(ci) w(co)(R − 1)))\n"
+        "  + sheen (1 − metallic) w(cd) · (1 + sheen_tint (base_color/lum − 1))\n"
+        "  + F · D_GGX(h; αx, αy) · G1(ωi) G1(ωo) / (4 ci co)\n"
+        "  + clearcoat/4 · (0.04 + 0.96 w(cd)) · D_GTR1(h; αc) · G1_GGX(ωi; 0.25) G1_GGX(ωo; 0.25)\n"
+        "w(c) = (1 − c)⁵,  R = 2 roughness cd²,  lum = 0.212671 R + 0.715160 G + 0.072169 B\n"
+        "αx = max(0.001, roughness²/a),  αy = max(0.001, roughness² a),  a = √(1 − 0.9 anisotropic)\n"
+        "F = (1 − metallic)(1 − spec_tint) F_dielectric(cd, η) + metallic S(base_color)\n"
+        "    + (1 − metallic) spec_tint S(base_color/lum · ((η − 1)/(η + 1))²),  S(f0) = f0 + (1 − f0) w(cd)\n"
+        "η = 2/(1 − √(0.08 specular)) − 1,  αc = 0.1 + clearcoat_gloss (0.001 − 0.1)\n"
+        "D_GTR1 = (αc² − 1) / (π ln(αc²) (1 + (αc² − 1) ch²))"
+    ),
     "toon-diffuse": "f = (ρshade + (ρd − ρshade) · S((ci − threshold)/width)) / π,  S(u) = 1/(1 + e^(−u))",
     "toon-specular": "f = ks · S((r·ωo − threshold)/width) / π,  S(u) = 1/(1 + e^(−u))",
 }
@@ -124,6 +136,11 @@ NOTES = {
     "charlie-sheen": "A microfacet lobe of fibres (an inverted distribution: most normals near the horizon), for "
                      "cloth, velvet and felt. Estevez & Kulla's terminator softening is a shading-normal device and "
                      "is left out, as glTF's KHR_materials_sheen and MaterialX leave it out.",
+    "principled": "The Disney BRDF as Mitsuba 3's principled plugin evaluates it (its reflection: no spec_trans, "
+                  "flatness or eta), parameter names and ranges included, so that `brdffit export --to mitsuba` "
+                  "writes it exactly; tests/test_principled.py holds it to the plugin at 2,000 random pairs. The "
+                  "clearcoat has no 1/(4 ci co), as the plugin evaluates it. anisotropic, spec_tint and sheen_tint "
+                  "are held at 0 unless freed. Not reciprocal only in name: every term is symmetric in ωi and ωo.",
     "toon-diffuse": "Non-photorealistic two-tone shading. width is held fixed by fits unless it is freed. Not "
                     "reciprocal: it switches on ci alone.",
     "toon-specular": "A flat highlight disc; width is held fixed by fits unless it is freed. Reciprocal, since "

@@ -34,6 +34,7 @@ __all__ = [
     "ashikhmin_shirley",
     "lafortune",
     "burley",
+    "principled",
     "sheen",
     "charlie_sheen",
     "charlie_lambda",
@@ -537,6 +538,49 @@ def charlie_sheen(theta_i, phi_i, theta_o, phi_o, ks, alpha):
     return _masked(g, _col(ks) * (d * gg / (4.0 * g.ci * g.co))[:, None])
 
 
+@_quiet
+def principled(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specular, spec_tint, anisotropic,
+               sheen, sheen_tint, clearcoat, clearcoat_gloss):
+    """The Disney principled BRDF as Mitsuba 3's ``principled`` plugin evaluates its reflection (Burley 2012 and
+    2015; src/bsdfs/principled.cpp, principledhelpers.h), written from the plugin's terms with w(c) = (1 − c)⁵:
+
+    diffuse (1 − metallic) base/π ((1 − w(ci)/2)(1 − w(co)/2) + R (w(ci) + w(co) + w(ci) w(co)(R − 1))),
+    R = 2 roughness cos²θd; sheen (1 − metallic) w(cosθd) (1 + sheen_tint (base/lum − 1)), lum the Rec. 709
+    luminance; specular F D G/(4 ci co) with anisotropic GGX D and separable Smith G at αx = max(10⁻³, r²/a),
+    αy = max(10⁻³, r² a), a = √(1 − 0.9 anisotropic), F = (1 − metallic)(1 − spec_tint) F_dielectric(θd, η)
+    + metallic Schlick(base) + (1 − metallic) spec_tint Schlick(base/lum · R0(η)), η = 2/(1 − √(0.08 specular)) − 1;
+    clearcoat ¼ clearcoat Schlick(0.04) D_GTR1 G1(θi) G1(θo), GTR1 width 0.1 + gloss (0.001 − 0.1), D_GTR1 =
+    (α² − 1)/(π ln α² (1 + (α² − 1) cos²θh)), G1 GGX's of width 0.25 (no 1/(4 ci co), as the plugin)."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    base = _col(base_color)
+    lum = base[:, 0] * 0.212671 + base[:, 1] * 0.715160 + base[:, 2] * 0.072169 if base.shape[1] == 3 else base[:, 0]
+    tint = base / lum[:, None]
+
+    def w(c):
+        return (1.0 - c) ** 5
+
+    wi, wo, wd = w(g.ci), w(g.co), w(g.cos_d)
+    rr = 2.0 * roughness * g.cos_d**2
+    diffuse = (1.0 - metallic) * base / math.pi * ((1 - wi / 2) * (1 - wo / 2) + rr * (wi + wo + wi * wo * (rr - 1)))[:, None]
+    sheen_term = sheen * (1.0 - metallic) * wd[:, None] * (1.0 + sheen_tint * (tint - 1.0))
+    aspect = math.sqrt(1.0 - 0.9 * anisotropic)
+    ax, ay = max(1e-3, roughness**2 / aspect), max(1e-3, roughness**2 * aspect)
+    d = microfacet_D_aniso("ggx", g.th, g.ph, ax, ay)
+    gg = 1.0 / (1.0 + smith_lambda_aniso("ggx", g.ti, g.pi_, ax, ay)) / (1.0 + smith_lambda_aniso("ggx", g.to, g.po, ax, ay))
+    eta = 2.0 / (1.0 - math.sqrt(0.08 * specular)) - 1.0
+    r0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+    fd = fresnel_dielectric(np.arccos(g.cos_d), 1.0, eta)[:, None]
+    c = g.cos_d[:, None]
+    f = ((1 - metallic) * (1 - spec_tint) * fd + metallic * fresnel_schlick(c, base)
+         + (1 - metallic) * spec_tint * fresnel_schlick(c, tint * r0))
+    spec = f * (d * gg / (4.0 * g.ci * g.co))[:, None]
+    a = 0.1 + clearcoat_gloss * (0.001 - 0.1)
+    d_cc = (a * a - 1.0) / (math.pi * math.log(a * a) * (1.0 + (a * a - 1.0) * np.cos(g.th) ** 2))
+    g_cc = smith_G1("ggx", g.ti, 0.25) * smith_G1("ggx", g.to, 0.25)
+    cc = 0.25 * clearcoat * fresnel_schlick(g.cos_d, 0.04) * d_cc * g_cc
+    return _masked(g, diffuse + sheen_term + spec + cc[:, None])
+
+
 # --------------------------------------------------------------------------------------------------------------
 # Two-tone (toon) lobes, issue 2's definition (after Lake et al., NPAR 2000, with a logistic step)
 
@@ -594,6 +638,7 @@ REFERENCES = {
     "lafortune": _lafortune_ref,
     "burley": lambda ti, pi_, to, po, p: burley(ti, pi_, to, po, p["rho_d"], p["roughness"]),
     "sheen": lambda ti, pi_, to, po, p: sheen(ti, pi_, to, po, p["ks"]),
+    "principled": lambda ti, pi_, to, po, p: principled(ti, pi_, to, po, **p),
     "charlie-sheen": lambda ti, pi_, to, po, p: charlie_sheen(ti, pi_, to, po, p["ks"], p["alpha"]),
     "toon-diffuse": lambda ti, pi_, to, po, p: toon_diffuse(ti, pi_, to, po, p["rho_d"], p["rho_shade"],
                                                             p["threshold"], p["width"]),

@@ -13,6 +13,8 @@ Plugins written (Mitsuba 3 ``src/bsdfs/``; parameters as its plugin tables docum
   ``calc_schlick(base_color, cos, eta)`` in ``src/bsdfs/principledhelpers.h``, is f0 + (1 − f0)(1 − cos)⁵ for
   eta > 1; the default ``specular`` 0.5 gives eta = 1.5; the diffuse, sheen and clearcoat terms vanish).
 - ``blendbsdf`` (``weight`` t): (1 − t) first + t second, for sums: each part scaled by 1/its weight.
+- ``principled`` with every parameter of brdffit's ``principled`` lobe, for a model that is that lobe alone: the
+  lobe evaluates what the plugin evaluates (`brdffit.models.principled`), so the export is exact.
 
 A sum A + B is written exactly as a blend of 2A and 2B: ``blendbsdf`` takes convex combinations, and each part's
 amplitude (``reflectance``, ``specular_reflectance``) is scaled by the inverse of its weight. Values above 1 go
@@ -42,7 +44,7 @@ from . import terms as tm
 __all__ = ["write", "evaluate_in_mitsuba", "check_channels", "EXPORTABLE"]
 
 EXPORTABLE = ("lambert (any number, summed) and isotropic cook-torrance or ggx lobes with any Fresnel mode, any number, "
-              "summed")
+              "summed; or principled alone")
 # Where a principled part shares a blend with other parts, their weight is at least this much.
 _MIN_OTHER_WEIGHT = 1e-3
 
@@ -165,6 +167,20 @@ def _schlick_leaves(schlick: list, channels: int, others: bool, notes: list) -> 
                                 + [("string", "material", "none")], "specular_reflectance", rest,
                                 parts=[(lobe_f1, {"ks": rest, "m": alpha, "f0": 1.0})]))
     return leaves
+
+
+def _principled_alone(model: tm.Model) -> bool:
+    return len(model.lobes) == 1 and model.lobes[0].name == "principled"
+
+
+def _principled_leaf(model: tm.Model) -> _Leaf:
+    """The ``principled`` plugin of a model that is brdffit's ``principled`` lobe alone, parameter for parameter
+    (every one in [0, 1], as the plugin takes them)."""
+    local = model.layout.local_params(model.params, 0)
+    params = [("rgb", "base_color", np.asarray(local["base_color"], dtype=float))]
+    params += [("float", name, float(np.asarray(value))) for name, value in local.items() if name != "base_color"]
+    return _Leaf("principled", params, None, weight=1.0,
+                 parts=[(model.lobes[0], {k: np.asarray(v, dtype=float) for k, v in local.items()})])
 
 
 def _weigh(leaves: list[_Leaf]) -> list[_Leaf]:
@@ -300,7 +316,7 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     """
     check_channels(model, "Mitsuba 3")
     notes: list[str] = []
-    leaves = _weigh(_leaves(model, notes))
+    leaves = [_principled_leaf(model)] if _principled_alone(model) else _weigh(_leaves(model, notes))
     parts = [part for leaf in leaves for part in leaf.parts]
     written = _evaluator(parts, model.channels)
     reference = model if source is None else source

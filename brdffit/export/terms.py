@@ -257,6 +257,8 @@ def lobe_peaks(lobe, params: dict) -> list[Peak]:
         found = [Peak("half", value(width)) for width in lobe.roughness_names]
     elif name in ("ward", "ward-duer"):
         found = [Peak("half", value("alpha"))]
+    elif name == "principled":
+        found = [Peak("half", max(0.001, value("roughness") ** 2))]
     elif name == "ward-aniso":
         found = [Peak("half", value("alpha_x")), Peak("half", value("alpha_y"))]
     elif name in ("blinn-phong", "ashikhmin-shirley"):

@@ -17,6 +17,7 @@ from .lafortune import Lafortune
 from .lobe import Lobe
 from .layout import layout
 from .phong import BlinnPhong, Phong
+from .principled import Principled
 from .sheen import CharlieSheen, Sheen
 from .toon import ToonDiffuse, ToonSpecular
 from .ward import Ward, WardAniso, WardDuer
@@ -45,6 +46,7 @@ _LOBES: dict[str, type[Lobe]] = {
         Lafortune,
         Sheen,
         CharlieSheen,
+        Principled,
         ToonDiffuse,
         ToonSpecular,
     )
