@@ -84,6 +84,10 @@ EQUATIONS = {
         "Λ(θ) = exp(L(cosθ)) for cosθ < ½, else exp(2 L(½) − L(1 − cosθ)),  L(x) = a/(1 + b x^c) + d x + e,\n"
         "(a, b, c, d, e) linear in (1 − α)² between Estevez & Kulla's Table 1 rows"
     ),
+    "abc-smooth": ("f = A · (1 + B Dp²)^(−C) · F(cd', η),  Dp = |ωi,xy + ωo,xy|,  cd' = √(1 − |ωi,xy − ωo,xy|²/4)\n"
+                   "F the exact dielectric Fresnel term of index η"),
+    "abc-microfacet": ("f = A · (1 + B (1 − ch))^(−C) · F(cd, η) · G / (π ci co),  G = min(1, 2 ch co / cd, 2 ch ci / cd)\n"
+                       "F the exact dielectric Fresnel term of index η"),
     "principled": (
         "f = (1 − metallic) base_color/π · ((1 − w(ci)/2)(1 − w(co)/2) + R (w(ci) + w(co) + w(ci) w(co)(R − 1)))\n"
         "  + sheen (1 − metallic) w(cd) · (1 + sheen_tint (base_color/lum − 1))\n"
@@ -136,6 +140,10 @@ NOTES = {
     "charlie-sheen": "A microfacet lobe of fibres (an inverted distribution: most normals near the horizon), for "
                      "cloth, velvet and felt. Estevez & Kulla's terminator softening is a shading-normal device and "
                      "is left out, as glTF's KHR_materials_sheen and MaterialX leave it out.",
+    "abc-smooth": "Löw et al.'s smooth-surface model: an ABC (K-correlation) curve of the projected deviation from "
+                  "the mirror direction, no shadowing; A is unnormalised (an amplitude in 1/sr).",
+    "abc-microfacet": "Löw et al.'s microfacet model: the ABC curve as an unnormalised distribution of 1 − cosθh, "
+                      "with Cook & Torrance's π, V-cavity shadowing and Fresnel term, as BBM evaluates it.",
     "principled": "The Disney BRDF as Mitsuba 3's principled plugin evaluates it (its reflection: no spec_trans, "
                   "flatness or eta), parameter names and ranges included, so that `brdffit export --to mitsuba` "
                   "writes it exactly; tests/test_principled.py holds it to the plugin at 2,000 random pairs. The "

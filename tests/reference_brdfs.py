@@ -34,6 +34,8 @@ __all__ = [
     "ashikhmin_shirley",
     "lafortune",
     "burley",
+    "abc_smooth",
+    "abc_microfacet",
     "principled",
     "sheen",
     "charlie_sheen",
@@ -539,6 +541,31 @@ def charlie_sheen(theta_i, phi_i, theta_o, phi_o, ks, alpha):
 
 
 @_quiet
+def abc_smooth(theta_i, phi_i, theta_o, phi_o, A, B, C, eta):
+    """Löw, Kronander, Ynnerman & Unger, BRDF models for accurate and efficient rendering of glossy surfaces, TOG
+    2012, smooth-surface model (Eqs. 10-14, as BBM evaluates it): f = A (1 + B Dp²)^(−C) F(θd, η), Dp the length
+    of the sum of the directions' projections on the surface, cosθd = √(1 − |difference of projections|²/4)."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    ix, iy = g.si * np.cos(g.pi_), g.si * np.sin(g.pi_)
+    ox, oy = g.so * np.cos(g.po), g.so * np.sin(g.po)
+    dp2 = (ix + ox) ** 2 + (iy + oy) ** 2
+    cos_d = np.sqrt(np.clip(1.0 - 0.25 * ((ix - ox) ** 2 + (iy - oy) ** 2), 0.0, 1.0))
+    f = fresnel_dielectric(np.arccos(cos_d), 1.0, eta)
+    return _masked(g, _col(A) * ((1.0 + B * dp2) ** (-C) * f)[:, None])
+
+
+@_quiet
+def abc_microfacet(theta_i, phi_i, theta_o, phi_o, A, B, C, eta):
+    """Löw et al. 2012, Eq. 15 with Cook & Torrance's form (π, V-cavity G, exact dielectric F at θd):
+    f = A (1 + B (1 − cosθh))^(−C) F(θd, η) G / (π cosθi cosθo)."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    ch = np.cos(g.th)
+    gg = np.minimum(1.0, np.minimum(2 * ch * g.co / g.cos_d, 2 * ch * g.ci / g.cos_d))
+    f = fresnel_dielectric(np.arccos(g.cos_d), 1.0, eta)
+    return _masked(g, _col(A) * ((1.0 + B * (1.0 - ch)) ** (-C) * f * gg / (math.pi * g.ci * g.co))[:, None])
+
+
+@_quiet
 def principled(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specular, spec_tint, anisotropic,
                sheen, sheen_tint, clearcoat, clearcoat_gloss):
     """The Disney principled BRDF as Mitsuba 3's ``principled`` plugin evaluates its reflection (Burley 2012 and
@@ -639,6 +666,8 @@ REFERENCES = {
     "burley": lambda ti, pi_, to, po, p: burley(ti, pi_, to, po, p["rho_d"], p["roughness"]),
     "sheen": lambda ti, pi_, to, po, p: sheen(ti, pi_, to, po, p["ks"]),
     "principled": lambda ti, pi_, to, po, p: principled(ti, pi_, to, po, **p),
+    "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),
+    "abc-microfacet": lambda ti, pi_, to, po, p: abc_microfacet(ti, pi_, to, po, **p),
     "charlie-sheen": lambda ti, pi_, to, po, p: charlie_sheen(ti, pi_, to, po, p["ks"], p["alpha"]),
     "toon-diffuse": lambda ti, pi_, to, po, p: toon_diffuse(ti, pi_, to, po, p["rho_d"], p["rho_shade"],
                                                             p["threshold"], p["width"]),

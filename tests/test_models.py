@@ -97,6 +97,8 @@ OTHER_CASES = [
     Case("burley", {}, {"rho_d": RHO, "roughness": 0.7}),
     Case("sheen", {}, {"ks": KS}),
     Case("charlie-sheen", {}, {"ks": KS, "alpha": 0.35}),
+    Case("abc-smooth", {}, {"A": KS, "B": 350.0, "C": 0.8, "eta": 1.6}),
+    Case("abc-microfacet", {}, {"A": KS, "B": 60.0, "C": 1.7, "eta": 1.45}),
     Case("principled", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.3, "roughness": 0.45, "specular": 0.65,
                             "spec_tint": 0.25, "anisotropic": 0.6, "sheen": 0.4, "sheen_tint": 0.3, "clearcoat": 0.7,
                             "clearcoat_gloss": 0.55}),
@@ -152,7 +154,8 @@ def _values(case_id):
 
 # The lobes and options of the modern microfacet, Burley and sheen models: against the reference at random
 # directions above the horizon to 1e-12 relative (the fixed configurations above hold every lobe to 1e-10).
-MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled")
+MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "abc-smooth",
+                                                  "abc-microfacet")
           or case.options.get("distribution") == "std"
           or case.options.get("anisotropic") is True and case.spec != "lafortune"
           or case.options.get("shadowing") == "smith-correlated"]

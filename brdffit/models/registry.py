@@ -10,6 +10,7 @@ import dataclasses
 import re
 
 from .._lazy import module
+from .abc import ABCMicrofacet, ABCSmooth
 from .ashikhmin_shirley import AshikhminShirley, AshikhminShirleyAniso
 from .cook_torrance import GGX, CookTorrance
 from .diffuse import Burley, Lambert, OrenNayar
@@ -44,6 +45,8 @@ _LOBES: dict[str, type[Lobe]] = {
         AshikhminShirley,
         AshikhminShirleyAniso,
         Lafortune,
+        ABCSmooth,
+        ABCMicrofacet,
         Sheen,
         CharlieSheen,
         Principled,
