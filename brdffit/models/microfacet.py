@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-import functools
 from typing import ClassVar
 
 from .._lazy import module
@@ -23,7 +22,7 @@ from ..params import ParamSpec
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 jax_special = module("jax.scipy.special")
-jax = module("jax")
+jax_lax = module("jax.lax")
 
 __all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "StudentT", "DISTRIBUTIONS", "ANISOTROPIC", "v_cavity", "smith",
            "smith_correlated", "SHADOWING"]
@@ -179,33 +178,46 @@ class BlinnPhong(Distribution):
 _STD_MU_MAX = 1e100
 
 
+# Terms of the incomplete beta function's continued fraction (`_half_beta`): for b = ½ and a in the STD's range
+# (γ − 1 in [0.51, 39]) 30 give it to 1.3e-13 relative over x in [0, 1] against SciPy's betainc.
+_BETA_CF_TERMS = 32
+# Lentz's guard against a vanishing denominator (Numerical Recipes' FPMIN).
+_LENTZ_FLOOR = 1e-300
+
+
+def _beta_continued_fraction(a, b, x):
+    """The continued fraction of I_x(a, b) (Numerical Recipes, 3rd ed., §6.4, Eq. 6.4.5, evaluated by the modified
+    Lentz method) with a fixed number of terms, `_BETA_CF_TERMS`: plain arithmetic, so that JAX differentiates it
+    in a and b as well as x, and vectorised without a loop that waits for the slowest element (JAX's own betainc
+    iterates up to convergence, about 15 times slower here, and has no derivative in a)."""
+    def guard(v):
+        return jnp.where(jnp.abs(v) < _LENTZ_FLOOR, _LENTZ_FLOOR, v)
+
+    def step(numerator, c, d, h):
+        d = 1.0 / guard(1.0 + numerator * d)
+        c = guard(1.0 + numerator / c)
+        return c, d, h * d * c
+
+    def term(m, state):
+        c, d, h = state
+        c, d, h = step(m * (b - m) * x / ((a - 1.0 + 2 * m) * (a + 2 * m)), c, d, h)
+        return step(-(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 1.0 + 2 * m)), c, d, h)
+
+    d = 1.0 / guard(1.0 - (a + b) * x / (a + 1.0))
+    return jax_lax.fori_loop(1, _BETA_CF_TERMS + 1, term, (jnp.ones_like(x), d, d))[2]
+
+
 def _half_beta(a, x):
-    """The regularised incomplete beta function I_x(a, ½), differentiable in a as well as x (`_half_beta_jvp`)."""
-    return jax_special.betainc(a, 0.5, x)
-
-
-def _half_beta_jvp(primals, tangents):
-    # ∂I/∂x = x^(a−1) (1 − x)^(−½) / B(a, ½); ∂I/∂a has no closed form (a ₃F₂), and JAX's betainc does not
-    # differentiate in a: a central difference of relative step 1e-5 (truncation and rounding both near 1e-10
-    # relative), enough for a fit's Jacobian. 0 at x = 0 and x = 1, where I is 0 or 1 for every a.
-    a, x = primals
-    da, dx = tangents
-    value = _half_beta(a, x)
-    step = 1e-5 * a
-    d_a = (jax_special.betainc(a + step, 0.5, x) - jax_special.betainc(a - step, 0.5, x)) / (2.0 * step)
-    inside = (x > 0.0) & (x < 1.0)
-    safe = jnp.where(inside, x, 0.5)
-    d_x = jnp.where(inside, jnp.exp((a - 1.0) * jnp.log(safe) - 0.5 * jnp.log1p(-safe)
-                                    - jax_special.betaln(a, 0.5)), 0.0)
-    return value, d_a * da + d_x * dx
-
-
-@functools.lru_cache(maxsize=1)
-def _differentiable_half_beta():
-    """`_half_beta` with its derivatives `_half_beta_jvp` (built on first use: JAX is loaded lazily here)."""
-    function = jax.custom_jvp(_half_beta)
-    function.defjvp(_half_beta_jvp)
-    return function
+    """The regularised incomplete beta function I_x(a, ½): the continued fraction where it converges fast,
+    x < (a + 1)/(a + 5/2), else 1 − I_{1−x}(½, a) (Numerical Recipes §6.4)."""
+    b = 0.5
+    inside = jnp.clip(x, 1e-300, 1.0 - 1e-16)
+    front = jnp.exp(a * jnp.log(inside) + b * jnp.log1p(-inside) - jax_special.gammaln(a)
+                    - jax_special.gammaln(b) + jax_special.gammaln(a + b))
+    swap = x > (a + 1.0) / (a + b + 2.0)
+    direct = front * _beta_continued_fraction(a, b, jnp.where(swap, 0.5, x)) / a
+    other = 1.0 - front * _beta_continued_fraction(b, a, jnp.where(swap, 1.0 - x, 0.5)) / b
+    return jnp.where(x <= 0.0, 0.0, jnp.where(x >= 1.0, 1.0, jnp.where(swap, other, direct)))
 
 
 def _std_lambda_of_mu(mu, gamma):
@@ -216,13 +228,14 @@ def _std_lambda_of_mu(mu, gamma):
         Λ = c (γ − 1 + μ²)^(3/2−γ) / ((2γ − 3) μ) − S(μ),
 
     S(μ) = ∫_μ^∞ P2 the Student-t tail with 2γ − 2 degrees of freedom at μ√2, ½ I_x(γ − 1, ½) with
-    x = (γ − 1)/(γ − 1 + μ²). (The paper approximates the second integral by a fitted rational function.)"""
+    x = (γ − 1)/(γ − 1 + μ²) (`_half_beta`). (The paper approximates the second integral by a fitted rational
+    function.)"""
     g1 = gamma - 1.0
     mu = jnp.minimum(mu, _STD_MU_MAX)
     log_c = gamma * jnp.log(g1) + jax_special.gammaln(gamma - 0.5) - jax_special.gammaln(gamma) \
         - 0.5 * jnp.log(jnp.pi)
     first = jnp.exp(log_c + (1.5 - gamma) * jnp.log(g1 + mu * mu)) / ((2.0 * gamma - 3.0) * mu)
-    return first - 0.5 * _differentiable_half_beta()(g1, g1 / (g1 + mu * mu))
+    return first - 0.5 * _half_beta(g1, g1 / (g1 + mu * mu))
 
 
 @dataclasses.dataclass(frozen=True)
