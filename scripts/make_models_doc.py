@@ -122,8 +122,8 @@ NOTES = {
                      "at m = 0.05, 1.3% at m = 0.2, 10% at m = 0.5 and up to 50% at m = 0.9 near grazing. "
                      "distribution=std (Ribardière et al., CGF 2017) adds the tail exponent gamma; its Λ is exact "
                      "(the Student-t tail as an incomplete beta function, where the paper fits a rational "
-                     "approximation), and its derivative in γ is a central difference of that function (JAX has "
-                     "none in the parameters), good to about 1e-9.",
+                     "approximation), evaluated by its continued fraction (Numerical Recipes §6.4) to about 1e-13 "
+                     "and differentiated in γ like any other expression.",
     "ashikhmin-shirley": "The specular term only (add a diffuse lobe for the rest); F is evaluated at ωi·h.",
     "ashikhmin-shirley-aniso": "nu is the exponent along the tangent x, nv along the bitangent y; at h = n the "
                                "exponent is taken as (nu + nv)/2.",

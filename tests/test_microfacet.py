@@ -357,8 +357,8 @@ def test_std_smith_G1_equals_the_masking_integral(gamma):
 
 
 def test_std_gamma_derivative_matches_finite_differences():
-    """The derivative in γ goes through a central difference of the incomplete beta function (JAX has no
-    derivative of betainc in its parameters): checked against SciPy's Λ differenced in γ."""
+    """The derivative in γ, which JAX takes through the incomplete beta function's continued fraction, against
+    SciPy's Λ differenced in γ."""
     for theta in (0.5, 1.1, 1.45):
         for gamma in (1.7, 3.0, 20.0):
             got = float(jax.grad(STD.Lambda, argnums=2)(math.cos(theta), 0.3, gamma))
