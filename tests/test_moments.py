@@ -38,7 +38,15 @@ def _points(problem, base, count, seed):
 
 # Beside every lobe: a shared parameter, two amplitudes in one lobe, a fixed amplitude beside a free one in the same
 # lobe (its part is f₀'s, not the free one's column: `brdffit.fitting.separable.adds_to_offset`), padded samples.
-CASES = ([(f"lambert+{n}", None, False) for n in models.names() if n != "lambert"]  # Lambert alone: no passes
+def _moments_apply(name: str) -> bool:
+    """Whether the moments serve a lobe beside Lambert: it needs an outer (shape) parameter (Lambert + sheen has
+    none: no passes), and colour parameters that are amplitudes (principled's base colour also enters its Fresnel
+    term, a per-channel value, like a conductor's η: `test_the_moments_do_not_apply_where_a_channel_has_its_own_values`)."""
+    specs = models.lobe_class(name)().param_specs()
+    return any(not s.colour and not s.fixed for s in specs) and all(s.linear or not s.colour for s in specs)
+
+
+CASES = ([(f"lambert+{n}", None, False) for n in models.names() if n != "lambert" and _moments_apply(n)]
          + [("lambert+ggx+ggx(share=f0)", None, False), ("lambert+lafortune(lobes=2)", None, False),
             ("lambert+toon-diffuse", {"rho_shade": 0.2}, False), ("lambert+lafortune(lobes=2)", {"ks_2": 0.3}, False),
             ("lambert+ggx", None, True)])
@@ -72,6 +80,8 @@ def test_the_moments_do_not_apply_where_a_channel_has_its_own_values():
     assert not moments.applies(problem, {k: np.asarray(v) for k, v in data.fixed.items()})
     problem, _, data = _setup("lambert+ggx", "cosine", fixed={"rho_d": 0.2})
     assert moments.applies(problem, {k: np.asarray(v) for k, v in data.fixed.items()})
+    problem, _, data = _setup("lambert+principled", "cosine")
+    assert not moments.applies(problem, {k: np.asarray(v) for k, v in data.fixed.items()})
     problem, _, _ = _setup("lambert+ggx", "log")
     assert not moments.applies(problem, {})
 
