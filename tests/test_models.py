@@ -65,8 +65,12 @@ def _fresnel_params(fresnel):
 CT_CASES = [
     Case("cook-torrance", {"distribution": d, "shadowing": s, "fresnel": f},
          {"ks": KS, "m": 0.35, **_fresnel_params(f)})
-    for d, s, f in itertools.product(("beckmann", "ggx", "blinn"), ("v-cavity", "smith", "smith-correlated", "none"),
+    for d, s, f in itertools.product(("beckmann", "ggx", "blinn"), ("v-cavity", "smith", "none"),
                                      ("schlick", "dielectric", "conductor"))
+] + [  # the height-correlated masking with each distribution (the Fresnel modes do not interact with it)
+    Case("cook-torrance", {"distribution": d, "shadowing": "smith-correlated", "fresnel": "schlick"},
+         {"ks": KS, "m": 0.35, "f0": 0.08})
+    for d in ("beckmann", "ggx", "blinn")
 ] + [
     Case("cook-torrance", {"distribution": d, "shadowing": s, "fresnel": "schlick", "anisotropic": True},
          {"ks": KS, "m_x": 0.12, "m_y": 0.45, "f0": 0.08})
