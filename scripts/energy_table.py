@@ -60,6 +60,7 @@ SETTINGS = [
     ("cook-torrance(distribution=std, shadowing=smith)", "m=0.5, γ=1.6, f0=1", dict(ks=1.0, m=0.5, gamma=1.6, f0=1.0)),
     ("cook-torrance(distribution=std, shadowing=smith-correlated)", "m=0.5, γ=1.6, f0=1",
      dict(ks=1.0, m=0.5, gamma=1.6, f0=1.0)),
+    ("cook-torrance(distribution=gtr, shadowing=smith)", "m=0.5, γ=1, f0=1", dict(ks=1.0, m=0.5, gamma=1.0, f0=1.0)),
     ("burley", "roughness=0", dict(rho_d=1.0, roughness=0.0)),
     ("burley", "roughness=1", dict(rho_d=1.0, roughness=1.0)),
     ("sheen", "ks=1", dict(ks=1.0)),

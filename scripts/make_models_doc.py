@@ -43,6 +43,7 @@ EQUATIONS = {
         "D ggx      = m² / (π (ch² (m² − 1) + 1)²)\n"
         "D blinn    = (αp + 2)/(2π) · ch^αp,  αp = 2/m² − 2\n"
         "D std      = (1 + tan²θh/(m² (γ − 1)))^(−γ) / (π m² ch⁴)  (Student-t slopes; γ = 2 is GGX, γ → ∞ Beckmann)\n"
+        "D gtr      = c / (m² ch² + 1 − ch²)^γ,  c = (γ − 1)(m² − 1) / (π (1 − m^(2 − 2γ)))  (γ = 1: GTR1, 2: GGX)\n"
         "G v-cavity = min(1, 2 ch co / cd, 2 ch ci / cd)\n"
         "G smith    = G1(ωi) G1(ωo),  G1 = 1/(1 + Λ):\n"
         "             beckmann Λ = (erf(a) − 1)/2 + exp(−a²)/(2a√π),  a = 1/(m tanθ)\n"
@@ -50,6 +51,8 @@ EQUATIONS = {
         "             blinn    Λ = Beckmann's Λ with a = √(αp/2 + 1)/tanθ (Walter et al.'s approximation)\n"
         "             std      Λ = c (γ − 1 + μ²)^(3/2−γ) / ((2γ − 3) μ) − ½ I_x(γ − 1, ½),  μ = 1/(m tanθ),\n"
         "                        c = (γ − 1)^γ Γ(γ − ½)/(√π Γ(γ)),  x = (γ − 1)/(γ − 1 + μ²)  (exact)\n"
+        "             gtr      Λ = 2μ² ∫_0^1 (√(1 − s²) − s acos s) P22(μ/s) s⁻⁴ ds,  μ = cotθ, P22 = D ch⁴\n"
+        "                        (Smith's definition with its angular integral done by hand; Gauss-Legendre panels)\n"
         "G smith-correlated = 1/(1 + Λ(ωi) + Λ(ωo))  (height-correlated)\n"
         "G none     = 1\n"
         "anisotropic=True (beckmann, ggx, std), widths αx = m_x, αy = m_y, e = ((h·x/αx)² + (h·y/αy)²)/ch²:\n"
@@ -123,7 +126,9 @@ NOTES = {
                      "distribution=std (Ribardière et al., CGF 2017) adds the tail exponent gamma; its Λ is exact "
                      "(the Student-t tail as an incomplete beta function, where the paper fits a rational "
                      "approximation), evaluated by its continued fraction (Numerical Recipes §6.4) to about 1e-13 "
-                     "and differentiated in γ like any other expression.",
+                     "and differentiated in γ like any other expression. distribution=gtr (Burley 2012, App. B) "
+                     "also has an exponent gamma; Burley gives no Smith Λ for it, so Λ is integrated numerically "
+                     "from its definition, to about 1e-11 against SciPy's adaptive quadrature.",
     "ashikhmin-shirley": "The specular term only (add a diffuse lobe for the rest); F is evaluated at ωi·h.",
     "ashikhmin-shirley-aniso": "nu is the exponent along the tangent x, nv along the bitangent y; at h = n the "
                                "exponent is taken as (nu + nv)/2.",
@@ -169,7 +174,7 @@ OPTION_VALUES = {
 # Option settings whose parameters differ from the default ones: their extra parameters get a table of their own.
 VARIANTS = {
     "cook-torrance": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}, {"anisotropic": True},
-                      {"distribution": "std"}],
+                      {"distribution": "std"}, {"distribution": "gtr"}],
     "ggx": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}, {"anisotropic": True}],
     "lafortune": [{"anisotropic": True}],
 }

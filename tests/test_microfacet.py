@@ -26,7 +26,8 @@ THETAS = np.radians([1.0, 10.0, 30.0, 50.0, 70.0, 80.0, 85.0, 89.0, 89.9])
 
 
 def test_distribution_table():
-    assert NAMES == ["beckmann", "blinn", "ggx"] and sorted(mf.DISTRIBUTIONS) == NAMES + ["std"]
+    assert NAMES == ["beckmann", "blinn", "ggx"] and sorted(mf.DISTRIBUTIONS) == ["beckmann", "blinn", "ggx", "gtr",
+                                                                                   "std"]
     assert set(mf.SHADOWING) == {"v-cavity", "smith", "smith-correlated", "none"}
 
 
@@ -156,7 +157,7 @@ def test_smith_weak_white_furnace():
 
 
 def _gradient_cases():
-    for name in NAMES + ["std"]:
+    for name in NAMES + ["std", "gtr"]:
         for function in ("D", "Lambda", "G1"):
             for cos_v in (1.0, 0.999999, 0.5, 1.7e-3, 1e-9):
                 yield pytest.param(name, function, cos_v, id=f"{name}-{function}-{cos_v:g}")
@@ -167,8 +168,8 @@ def test_gradients_finite(name, function, cos_v):
     """Derivatives w.r.t. the cosine and the roughness (and the STD's γ) are finite from the normal down to a
     horizontal direction."""
     fn = getattr(mf.DISTRIBUTIONS[name], function)
-    if name == "std":
-        for gamma in (1.51, 2.0, 7.0, 40.0):
+    if name in ("std", "gtr"):
+        for gamma in ((1.51, 2.0, 7.0, 40.0) if name == "std" else (0.6, 1.0, 2.0, 10.0)):
             grads = jax.grad(fn, argnums=(0, 1, 2))(jnp.asarray(cos_v), 0.3, gamma)
             assert np.all(np.isfinite(np.asarray(grads))), gamma
         return
@@ -385,3 +386,63 @@ def test_charlie_distribution_is_normalised(alpha):
     d = f * 4.0 * np.maximum(cos, 1e-12) ** 2 * (1.0 + 2.0 * lam)
     integrand = 2.0 * math.pi * d * cos * np.sin(theta)
     assert integrate.trapezoid(integrand[:-1], theta[:-1]) == pytest.approx(1.0, abs=2e-6)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Burley's generalised Trowbridge-Reitz distribution (Burley 2012, App. B)
+
+GTR = mf.DISTRIBUTIONS["gtr"]
+GTR_GAMMAS = [0.6, 1.0, 1.5, 2.0, 4.0, 10.0]
+
+
+@pytest.mark.parametrize("gamma", GTR_GAMMAS)
+@pytest.mark.parametrize("m", [1e-3, 0.05, 0.3, 1.0])
+def test_gtr_is_normalised(gamma, m):
+    """∫ D cosθh dωh = 2π ∫ P22(r) r dr over the slope r = tanθh, P22 = D cos⁴θh, by adaptive quadrature in r/α."""
+    def p22(r):
+        c = math.cos(math.atan(r))
+        return float(GTR.D(c, m, gamma)) * c**4
+
+    value, _ = integrate.quad(lambda t: 2.0 * math.pi * p22(m * t) * m * m * t, 0.0, math.inf, epsabs=0.0,
+                              epsrel=1e-10, limit=400)
+    assert value == pytest.approx(1.0, abs=1e-8)
+
+
+def test_gtr_is_ggx_at_two_and_burleys_formula_elsewhere():
+    theta = np.radians(np.linspace(0.01, 89.99, 2000))
+    cos = jnp.asarray(np.cos(theta))
+    for m in (1e-3, 0.05, 0.3, 1.0):
+        # 1e-11: c goes through ln(α²) and e^z − 1, which round differently from GGX's α²/π at α = 1e-3.
+        np.testing.assert_allclose(np.asarray(GTR.D(cos, m, 2.0)), np.asarray(mf.DISTRIBUTIONS["ggx"].D(cos, m)),
+                                   rtol=1e-11)
+        # GGX's Λ written without cancellation: ε/(2(√(1 + ε) + 1)), ε = α² tan²θ. atol: next to the normal Λ
+        # (< 1e-9) takes tan²θ from cosθ, where 1 − cos²θ cancels (3e-9 relative at 0.01°, 1e-19 absolute), far
+        # below what 1 + Λ can show.
+        e = m * m * np.tan(theta) ** 2
+        np.testing.assert_allclose(np.asarray(GTR.Lambda(cos, m, 2.0)), 0.5 * e / (np.sqrt(1.0 + e) + 1.0),
+                                   rtol=1e-11, atol=1e-15)
+        # From 0.5° on: D takes cosθh alone, and 1 − cos²θh cancels next to the normal (sinθh of the reference does
+        # not); at 0.5° that costs ~1e-12 relative.
+        away = theta > np.radians(0.5)
+        for gamma in (0.6, 1.0, 4.0):
+            np.testing.assert_allclose(np.asarray(GTR.D(cos, m, gamma))[away], ref.gtr_D(theta, m, gamma)[away],
+                                       rtol=1e-11)
+
+
+@pytest.mark.parametrize("gamma", [0.6, 1.0, 1.5, 4.0, 10.0])
+def test_gtr_lambda_matches_its_definition(gamma):
+    theta = np.radians([0.1, 5.0, 30.0, 60.0, 80.0, 88.0, 89.5, 89.95])
+    for m in (1e-3, 0.05, 0.4, 1.0):
+        got = np.asarray(GTR.Lambda(jnp.asarray(np.cos(theta)), m, gamma))
+        np.testing.assert_allclose(got, ref.gtr_lambda(theta, m, gamma), rtol=1e-10)
+
+
+@pytest.mark.parametrize("gamma", [1.0, 1.5, 4.0])
+def test_gtr_smith_G1_equals_the_masking_integral(gamma):
+    h, cos_h, w = _stretched_slope_quadrature(0.2, 0.2, radial=2000, angular=1024)
+    d = np.asarray(GTR.D(jnp.asarray(h[..., 2]), 0.2, gamma)) * cos_h**3 * w
+    for theta in (0.3, 1.0, 1.4):
+        omega = _direction(theta, 0.4)
+        projected = np.sum(np.maximum(h @ omega, 0.0) * d)
+        g1 = 1.0 / (1.0 + float(GTR.Lambda(math.cos(theta), 0.2, gamma)))
+        assert g1 == pytest.approx(math.cos(theta) / projected, rel=2e-6), theta

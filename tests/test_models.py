@@ -80,6 +80,10 @@ CT_CASES = [
          {"ks": KS, "m": 0.3, "gamma": 3.5, "f0": 0.08})
     for s in ("v-cavity", "smith", "smith-correlated", "none")
 ] + [
+    Case("cook-torrance", {"distribution": "gtr", "shadowing": s, "fresnel": "schlick"},
+         {"ks": KS, "m": 0.25, "gamma": 1.3, "f0": 0.08})
+    for s in ("v-cavity", "smith", "smith-correlated")
+] + [
     Case("cook-torrance", {"distribution": "std", "shadowing": "smith-correlated", "fresnel": "conductor",
                            "anisotropic": True},
          {"ks": KS, "m_x": 0.4, "m_y": 0.1, "gamma": 1.8, **_fresnel_params("conductor")}),
@@ -160,7 +164,7 @@ def _values(case_id):
 # directions above the horizon to 1e-12 relative (the fixed configurations above hold every lobe to 1e-10).
 MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "abc-smooth",
                                                   "abc-microfacet")
-          or case.options.get("distribution") == "std"
+          or case.options.get("distribution") in ("std", "gtr")
           or case.options.get("anisotropic") is True and case.spec != "lafortune"
           or case.options.get("shadowing") == "smith-correlated"]
 

@@ -25,8 +25,9 @@ class CookTorrance(Lobe):
     f = ks F(ωo·h) D(h) G(ωi, ωo) / (4 cosθi cosθo).
 
     Options:
-        distribution: ``"beckmann"`` (default), ``"ggx"``, ``"blinn"`` or ``"std"`` (Student-t, with its tail
-            exponent ``gamma`` as a parameter) (`brdffit.models.microfacet`).
+        distribution: ``"beckmann"`` (default), ``"ggx"``, ``"blinn"``, ``"std"`` (Student-t) or ``"gtr"``
+            (Burley's generalised Trowbridge-Reitz), the last two with their exponent ``gamma`` as a parameter
+            (`brdffit.models.microfacet`).
         shadowing: ``"v-cavity"`` (default, Cook-Torrance 1982), ``"smith"`` (separable, for the chosen D),
             ``"smith-correlated"`` (height-correlated, Heitz 2014 Eq. 99, as pbrt-v4 renders) or ``"none"``.
         anisotropic: widths ``<r>_x`` along the tangent and ``<r>_y`` along the bitangent instead of one ``<r>``

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import functools
 from typing import ClassVar
 
 from .._lazy import module
@@ -24,7 +25,7 @@ jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`
 jax_special = module("jax.scipy.special")
 jax_lax = module("jax.lax")
 
-__all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "StudentT", "DISTRIBUTIONS", "ANISOTROPIC", "v_cavity", "smith",
+__all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "StudentT", "GTR", "DISTRIBUTIONS", "ANISOTROPIC", "v_cavity", "smith",
            "smith_correlated", "SHADOWING"]
 
 # Above this Beckmann a = 1/(m tanθ) the shadowing is 1 to double precision (erfc(27) ~ 1e-319).
@@ -273,7 +274,97 @@ class StudentT(Distribution):
         return _std_lambda_of_mu(safe_div(z, safe_sqrt(across), fallback=_STD_MU_MAX), tail)
 
 
-DISTRIBUTIONS = {d.name: d for d in (Beckmann(), GGX(), BlinnPhong(), StudentT())}
+def _ratio_to_expm1(z):
+    """z/(e^z − 1), 1 at z = 0 (smooth through it)."""
+    small = jnp.abs(z) < 1e-8
+    return jnp.where(small, 1.0 - 0.5 * z, z / jnp.expm1(jnp.where(small, 1.0, z)))
+
+
+def _ratio_to_log(y, log):
+    """y/log for y = e^log − 1 given both (each computed without cancellation), 1 + y/2 near y = 0."""
+    small = jnp.abs(y) < 1e-8
+    return jnp.where(small, 1.0 + 0.5 * y, y / jnp.where(small, 1.0, log))
+
+
+# Gauss-Legendre nodes of each of the three panels of the GTR's Λ integral (`_gtr_lambda`); against GGX's closed
+# form (GTR at γ = 2) it is measured in tests/test_microfacet.py.
+_GTR_NODES = 48
+# The GTR's Λ integral changes panels at this many times its two scales, μ and μ/α (`_gtr_lambda`).
+_GTR_PEAK_WIDTHS = 8.0
+
+
+@functools.lru_cache(maxsize=1)
+def _legendre_on_unit_interval():
+    import numpy as np
+
+    x, w = np.polynomial.legendre.leggauss(_GTR_NODES)
+    return 0.5 * (x + 1.0), 0.5 * w
+
+
+def _gtr_normalisation(m, gamma):
+    """c of D = c/(α² cos²θh + sin²θh)^γ (Burley 2012, App. B, Eqs. 4-5): (γ − 1)(α² − 1)/(π (1 − (α²)^(1−γ))),
+    and (α² − 1)/(π ln α²) at γ = 1, written through z/(e^z − 1) and (α² − 1)/ln α² so that γ = 1 and α = 1 are
+    ordinary points."""
+    log_a2 = 2.0 * jnp.log(m)
+    return _ratio_to_log(m * m - 1.0, log_a2) * _ratio_to_expm1((1.0 - gamma) * log_a2) / jnp.pi
+
+
+def _gtr_lambda(cos_v, m, gamma):
+    """Smith's Λ of the GTR distribution, which has no closed form (Burley gives none; GTR is not
+    shape-invariant, so Λ depends on α and θ separately). From Smith's definition over the slopes,
+    Λ = (1/μ) ∫∫_{x > μ} (x − μ) P22(x, y) dx dy with μ = cotθ, the angular integral done by hand in polar slopes
+    leaves one dimension:
+
+        Λ = 2μ² ∫_0^1 (√(1 − s²) − s acos s) · c (s² + μ²)^(γ−2) / (α² s² + μ²)^γ ds,   s = μ/r,
+
+    a smooth integrand but for its two scales near s = 0 (μ and μ/α), power laws between them and beyond, and a
+    (1 − s)^(3/2) branch at s = 1. Gauss-Legendre panels: [0, s_near], s_near = min(½, 8μ); [s_near, s_far] and
+    [s_far, ½] in log s, s_far = min(½, 8μ/α); the edge [½, 1] in w with s = 1 − w²/2, where it is analytic."""
+    c2 = jnp.clip(cos_v * cos_v, TINY, 1.0)
+    mu = jnp.sqrt(c2 / jnp.maximum(1.0 - c2, TINY))[..., None]
+    c = _gtr_normalisation(m, gamma)
+    nodes, weights = (jnp.asarray(a) for a in _legendre_on_unit_interval())
+
+    def integrand(s):
+        bracket = jnp.sqrt(jnp.maximum(1.0 - s * s, 0.0)) - s * jnp.arccos(jnp.clip(s, -1.0, 1.0))
+        return bracket * c * jnp.exp((gamma - 2.0) * jnp.log(s * s + mu * mu)
+                                     - gamma * jnp.log(m * m * s * s + mu * mu))
+
+    # Two scales: (s² + μ²)^(γ−2) turns at s ~ μ, (α²s² + μ²)^−γ at s ~ μ/α (the same at γ = 2).
+    s_near = jnp.minimum(0.5, _GTR_PEAK_WIDTHS * mu)
+    s_far = jnp.minimum(0.5, _GTR_PEAK_WIDTHS * mu / m)
+    peak = s_near[..., 0] * jnp.sum(weights * integrand(s_near * nodes), axis=-1)
+
+    def logarithmic(lower, upper):  # ∫ over [lower, upper] in log s, where the integrand is a power law
+        span = jnp.log(upper / lower)
+        points = lower * jnp.exp(span * nodes)
+        return jnp.sum(weights * integrand(points) * points * span, axis=-1)
+
+    tail = logarithmic(s_near, s_far) + logarithmic(s_far, 0.5)
+    edge = jnp.sum(weights * integrand(1.0 - 0.5 * nodes * nodes) * nodes, axis=-1)
+    return jnp.where(cos_v >= 1.0, 0.0, 2.0 * mu[..., 0] ** 2 * (peak + tail + edge))
+
+
+@dataclasses.dataclass(frozen=True)
+class GTR(Distribution):
+    """Burley's generalised Trowbridge-Reitz distribution (Physically-based shading at Disney, SIGGRAPH 2012 course
+    notes, App. B, Eq. 4): D = c/(α² cos²θh + sin²θh)^γ, c normalising it (`_gtr_normalisation`). γ = 2 is GGX,
+    γ = 1 the Disney clearcoat's GTR1; larger γ shorter tails. Its Smith Λ is integrated numerically
+    (`_gtr_lambda`), Burley giving none. Isotropic only."""
+
+    name = "gtr"
+    tail: ClassVar[ParamSpec] = ParamSpec("gamma", 2.0, 0.6, 10.0, unit="1",
+                                          doc="GTR exponent γ (1: GTR1, 2: GGX; larger: shorter tails)")
+
+    def D(self, cos_h, m, tail=None):
+        c2 = cos_h * cos_h
+        return _gtr_normalisation(m, tail) * jnp.exp(-tail * jnp.log(1.0 + (m * m - 1.0) * c2))
+
+    def Lambda(self, cos_v, m, tail=None):
+        return _gtr_lambda(cos_v, m, tail)
+
+
+DISTRIBUTIONS = {d.name: d for d in (Beckmann(), GGX(), BlinnPhong(), StudentT(), GTR())}
 # The distributions with an anisotropic form (`Distribution.D_aniso`).
 ANISOTROPIC = ("beckmann", "ggx", "std")
 
