@@ -36,7 +36,7 @@ CASES = [
     ("cook-torrance(distribution=std, anisotropic=true)", dict(ks=KS, m_x=0.3, m_y=0.12, gamma=1.8, f0=0.04),
      ("f0",), "half-diff", 4000),
     ("cook-torrance(distribution=gtr, shadowing=smith)", dict(ks=KS, m=0.2, gamma=1.4, f0=0.04), ("f0",),
-     "half-diff", 4000),
+     "half-diff", 2000),
     ("burley", dict(rho_d=RGB, roughness=0.6), (), "uniform", 3000),
     ("lambert+abc-smooth", dict(rho_d=RGB, A=[3.0, 2.5, 2.0], B=300.0, C=0.9), ("eta",), "half-diff", 4000),
     ("lambert+abc-microfacet", dict(rho_d=RGB, A=[2.0, 1.6, 1.2], B=80.0, C=1.5), ("eta",), "half-diff", 4000),
