@@ -315,6 +315,18 @@ def test_pbrt_conductor_is_brdffit_ggx_with_height_correlated_shadowing(pairs, a
                                                                                           rel=1e-12)
 
 
+def test_pbrt_exports_height_correlated_ggx_conductors_exactly(pairs):
+    """brdffit's GGX with shadowing=smith-correlated is what pbrt-v4's conductor evaluates: the export says exact,
+    and pbrt's transcribed formulas on the written text give brdffit's values."""
+    model = get("lambert+ggx(shadowing=smith-correlated, fresnel=conductor)", rho_d=[0.2, 0.1, 0.05], ks=0.5,
+                alpha=0.25, eta=[0.2, 0.4, 1.1], k=[3.9, 2.4, 2.2])
+    result = export_details(model, "pbrt", name="gold")
+    assert "# exact:" in result.text and "approximation" not in result.text and result.deviation.rms < 1e-12
+    wi, wo = pairs
+    np.testing.assert_allclose(pr.evaluate(pr.parse(result.text), "gold", wi, wo),
+                               np.asarray(evaluate_dirs(model, wi, wo)), rtol=1e-10)
+
+
 def test_pbrt_lambert_is_exact_at_the_near_peak_pairs_of_a_lobe():
     # The one exact pbrt-v4 mapping, checked at the near-peak pairs of a sharp lobe beside it (the diffuse part of
     # a two-part mix is the pbrt diffuse material with reflectance rho / its weight).

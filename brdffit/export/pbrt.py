@@ -11,9 +11,10 @@ formulas of `brdffit.export.pbrt_reference`):
   the amplitude ks.
 
 pbrt-v4 has no amplitude on its conductor: a microfacet lobe enters the mix with weight ks (one value, so a
-per-channel ks is averaged), the diffuse part takes the rest with its reflectance divided by its weight. Every
-microfacet lobe is approximate (Trowbridge-Reitz only, height-correlated Smith, no Schlick Fresnel); the export
-states the deviation measured with those formulas.
+per-channel ks is averaged), the diffuse part takes the rest with its reflectance divided by its weight. A
+microfacet lobe is exact when it is what pbrt-v4 renders (GGX with ``shadowing=smith-correlated``, a conductor or
+dielectric Fresnel, one ks); otherwise it is approximate (Trowbridge-Reitz only, height-correlated Smith, no
+Schlick Fresnel), and the export states the deviation measured with those formulas.
 """
 
 from __future__ import annotations
@@ -67,8 +68,9 @@ def _candidates(model, notes: list) -> list[tuple[list[_Part], list]]:
         if lobe.distribution != "ggx":
             notes.append(f"pbrt-v4 has only the Trowbridge-Reitz (GGX) distribution: the {lobe.distribution} "
                          f"width m = {tm.number(alpha)} was written as the GGX alpha")
-        notes.append(f"{lobe.name} shadowing={lobe.shadowing} became pbrt-v4's height-correlated Smith "
-                     "1/(1 + Lambda(wo) + Lambda(wi))")
+        if lobe.shadowing != "smith-correlated":
+            notes.append(f"{lobe.name} shadowing={lobe.shadowing} became pbrt-v4's height-correlated Smith "
+                         "1/(1 + Lambda(wo) + Lambda(wi))")
         ks = np.atleast_1d(term.params["ks"])
         if np.ptp(ks) > 0:
             notes.append(f"pbrt-v4's conductor has no amplitude: ks = {', '.join(tm.number(v) for v in ks)} "
