@@ -91,6 +91,10 @@ EQUATIONS = {
                    "F the exact dielectric Fresnel term of index η"),
     "abc-microfacet": ("f = A · (1 + B (1 − ch))^(−C) · F(cd, η) · G / (π ci co),  G = min(1, 2 ch co / cd, 2 ch ci / cd)\n"
                        "F the exact dielectric Fresnel term of index η"),
+    "sgd": ("f = ks · F · D · G1(θi) G1(θo) / (π ci co),  D = K · exp(−(α + t/α)) (α + t/α)^(−p) / (π ch⁴),  "
+            "t = tan²θh\n"
+            "K = 1 / (α Γ(1 − p, α))  (exact normalisation; Γ the upper incomplete gamma function)\n"
+            "F = f0 + (1 − f0)(1 − cd)⁵ − f1 cd,  G1(θ) = 1 + Λ (1 − exp(c (θ − θ0)^k)) for θ > θ0, else 1"),
     "principled": (
         "f = (1 − metallic) base_color/π · ((1 − w(ci)/2)(1 − w(co)/2) + R (w(ci) + w(co) + w(ci) w(co)(R − 1)))\n"
         "  + sheen (1 − metallic) w(cd) · (1 + sheen_tint (base_color/lum − 1))\n"
@@ -149,6 +153,10 @@ NOTES = {
                   "the mirror direction, no shadowing; A is unnormalised (an amplitude in 1/sr).",
     "abc-microfacet": "Löw et al.'s microfacet model: the ABC curve as an unnormalised distribution of 1 − cosθh, "
                       "with Cook & Torrance's π, V-cavity shadowing and Fresnel term, as BBM evaluates it.",
+    "sgd": "Bagher et al.'s shifted gamma distribution with their Fresnel correction f1 and fitted shadowing "
+           "(shadow_lambda, shadow_c, shadow_k, shadow_theta0), as BBM evaluates them, with the π of Cook & "
+           "Torrance's form. The paper and BBM fit K; here it normalises D exactly, from α and p (p < 1). f1 and the "
+           "shadowing parameters are held at values that switch them off (θ0 = π/2: G1 = 1) unless freed.",
     "principled": "The Disney BRDF as Mitsuba 3's principled plugin evaluates it (its reflection: no spec_trans, "
                   "flatness or eta), parameter names and ranges included, so that `brdffit export --to mitsuba` "
                   "writes it exactly; tests/test_principled.py holds it to the plugin at 2,000 random pairs. The "

@@ -36,6 +36,7 @@ __all__ = [
     "burley",
     "abc_smooth",
     "abc_microfacet",
+    "sgd",
     "principled",
     "sheen",
     "charlie_sheen",
@@ -613,6 +614,24 @@ def abc_microfacet(theta_i, phi_i, theta_o, phi_o, A, B, C, eta):
 
 
 @_quiet
+def sgd(theta_i, phi_i, theta_o, phi_o, ks, alpha, p, f0, f1, shadow_lambda, shadow_c, shadow_k, shadow_theta0):
+    """Bagher, Soler & Holzschuch, CGF 31(4) 2012, as BBM evaluates it: f = ks F D G1 G1 / (π cosθi cosθo),
+    D = K exp(−(α + tan²θh/α)) (α + tan²θh/α)^(−p) / (π cos⁴θh) with K = 1/(α Γ(1 − p, α)) (SciPy's gamma and
+    gammaincc), F = f0 + (1 − f0)(1 − cosθd)⁵ − f1 cosθd, G1(θ) = 1 + Λ (1 − e^(c (θ − θ0)^k)) beyond θ0."""
+    g = Pair(theta_i, phi_i, theta_o, phi_o)
+    k_norm = 1.0 / (alpha * special.gamma(1.0 - p) * special.gammaincc(1.0 - p, alpha))
+    shifted = alpha + np.tan(g.th) ** 2 / alpha
+    d = k_norm * np.exp(-shifted) * shifted ** (-p) / (math.pi * np.cos(g.th) ** 4)
+
+    def g1(theta):
+        return np.where(theta > shadow_theta0,
+                        1.0 + shadow_lambda * (1.0 - np.exp(shadow_c * np.abs(theta - shadow_theta0) ** shadow_k)), 1.0)
+
+    f = f0 + (1.0 - f0) * (1.0 - g.cos_d) ** 5 - f1 * g.cos_d
+    return _masked(g, _col(ks) * (f * d * g1(g.ti) * g1(g.to) / (math.pi * g.ci * g.co))[:, None])
+
+
+@_quiet
 def principled(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specular, spec_tint, anisotropic,
                sheen, sheen_tint, clearcoat, clearcoat_gloss):
     """The Disney principled BRDF as Mitsuba 3's ``principled`` plugin evaluates its reflection (Burley 2012 and
@@ -715,6 +734,7 @@ REFERENCES = {
     "principled": lambda ti, pi_, to, po, p: principled(ti, pi_, to, po, **p),
     "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),
     "abc-microfacet": lambda ti, pi_, to, po, p: abc_microfacet(ti, pi_, to, po, **p),
+    "sgd": lambda ti, pi_, to, po, p: sgd(ti, pi_, to, po, **p),
     "charlie-sheen": lambda ti, pi_, to, po, p: charlie_sheen(ti, pi_, to, po, p["ks"], p["alpha"]),
     "toon-diffuse": lambda ti, pi_, to, po, p: toon_diffuse(ti, pi_, to, po, p["rho_d"], p["rho_shade"],
                                                             p["threshold"], p["width"]),

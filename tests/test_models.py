@@ -107,6 +107,8 @@ OTHER_CASES = [
     Case("charlie-sheen", {}, {"ks": KS, "alpha": 0.35}),
     Case("abc-smooth", {}, {"A": KS, "B": 350.0, "C": 0.8, "eta": 1.6}),
     Case("abc-microfacet", {}, {"A": KS, "B": 60.0, "C": 1.7, "eta": 1.45}),
+    Case("sgd", {}, {"ks": KS, "alpha": 0.07, "p": 0.45, "f0": 0.06, "f1": 0.02, "shadow_lambda": 0.4,
+                     "shadow_c": 0.8, "shadow_k": 1.5, "shadow_theta0": 1.0}),
     Case("principled", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.3, "roughness": 0.45, "specular": 0.65,
                             "spec_tint": 0.25, "anisotropic": 0.6, "sheen": 0.4, "sheen_tint": 0.3, "clearcoat": 0.7,
                             "clearcoat_gloss": 0.55}),
@@ -163,7 +165,7 @@ def _values(case_id):
 # The lobes and options of the modern microfacet, Burley and sheen models: against the reference at random
 # directions above the horizon to 1e-12 relative (the fixed configurations above hold every lobe to 1e-10).
 MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "abc-smooth",
-                                                  "abc-microfacet")
+                                                  "abc-microfacet", "sgd")
           or case.options.get("distribution") in ("std", "gtr")
           or case.options.get("anisotropic") is True and case.spec != "lafortune"
           or case.options.get("shadowing") == "smith-correlated"]
@@ -179,6 +181,20 @@ def test_modern_lobe_matches_reference_at_random_directions(case):
     want = case.reference(*angles)
     assert np.all(want >= 0) and np.mean(want > 1e-6) > 0.25  # a narrow Beckmann width underflows off its peak
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=ATOL)  # ATOL: see the module doc
+
+
+@pytest.mark.parametrize("alpha, p", [(1e-3, 0.2), (0.05, 0.64), (0.3, 0.9), (1.0, 0.01)])
+def test_sgd_distribution_is_normalised(alpha, p):
+    """The SGD's D with its closed-form K (1/(α Γ(1 − p, α))) integrates to 1 with cosθh: over the slope plane
+    that is ∫_0^∞ K P22(x) dx, x = tan²θh, by adaptive quadrature in x/α²."""
+    from scipy import integrate
+
+    from brdffit.models.sgd import sgd_normalisation
+
+    k = float(sgd_normalisation(alpha, p))
+    value, _ = integrate.quad(lambda t: k * np.exp(-(alpha + t * alpha)) * (alpha + t * alpha) ** (-p) * alpha**2,
+                              0.0, np.inf, epsabs=0.0, epsrel=1e-12, limit=400)
+    assert value == pytest.approx(1.0, abs=1e-10)
 
 
 def test_every_registered_lobe_has_a_case_and_a_reference():

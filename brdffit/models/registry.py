@@ -19,6 +19,7 @@ from .lobe import Lobe
 from .layout import layout
 from .phong import BlinnPhong, Phong
 from .principled import Principled
+from .sgd import SGD
 from .sheen import CharlieSheen, Sheen
 from .toon import ToonDiffuse, ToonSpecular
 from .ward import Ward, WardAniso, WardDuer
@@ -47,6 +48,7 @@ _LOBES: dict[str, type[Lobe]] = {
         Lafortune,
         ABCSmooth,
         ABCMicrofacet,
+        SGD,
         Sheen,
         CharlieSheen,
         Principled,
