@@ -36,13 +36,30 @@ MODELS = (
     "lambert+abc-microfacet",
     "lambert+abc-smooth",
     "principled",
+    "lambert+cook-torrance(distribution=gtr, shadowing=smith)",
+    "lambert+sgd",
 )
 OUTPUT = ROOT / "docs" / "real-data" / "candidates.json"
+
+
+def markdown(out: dict) -> str:
+    """The table of docs/model-selection.md: one row per model, one column per material."""
+    rows = out["rows"]
+    lines = ["| model | " + " | ".join(r["name"] for r in rows) + " |", "|---|" + "---|" * len(rows),
+             "| default fit (its model) | " + " | ".join(f"{r['default']:.3f} (`{r['default_model']}`)" for r in rows)
+             + " |",
+             "| independent reference | " + " | ".join(f"{r['reference']:.3f}" for r in rows) + " |"]
+    for m in out["models"]:
+        lines.append(f"| `{m}` | " + " | ".join(f"{r['models'][m]['test']:.3f} ({r['models'][m]['test'] / r['default']:.2f}×)"
+                                                for r in rows) + " |")
+    return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", nargs="+", metavar="NAME", help="materials to measure (default: every RGL one)")
+    parser.add_argument("--models", nargs="+", metavar="SPEC", default=list(MODELS),
+                        help="models to fit (default: all of MODELS); the others' stored numbers are kept")
     args = parser.parse_args(argv)
 
     import brdffit
@@ -50,7 +67,9 @@ def main(argv=None) -> int:
 
     enable_compilation_cache()
     stored = {row["name"]: row for row in json.loads((ROOT / "docs" / "real-data" / "gallery.json").read_text())["rows"]}
-    out = {"models": list(MODELS), "rows": []}
+    out = json.loads(OUTPUT.read_text()) if OUTPUT.exists() else {"rows": []}
+    out["models"] = [m for m in MODELS if m in args.models or m in out.get("models", [])]
+    kept = {row["name"]: row for row in out["rows"]}
     for entry in gallery.materials():
         if entry["kind"] != "rgl" or (args.only and entry["name"] not in args.only):
             continue
@@ -59,22 +78,19 @@ def main(argv=None) -> int:
         angles, f_data, _ = gallery.heldout_points(row, measurements)
         cos_i = np.cos(angles[0])
         result = {"name": entry["name"], "default_model": row["model"], "default": row["heldout"]["cosine"],
-                  "reference": row["reference"]["test_error"], "models": {}}
-        for spec in MODELS:
+                  "reference": row["reference"]["test_error"], "models": dict(kept.get(entry["name"], {})
+                                                                                .get("models", {}))}
+        for spec in args.models:
             fitted = brdffit.fit(measurements, spec)
             error = gallery.errors(fitted.predict(*angles), f_data, cos_i)["cosine"]
             result["models"][spec] = {"test": error, "status": str(fitted.status), "n_params": fitted.n_params}
             print(f"{entry['name']:20s} {spec:58s} {error:.4f} (default {result['default']:.4f}, reference "
                   f"{result['reference']:.4f}) {fitted.status}", flush=True)
-        out["rows"].append(result)
+        kept[entry["name"]] = result
+    out["rows"] = list(kept.values())
     OUTPUT.write_text(json.dumps(out, indent=1) + "\n")
     print()
-    print("| material | default fit | reference | " + " | ".join(f"`{m}`" for m in MODELS) + " |")
-    print("|---|---|---|" + "---|" * len(MODELS))
-    for r in out["rows"]:
-        cells = [f"{r['models'][m]['test']:.3f} ({r['models'][m]['test'] / r['default']:.2f}×)" for m in MODELS]
-        print(f"| {r['name']} | {r['default']:.3f} (`{r['default_model']}`) | {r['reference']:.3f} | "
-              + " | ".join(cells) + " |")
+    print(markdown(out))
     return 0
 
 
