@@ -27,6 +27,8 @@ AMPLITUDE = ParamSpec("A", 1.0, 0.0, math.inf, colour=True, unit="1/sr", doc="he
 WIDTH = ParamSpec("B", 100.0, 1e-3, 1e7, unit="1", doc="inverse width of the ABC curve", scale=True)
 FALL_OFF = ParamSpec("C", 1.0, 1e-3, 20.0, unit="1", doc="fall-off exponent of the ABC curve", scale=True)
 ETA = ParamSpec("eta", 1.5, 1.0, 4.0, unit="1", doc="refractive index of the Fresnel term")
+# Both models' parameters, in order.
+PARAMETERS = (AMPLITUDE, WIDTH, FALL_OFF, ETA)
 
 
 def _abc(x, b, c):
@@ -45,7 +47,7 @@ class ABCSmooth(Lobe):
                  "surfaces, ACM TOG 31(1), 2012, Eqs. 10-14")
 
     def param_specs(self):
-        return (AMPLITUDE, WIDTH, FALL_OFF, ETA)
+        return PARAMETERS
 
     def __call__(self, params, pair: LocalPair):
         sx, sy = pair.wi[..., 0] + pair.wo[..., 0], pair.wi[..., 1] + pair.wo[..., 1]
@@ -67,7 +69,7 @@ class ABCMicrofacet(Lobe):
                  "surfaces, ACM TOG 31(1), 2012, Eq. 15")
 
     def param_specs(self):
-        return (AMPLITUDE, WIDTH, FALL_OFF, ETA)
+        return PARAMETERS
 
     def __call__(self, params, pair: LocalPair):
         d = _abc(1.0 - pair.cos_h, params["B"], params["C"])

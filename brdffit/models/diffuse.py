@@ -8,12 +8,13 @@ import math
 from .._lazy import module
 from ..geometry import LocalPair
 from ..params import ParamSpec
+from .fresnel import schlick_weight
 from .lobe import Lobe
 from .specs import RHO_D
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["Lambert", "OrenNayar", "Burley"]
+__all__ = ["Lambert", "OrenNayar", "Burley", "burley_shape"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,6 +59,14 @@ class OrenNayar(Lobe):
         return params["rho_d"] / jnp.pi * (a + b * term)[..., None]
 
 
+def burley_shape(pair: LocalPair, roughness):
+    """Burley's diffuse factor (1 + (F_D90 − 1) w(cosθi))(1 + (F_D90 − 1) w(cosθo)), F_D90 = 0.5 + 2 r cos²θd, w the
+    Schlick weight (`brdffit.models.fresnel.schlick_weight`); shape ``S``. Burley 2015 writes the same product as a
+    diffuse and a retro-reflection term (Mitsuba 3's principled evaluates that form)."""
+    f90 = 0.5 + 2.0 * roughness * pair.cos_d * pair.cos_d
+    return (1.0 + (f90 - 1.0) * schlick_weight(pair.cos_i)) * (1.0 + (f90 - 1.0) * schlick_weight(pair.cos_o))
+
+
 @dataclasses.dataclass(frozen=True)
 class Burley(Lobe):
     """Burley's diffuse (Physically-based shading at Disney, SIGGRAPH 2012 course, §5.3), the diffuse of the
@@ -77,7 +86,4 @@ class Burley(Lobe):
                                  doc="roughness of the retro-reflection term (F_D90 = 0.5 + 2 r cos²θd)"))
 
     def __call__(self, params, pair: LocalPair):
-        f90 = 0.5 + 2.0 * params["roughness"] * pair.cos_d * pair.cos_d
-        light = 1.0 + (f90 - 1.0) * (1.0 - pair.cos_i) ** 5
-        view = 1.0 + (f90 - 1.0) * (1.0 - pair.cos_o) ** 5
-        return params["rho_d"] / jnp.pi * (light * view)[..., None]
+        return params["rho_d"] / jnp.pi * burley_shape(pair, params["roughness"])[..., None]

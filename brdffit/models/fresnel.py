@@ -11,7 +11,7 @@ from ..geometry import TINY, safe_sqrt
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["schlick", "dielectric", "conductor", "CONDUCTORS", "DIELECTRICS"]
+__all__ = ["schlick", "schlick_weight", "dielectric", "conductor", "CONDUCTORS", "DIELECTRICS"]
 
 # Complex refractive indices (eta, k) of conductors at about 550 nm, as used in the issue specification.
 CONDUCTORS = {
@@ -34,6 +34,12 @@ DIELECTRICS = {
 }
 
 
+def schlick_weight(cos_theta):
+    """Schlick's (1994) weight (1 − cosθ)⁵ of a cosine clipped to [0, 1]: the grazing rise of his Fresnel term, and of
+    the terms built on it (Burley's diffuse and sheen, SGD's Fresnel term)."""
+    return (1.0 - jnp.clip(cos_theta, 0.0, 1.0)) ** 5
+
+
 def schlick(cos_theta, f0):
     r"""Schlick (1994), Eq. 24: F = f0 + (1 − f0)(1 − cosθ)^5.
 
@@ -44,8 +50,7 @@ def schlick(cos_theta, f0):
     Returns:
         The reflectance, broadcast shape.
     """
-    c = jnp.clip(cos_theta, 0.0, 1.0)
-    return f0 + (1.0 - f0) * (1.0 - c) ** 5
+    return f0 + (1.0 - f0) * schlick_weight(cos_theta)
 
 
 def dielectric(cos_theta_i, eta_i, eta_t):

@@ -7,8 +7,8 @@ that a fitted model exports to it exactly. With h = normalize(ωi + ωo), cd = �
 w(c) = (1 − c)⁵ the Schlick weight:
 
 - diffuse with retro-reflection (Burley 2015, §3.1): (1 − metallic) base_color/π ·
-  [(1 − w(ci)/2)(1 − w(co)/2) + R (w(ci) + w(co) + w(ci) w(co)(R − 1))], R = 2 roughness cd²
-  (Burley 2012's diffuse, `brdffit.models.diffuse.Burley`, written as Burley 2015 splits it);
+  [(1 − w(ci)/2)(1 − w(co)/2) + R (w(ci) + w(co) + w(ci) w(co)(R − 1))], R = 2 roughness cd², which is Burley
+  2012's diffuse expanded (`brdffit.models.diffuse.burley_shape`, evaluated here);
 - sheen: sheen (1 − metallic) w(cd) · lerp(1, base_color/lum, sheen_tint);
 - main specular: F D G / (4 ci co), D and G the anisotropic GGX with separable Smith masking at
   αx = max(0.001, roughness²/a), αy = max(0.001, roughness² a), a = √(1 − 0.9 anisotropic), and
@@ -31,8 +31,9 @@ from .._lazy import module
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
+from .diffuse import burley_shape
 from .lobe import Lobe
-from .microfacet import DISTRIBUTIONS
+from .microfacet import DISTRIBUTIONS, smith
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
@@ -60,10 +61,6 @@ def luminance(colour):
     if channels == 3:
         return sum(w * colour[..., k] for k, w in enumerate(_LUMINANCE))
     return colour[..., 0] if channels == 1 else jnp.mean(colour, axis=-1)
-
-
-def _schlick_weight(cos):
-    return (1.0 - jnp.clip(cos, 0.0, 1.0)) ** 5
 
 
 def _gtr1(cos_h, alpha):
@@ -103,16 +100,12 @@ class Principled(Lobe):
         dielectric = 1.0 - metallic
         lum = luminance(base)
         tint = jnp.where(lum > 0.0, base / jnp.where(lum > 0.0, lum, 1.0), 1.0)  # (C,)
-        w_i, w_o, w_d = _schlick_weight(pair.cos_i), _schlick_weight(pair.cos_o), _schlick_weight(pair.cos_d)
-
         # Diffuse and retro-reflection.
-        rr = 2.0 * roughness * pair.cos_d * pair.cos_d
-        shape = (1.0 - 0.5 * w_i) * (1.0 - 0.5 * w_o) + rr * (w_i + w_o + w_i * w_o * (rr - 1.0))
-        value = dielectric * base / jnp.pi * shape[..., None]
+        value = dielectric * base / jnp.pi * burley_shape(pair, roughness)[..., None]
 
         # Sheen.
         sheen_colour = 1.0 + params["sheen_tint"] * (tint - 1.0)
-        value = value + params["sheen"] * dielectric * w_d[..., None] * sheen_colour
+        value = value + params["sheen"] * dielectric * fr.schlick_weight(pair.cos_d)[..., None] * sheen_colour
 
         # Main specular: anisotropic GGX, separable Smith, the principled Fresnel mix.
         r2 = roughness * roughness
@@ -120,7 +113,7 @@ class Principled(Lobe):
         widths = (jnp.maximum(_MIN_ALPHA, r2 / aspect), jnp.maximum(_MIN_ALPHA, r2 * aspect))
         ggx = DISTRIBUTIONS["ggx"]
         d = ggx.D_aniso(pair.h, widths)
-        g = 1.0 / (1.0 + ggx.Lambda_aniso(pair.wi, widths)) / (1.0 + ggx.Lambda_aniso(pair.wo, widths))
+        g = smith(pair, ggx, widths)
         eta = specular_to_eta(params["specular"])
         c = pair.cos_d[..., None]
         f_dielectric = fr.dielectric(c, 1.0, eta)

@@ -21,6 +21,7 @@ import math
 from .._lazy import module
 from ..geometry import TINY, LocalPair
 from ..params import ParamSpec
+from .fresnel import schlick
 from .lobe import Lobe
 from .specs import KS
 
@@ -76,5 +77,5 @@ class SGD(Lobe):
         d = sgd_normalisation(alpha, p) * jnp.exp(-shifted - p * jnp.log(shifted)) / (jnp.pi * c2 * c2)
         shadow = (params["shadow_lambda"], params["shadow_c"], params["shadow_k"], params["shadow_theta0"])
         g = _shadowing(pair.cos_i, *shadow) * _shadowing(pair.cos_o, *shadow)
-        fresnel = params["f0"] + (1.0 - params["f0"]) * (1.0 - pair.cos_d) ** 5 - params["f1"] * pair.cos_d
+        fresnel = schlick(pair.cos_d, params["f0"]) - params["f1"] * pair.cos_d
         return params["ks"] * (fresnel * d * g / (jnp.pi * pair.cos_i * pair.cos_o))[..., None]

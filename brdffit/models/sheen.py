@@ -8,6 +8,7 @@ import dataclasses
 from .._lazy import module
 from ..geometry import TINY, LocalPair
 from ..params import ParamSpec
+from .fresnel import schlick_weight
 from .lobe import Lobe
 from .specs import KS
 
@@ -35,7 +36,7 @@ class Sheen(Lobe):
         return (dataclasses.replace(KS, doc="sheen amplitude"),)
 
     def __call__(self, params, pair: LocalPair):
-        return params["ks"] * ((1.0 - pair.cos_d) ** 5)[..., None]
+        return params["ks"] * schlick_weight(pair.cos_d)[..., None]
 
 
 def charlie_lambda(cos_v, alpha):
