@@ -107,6 +107,12 @@ EQUATIONS = {
         "η = 2/(1 − √(0.08 specular)) − 1,  αc = 0.1 + clearcoat_gloss (0.001 − 0.1)\n"
         "D_GTR1 = (αc² − 1) / (π ln(αc²) (1 + (αc² − 1) ch²))"
     ),
+    "gltf": (
+        "f = (1 − metallic) [(1 − specular · max_c F) base_color/π + specular F · D V]\n"
+        "  + metallic (base_color + (1 − base_color) w(cd)) · D V\n"
+        "F = f0 + (1 − f0) w(cd),  f0 = min(((ior − 1)/(ior + 1))² specular_color, 1),  w(c) = (1 − c)⁵\n"
+        "D = α²/(π (ch² (α² − 1) + 1)²),  V = G2/(4 ci co),  G2 = 1/(1 + Λ(ωi) + Λ(ωo)) (GGX),  α = roughness²"
+    ),
     "toon-diffuse": "f = (ρshade + (ρd − ρshade) · S((ci − threshold)/width)) / π,  S(u) = 1/(1 + e^(−u))",
     "toon-specular": "f = ks · S((r·ωo − threshold)/width) / π,  S(u) = 1/(1 + e^(−u))",
 }
@@ -162,6 +168,12 @@ NOTES = {
                   "writes it exactly; tests/test_principled.py holds it to the plugin at 2,000 random pairs. The "
                   "clearcoat has no 1/(4 ci co), as the plugin evaluates it. anisotropic, spec_tint and sheen_tint "
                   "are held at 0 unless freed. Not reciprocal only in name: every term is symmetric in ωi and ωo.",
+    "gltf": "The BRDF a glTF 2.0 file describes: its metallic-roughness material as the specification's Appendix B "
+            "writes it, with KHR_materials_ior (ior) and KHR_materials_specular (specular, specular_color). Every "
+            "parameter is declared inside the range a glTF file accepts, so a fit is a material any glTF viewer "
+            "takes as written (`brdffit fit --for gltf`, `brdffit export --to gltf`). base_color is a linear "
+            "amplitude (the value is affine in it); specular_color is held at white unless freed. Reciprocal: "
+            "every Fresnel term, the diffuse weight 1 − specular · max F included, is taken at the half vector.",
     "toon-diffuse": "Non-photorealistic two-tone shading. width is held fixed by fits unless it is freed. Not "
                     "reciprocal: it switches on ci alone.",
     "toon-specular": "A flat highlight disc; width is held fixed by fits unless it is freed. Reciprocal, since "

@@ -38,6 +38,7 @@ __all__ = [
     "abc_microfacet",
     "sgd",
     "principled",
+    "gltf",
     "sheen",
     "charlie_sheen",
     "charlie_lambda",
@@ -714,6 +715,34 @@ def _ct_ref(ti, pi_, to, po, p, roughness="m", distribution="beckmann", shadowin
                          fresnel=fresnel, f0=p.get("f0"), eta=p.get("eta"), k=p.get("k"), gamma=p.get("gamma"))
 
 
+@_quiet
+def gltf(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specular, ior, specular_color):
+    """The glTF 2.0 metallic-roughness material (glTF 2.0 Specification, Appendix B, "Specular BRDF", "Fresnel" and
+    "Metal BRDF and Dielectric BRDF") with KHR_materials_ior and KHR_materials_specular ("Implementation"), written
+    from the specification's visibility form: with α = roughness², L = ωi, V = ωo,
+
+        Vis = 1 / (2 (|N·V| √(α² + (1 − α²)(N·L)²) + |N·L| √(α² + (1 − α²)(N·V)²))),
+        D = α² / (π ((N·H)²(α² − 1) + 1)²),   specular_brdf = Vis D,
+        fr = f0 + (1 − f0)(1 − |V·H|)⁵,  f0 = min(((1 − ior)/(1 + ior))² specular_color, 1),
+        dielectric = (1 − specular max(fr)) base_color/π + specular fr specular_brdf,
+        metal = specular_brdf (base_color + (1 − base_color)(1 − |V·H|)⁵),
+        material = (1 − metallic) dielectric + metallic metal.
+    """
+    pair = Pair(theta_i, phi_i, theta_o, phi_o)
+    base, tint = _col(base_color), _col(specular_color)
+    a2 = roughness ** 4
+    nl, nv = pair.ci[:, None], pair.co[:, None]
+    vis = 1.0 / (2.0 * (nv * np.sqrt(a2 + (1.0 - a2) * nl ** 2) + nl * np.sqrt(a2 + (1.0 - a2) * nv ** 2)))
+    d = a2 / (np.pi * (np.cos(pair.th)[:, None] ** 2 * (a2 - 1.0) + 1.0) ** 2)
+    brdf = vis * d
+    schlick = (1.0 - pair.cos_d[:, None]) ** 5
+    f0 = np.minimum(((1.0 - ior) / (1.0 + ior)) ** 2 * tint, 1.0)
+    fresnel = f0 + (1.0 - f0) * schlick
+    dielectric = (1.0 - specular * fresnel.max(axis=1, keepdims=True)) * base / np.pi + specular * fresnel * brdf
+    metal = brdf * (base + (1.0 - base) * schlick)
+    return _masked(pair, (1.0 - metallic) * dielectric + metallic * metal)
+
+
 REFERENCES = {
     "lambert": lambda ti, pi_, to, po, p: lambert(ti, pi_, to, po, p["rho_d"]),
     "oren-nayar": lambda ti, pi_, to, po, p: oren_nayar(ti, pi_, to, po, p["rho_d"], p["sigma"]),
@@ -732,6 +761,7 @@ REFERENCES = {
     "burley": lambda ti, pi_, to, po, p: burley(ti, pi_, to, po, p["rho_d"], p["roughness"]),
     "sheen": lambda ti, pi_, to, po, p: sheen(ti, pi_, to, po, p["ks"]),
     "principled": lambda ti, pi_, to, po, p: principled(ti, pi_, to, po, **p),
+    "gltf": lambda ti, pi_, to, po, p: gltf(ti, pi_, to, po, **p),
     "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),
     "abc-microfacet": lambda ti, pi_, to, po, p: abc_microfacet(ti, pi_, to, po, **p),
     "sgd": lambda ti, pi_, to, po, p: sgd(ti, pi_, to, po, **p),

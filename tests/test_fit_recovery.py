@@ -41,6 +41,7 @@ CASES = [
     ("lambert+abc-smooth", dict(rho_d=RGB, A=[3.0, 2.5, 2.0], B=300.0, C=0.9), ("eta",), "half-diff", 4000),
     ("lambert+sgd", dict(rho_d=RGB, ks=KS, alpha=0.06, p=0.5, f0=0.04), ("f0",), "half-diff", 3000),
     ("lambert+abc-microfacet", dict(rho_d=RGB, A=[2.0, 1.6, 1.2], B=80.0, C=1.5), ("eta",), "half-diff", 4000),
+    ("gltf", dict(base_color=RGB, metallic=0.3, roughness=0.45, specular=0.8, ior=1.6), (), "half-diff", 4000),
     ("lambert+sheen", dict(rho_d=RGB, ks=[0.3, 0.2, 0.1]), (), "uniform", 3000),
     ("charlie-sheen", dict(ks=KS, alpha=0.4), (), "uniform", 3000),
     ("ashikhmin-shirley", dict(rs=[0.3, 0.2, 0.1], n=80.0), (), "half-diff", 3000),

@@ -14,6 +14,7 @@ from .abc import ABCMicrofacet, ABCSmooth
 from .ashikhmin_shirley import AshikhminShirley, AshikhminShirleyAniso
 from .cook_torrance import GGX, CookTorrance
 from .diffuse import Burley, Lambert, OrenNayar
+from .gltf import GltfMaterial
 from .lafortune import Lafortune
 from .lobe import Lobe
 from .layout import layout
@@ -52,6 +53,7 @@ _LOBES: dict[str, type[Lobe]] = {
         Sheen,
         CharlieSheen,
         Principled,
+        GltfMaterial,
         ToonDiffuse,
         ToonSpecular,
     )
