@@ -1,11 +1,11 @@
-"""Export a fitted model: brdffit's JSON, a Mitsuba 3 ``<bsdf>`` document or pbrt-v4 ``MakeNamedMaterial``
-statements.
+"""Export a fitted model: brdffit's JSON, a Mitsuba 3 ``<bsdf>`` document, pbrt-v4 ``MakeNamedMaterial``
+statements or a glTF 2.0 file.
 
 One file per target, each with a ``write`` function; `TARGETS` is the registry that the CLI's ``--to`` choices
 and `EXPORT_FORMATS` come from. Shared pieces (the lobes as renderer terms, the measured deviation, the Schlick
 -> index fit) are in `brdffit.export.terms`; the ``fit`` option is `brdffit.export.refit`, and what it wrote for a
 result in a `brdffit fit` output folder is recorded beside it by `brdffit.export.records`. Every renderer output
-opens with comments naming the source spec and the brdffit version, one ``approximation:`` line per
+opens with comments (in a glTF file, ``asset.extras.brdffit``) naming the source spec and the brdffit version, one ``approximation:`` line per
 approximation made, and the deviation of the written material from the source measured at 2,000 uniform random
 direction pairs and pairs near each lobe's peak, combined by the balance heuristic (`brdffit.export.terms.measure`,
 docs/export.md).
@@ -91,7 +91,7 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
 
     Arguments:
         model_or_result, name, fit: as `export`.
-        to: ``"mitsuba"`` or ``"pbrt"``.
+        to: a renderer in `TARGETS` (``"mitsuba"``, ``"pbrt"``, ``"gltf"``).
 
     Returns:
         An `Export`.
@@ -118,7 +118,7 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
     if not candidates or not (target.refines or candidates[0].deviation.exact()):
         from .refit import exportable_specs, fit_exportable
 
-        for spec in exportable_specs(model):
+        for spec in [target.family] if target.family else exportable_specs(model):
             fitted, line = fit_exportable(model, spec=spec)
             candidates.append(_export(target, fitted, name, header, model, line))
     return min(candidates, key=lambda c: c.deviation.rms)
@@ -139,8 +139,9 @@ def export(model_or_result, to: str = "json", *, name: str = "material", fit: bo
         model_or_result: a `brdffit.Model`, a `brdffit.FitResult` or a spec string (default parameters).
         to: a name in `TARGETS`: ``"json"`` (spec, channels, parameters, plus ``stderr`` and ``status`` for a
             `FitResult`; `brdffit.models.model_from_dict` reads it back), ``"mitsuba"`` (a Mitsuba 3
-            ``<bsdf version="3.0.0">`` document for ``mitsuba.load_string``) or ``"pbrt"`` (pbrt-v4
-            ``MakeNamedMaterial`` statements, the last one named ``name``).
+            ``<bsdf version="3.0.0">`` document for ``mitsuba.load_string``), ``"pbrt"`` (pbrt-v4
+            ``MakeNamedMaterial`` statements, the last one named ``name``) or ``"gltf"`` (a glTF 2.0 file: the
+            material on a sphere, `brdffit.export.gltf`).
         name: the material's id (Mitsuba) or name (pbrt).
         fit: for a renderer, fit the renderer's own model to the model over the hemisphere (cosine-weighted
             least squares: for Mitsuba a brdffit fit of lambert + GGX lobes, `brdffit.export.refit`, unless the

@@ -27,6 +27,9 @@ class Target:
         refines: whether ``write`` with a ``source`` fits the renderer's own parameters to it (pbrt-v4); a target
             that does not (Mitsuba 3, whose plugins brdffit's lambert + GGX lobes are exactly) gets a brdffit fit
             of those lobes (`brdffit.export.refit`) unless its direct mapping is exact.
+        family: the brdffit model the target writes exactly and alone (glTF: ``gltf``), which the fit option fits
+            in place of any other model; empty for a target whose fit option fits `brdffit.export.refit`'s
+            lambert + GGX families.
     """
 
     name: str
@@ -34,6 +37,7 @@ class Target:
     module: str
     renderer: bool = True
     refines: bool = False
+    family: str = ""
 
     def load(self):
         """The target's module (imported on first use)."""
@@ -44,5 +48,7 @@ TARGETS = {t.name: t for t in (
     Target("json", "brdffit's own description (model_from_dict reads it back)", "native", renderer=False),
     Target("mitsuba", "a Mitsuba 3 <bsdf version=\"3.0.0\"> document", "mitsuba"),
     Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", "pbrt", refines=True),
+    Target("gltf", "a glTF 2.0 .gltf file: the material (with KHR_materials_ior and _specular) on a sphere", "gltf",
+           family="gltf"),
 )}
 EXPORT_FORMATS = tuple(TARGETS)
