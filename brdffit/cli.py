@@ -512,12 +512,15 @@ def _cmd_fit(args) -> int:
     if args.report:
         _import_in_background("brdffit.report")
     selection = None
+    if args.target is not None and (args.model != "auto" or args.lobes is not None):
+        raise UsageError(f"--for {args.target} chooses among the models {args.target} represents exactly; give it "
+                         "without --model and --lobes")
     if args.model == "auto":
         from .select import DEFAULT_CANDIDATES
 
         _check_fixed(_parse_fixed(args.fixed), DEFAULT_CANDIDATES)
-        selection = select(measurements, DEFAULT_CANDIDATES, criterion="auto", progress=_progress(args),
-                           **_fit_options(args))
+        selection = select(measurements, DEFAULT_CANDIDATES, criterion="auto", target=args.target,
+                           progress=_progress(args), **_fit_options(args))
         result = selection.result
     elif args.lobes is None:
         _check_fixed(_parse_fixed(args.fixed), [args.model])
@@ -949,6 +952,12 @@ def _fit_command(sub) -> None:
                    help="number of Lafortune lobes in the model's Lafortune term, or 'auto' to choose 1.."
                         "--max-lobes by the 'auto' criterion")
     p.add_argument("--max-lobes", type=bounded(int, 1), default=3, metavar="K", help="largest K tried by --lobes auto")
+    from .export.registry import FIT_TARGETS, TARGETS
+
+    p.add_argument("--for", dest="target", choices=FIT_TARGETS, metavar="TARGET",
+                   help="fit for a renderer: choose among the models it represents exactly with every parameter in "
+                        "its ranges (" + "; ".join(f"{t}: {', '.join(TARGETS[t].renders)}" for t in FIT_TARGETS)
+                        + "), and state the held-out error of the best model without its limits beside it")
     _add_fit_options(p)
     p.add_argument("--multistart", type=bounded(int, 0), default=0, metavar="N", help="extra quasi-random starts")
     p.add_argument("--posterior", action="store_true",

@@ -88,11 +88,12 @@ class Selection:
             nanoseconds), ``status``, ``samples`` (the valid values the reported fit was fitted to: fewer than
             the data's for a candidate that screening ruled out), ``verdict`` (why it was or was not chosen by
             the criterion), and with a scene ``scene_error``.
-        chosen: the chosen spec (the scene's choice when a scene was given, else the criterion's).
+        chosen: the chosen spec (the scene's choice when a scene was given, the target's with a target, else the
+            criterion's).
         criterion: ``"heldout"``, ``"aic"``, ``"bic"`` or ``"cv"``; margin: the margin used; holdout: the fraction
             of the rows held out; heldout_scale: with the cosine loss, the RMS of the data's own cosine-weighted
             values f cosθi √w on the held-out rows (a held-out error over it is the relative error in reflected
-            radiance), else None.
+            radiance), else None; target: the renderer the choice was made for, or None.
         best: the candidate with the best score.
         chosen_by_criterion: the criterion's choice (equals ``chosen`` without a scene).
         chosen_by_scene: the scene's choice, or None.
@@ -114,6 +115,7 @@ class Selection:
     scene_results: dict = dataclasses.field(default_factory=dict)
     holdout: float = 0.2
     heldout_scale: float | None = None
+    target: str | None = None
 
     @property
     def result(self) -> FitResult:
@@ -127,15 +129,20 @@ class Selection:
         on the held-out rows (absolute, in the loss's units, and relative to Lambert's), its plausibility, and what
         to do when no candidate was plausible."""
         rows = {row["spec"]: row for row in self.table}
-        chosen = rows[self.chosen_by_criterion]
-        error = chosen["heldout_error"]
-        line = f"verdict: {self.chosen}: error on unseen directions {error:.4g}"
+        shown = self.chosen if self.target else self.chosen_by_criterion
+        error = rows[shown]["heldout_error"]
+        line = f"verdict: {self.chosen}" + (f" for {self.target}" if self.target else "")
+        line += f": error on unseen directions {error:.4g}"
         if self.heldout_scale:
             line += f" = {error / self.heldout_scale:.1%} of the reflected radiance"
         line += f" (loss RMS on the {self.holdout:.0%} of rows held out from its fit)"
         lambert = rows.get("lambert")
-        if lambert is not None and self.chosen_by_criterion != "lambert" and lambert["heldout_error"] > 0:
+        if lambert is not None and shown != "lambert" and lambert["heldout_error"] > 0:
             line += f", {error / lambert['heldout_error']:.2f}x Lambert's {lambert['heldout_error']:.4g}"
+        if self.target and self.chosen_by_criterion != shown:
+            free = rows[self.chosen_by_criterion]["heldout_error"]
+            line += (f"; the renderer's cost: the best model without the target's limits, "
+                     f"{self.chosen_by_criterion}, has {free:.4g} ({error / free:.2f}x)" if free > 0 else "")
         why = "; ".join(f"{c.name}: {c.message}" for c in self.result.plausibility().implausible)
         if not why:
             return line + "; plausible"
@@ -166,8 +173,10 @@ class Selection:
         lines.append(f"best by {self.criterion}: {self.best}; simplest with {rule}: {self.chosen_by_criterion}")
         if self.chosen_by_scene is not None:
             lines.append(f"cheapest within the scene tolerance: {self.chosen_by_scene}")
+        if self.target:
+            lines.append(f"chosen for {self.target} (its models exact and in its ranges): {self.chosen}")
         lines.extend(f"  {row['spec']}: {row['verdict']}" for row in self.table
-                     if row["spec"] != self.chosen_by_criterion and "verdict" in row)
+                     if row["spec"] not in (self.chosen_by_criterion, self.chosen) and "verdict" in row)
         lines.extend(f"warning: {w}" for w in self.warnings)
         return "\n".join(lines)
 
@@ -179,7 +188,7 @@ class Selection:
         return {"table": [{k: clean(v) for k, v in row.items()} for row in self.table], "chosen": self.chosen,
                 "criterion": self.criterion, "margin": self.margin, "best": self.best,
                 "chosen_by_criterion": self.chosen_by_criterion, "chosen_by_scene": self.chosen_by_scene,
-                "warnings": list(self.warnings)}
+                "target": self.target, "warnings": list(self.warnings)}
 
 
 def _loss_residuals(result: FitResult, measurements):
@@ -356,7 +365,8 @@ def _simplest(rows: list[dict], eligible) -> dict:
 def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto", *, loss: str = FIT.loss,
            margin: float | None = None, folds: int = 5, holdout: float = 0.2, scene=None,
            tolerance: float | None = None, scene_metric: str = "relative", reference: str = "data", seed: int = 0,
-           screen: bool = True, plausible: bool = True, progress: bool = False, **fit_options) -> Selection:
+           screen: bool = True, plausible: bool = True, target: str | None = None, progress: bool = False,
+           **fit_options) -> Selection:
     """Fit candidate models and choose the smallest one that is good enough.
 
     Arguments:
@@ -391,6 +401,10 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
             conserve energy where the data were measured but whose directional
             albedo exceeds `EXTRAPOLATION_ALBEDO` beyond the data's largest θi (`brdffit.plausibility.plausibility`)
             while a converged candidate remains; such a candidate's verdict says so.
+        target: a renderer in `brdffit.export.FIT_TARGETS` (``"gltf"``, ``"mitsuba"``): its own models
+            (`brdffit.export.Target.renders`, exact in it with every parameter in its ranges) join the
+            candidates, and the choice is the best of them by the criterion's score; ``chosen_by_criterion`` stays
+            the choice among all candidates, so that the summary shows what the renderer costs. Not with a scene.
         progress: show a progress line on stderr, one update per candidate (and per scene refit).
         **fit_options: passed to every `brdffit.fit` (solver, fixed, max_steps, ...).
 
@@ -400,6 +414,8 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
     measurements.check_informative()  # no information, no selection (named in the error)
     criterion = resolve_criterion(criterion, measurements)
     candidates = list(candidates)
+    renders = target_models(target, scene)
+    candidates += [spec for spec in renders if spec not in candidates]
     if not candidates:
         raise ValueError("select needs at least one candidate")
     if scene is not None and tolerance is None:
@@ -451,15 +467,49 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
                                                                options, bar)
     for row in rows:
         row["verdict"] = _verdict(row, chosen, best, threshold, criterion, usable, implausible)
+    for_target = None
+    if renders:
+        for_target = _choose_for_target(rows, usable, finite, renders, measurements, screened, done, options)
+        for_target["verdict"] = f"chosen for {target}: its best model by the {criterion} score"
     by_scene, scene_results = None, {}
     if scene is not None:
         by_scene, scene_results = _choose_by_scene(scene, reference, tolerance, scene_metric, rows, usable, best,
                                                    measurements, done, fit_options, bar, warnings)
-    bar.close(f"chose {by_scene or chosen['spec']}")
-    return Selection(table=rows, chosen=by_scene or chosen["spec"], criterion=criterion, margin=margin,
+    final = by_scene or (for_target or chosen)["spec"]
+    bar.close(f"chose {final}")
+    return Selection(table=rows, chosen=final, criterion=criterion, margin=margin,
                      best=best["spec"], chosen_by_criterion=chosen["spec"], chosen_by_scene=by_scene,
                      results=done, warnings=warnings, scene_results=scene_results, holdout=holdout,
-                     heldout_scale=_radiance_scale(measurements, fold_rows[0]) if loss == "cosine" else None)
+                     heldout_scale=_radiance_scale(measurements, fold_rows[0]) if loss == "cosine" else None,
+                     target=target)
+
+
+def target_models(target: str | None, scene) -> tuple:
+    """The models of a fit for ``target`` (`brdffit.export.Target.renders`); empty without a target."""
+    if target is None:
+        return ()
+    from .export.registry import FIT_TARGETS, TARGETS
+
+    if target not in FIT_TARGETS:
+        raise ValueError(f"no fit can be made for {target!r}: the targets with models declared exact and in range "
+                         f"are {', '.join(FIT_TARGETS)}")
+    if scene is not None:
+        raise ValueError("a selection for a target takes no scene")
+    return TARGETS[target].renders
+
+
+def _choose_for_target(rows, usable, finite, renders, measurements, screened, done, options) -> dict:
+    """The row of the target's choice: the best score among its models (converged ones first), its fit to all
+    the data made where the row still holds a screening fit."""
+    own = [r for r in usable if r["spec"] in renders] or [r for r in finite if r["spec"] in renders]
+    if not own:
+        raise ValueError(f"none of the target's models ({', '.join(renders)}) produced a finite score")
+    row = min(own, key=lambda r: (r["score"], _simplicity(r)))
+    spec = row["spec"]
+    if screened is not None and done[spec] is screened.get(spec):
+        done[spec] = fit(measurements, spec, init=done[spec].model, **options)
+        row.update(_full_fit_fields(done[spec], train_error=False))
+    return row
 
 
 def _choose_by_criterion(rows, usable, criterion, margin, plausible, done, implausible, warnings, screened,

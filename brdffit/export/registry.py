@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 
-__all__ = ["ExportError", "Target", "TARGETS", "EXPORT_FORMATS"]
+__all__ = ["ExportError", "Target", "TARGETS", "EXPORT_FORMATS", "FIT_TARGETS"]
 
 
 class ExportError(ValueError):
@@ -30,6 +30,9 @@ class Target:
         family: the brdffit model the target writes exactly and alone (glTF: ``gltf``), which the fit option fits
             in place of any other model; empty for a target whose fit option fits `brdffit.export.refit`'s
             lambert + GGX families.
+        renders: the brdffit models the target writes exactly with every parameter inside the ranges its own
+            tools accept (no unbounded values, no blends): the candidates of a fit for the target
+            (`brdffit.select`'s ``target``, ``brdffit fit --for``); empty where none is declared yet.
     """
 
     name: str
@@ -38,6 +41,7 @@ class Target:
     renderer: bool = True
     refines: bool = False
     family: str = ""
+    renders: tuple = ()
 
     def load(self):
         """The target's module (imported on first use)."""
@@ -46,9 +50,12 @@ class Target:
 
 TARGETS = {t.name: t for t in (
     Target("json", "brdffit's own description (model_from_dict reads it back)", "native", renderer=False),
-    Target("mitsuba", "a Mitsuba 3 <bsdf version=\"3.0.0\"> document", "mitsuba"),
+    Target("mitsuba", "a Mitsuba 3 <bsdf version=\"3.0.0\"> document", "mitsuba",
+           renders=("lambert", "principled")),
     Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", "pbrt", refines=True),
     Target("gltf", "a glTF 2.0 .gltf file: the material (with KHR_materials_ior and _specular) on a sphere", "gltf",
-           family="gltf"),
+           family="gltf", renders=("gltf",)),
 )}
 EXPORT_FORMATS = tuple(TARGETS)
+# The targets a fit can be made for (`brdffit fit --for`): those with models declared exact and in range.
+FIT_TARGETS = tuple(name for name, target in TARGETS.items() if target.renders)

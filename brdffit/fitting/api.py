@@ -743,16 +743,17 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
 
 
 # ---------------------------------------------------------------------------------------------------- public API
-def fit(measurements, model, *, loss: str = FIT.loss, solver=FIT.solver, init="auto", fixed=None, free=None,
+def fit(measurements, model=None, *, loss: str = FIT.loss, solver=FIT.solver, init="auto", fixed=None, free=None,
         multistart: int = 0, channel_mode: str = "shared-shape", robust=None, max_steps: int = FIT.max_steps,
         rtol: float = FIT.rtol, atol: float = FIT.atol, seed: int = FIT.seed, coarse="auto",
-        strict: bool = False, progress: bool = False) -> FitResult:
+        strict: bool = False, target: str | None = None, progress: bool = False) -> FitResult:
     """Fit a model to measurements by least squares: amplitudes exactly, the rest by a global search and a
     polish (the pipeline of the module doc).
 
     Arguments:
         measurements: `brdffit.Measurements`.
-        model: a spec string (``"lambert+ggx"``) or a `Model` (its values are the start when ``init="model"``).
+        model: a spec string (``"lambert+ggx"``) or a `Model` (its values are the start when ``init="model"``);
+            None with a ``target``.
         loss: a name in `brdffit.fitting.losses.LOSSES`: ``"cosine"`` (default), ``"log"``, ``"relative"``,
             ``"absolute"`` or ``"sigma"`` (docs/fitting.md).
         solver: a name from `brdffit.fitting.solvers.SOLVERS` (``"lm"``, ``"gauss-newton"``, ``"dogleg"``,
@@ -779,10 +780,17 @@ def fit(measurements, model, *, loss: str = FIT.loss, solver=FIT.solver, init="a
         strict: raise `FitError` instead of returning a non-converged result.
         progress: report the stages (search, polish, hold, refinement, uncertainty) on a progress line on stderr
             (`brdffit.progress.Progress`).
+        target: instead of a model, a renderer in `brdffit.export.FIT_TARGETS` (``"gltf"``, ``"mitsuba"``): fit
+            the models it represents exactly with every parameter in its ranges (`brdffit.export.Target.renders`)
+            and return the one `brdffit.select` chooses among them (its own model alone where it has one).
 
     Returns:
         A `FitResult`.
     """
+    if target is not None:
+        return _fit_for_target(measurements, model, target, locals())
+    if model is None:
+        raise TypeError("fit needs a model spec (or a target renderer)")
     if channel_mode not in CHANNEL_MODES:
         raise ValueError(f"channel_mode must be one of {', '.join(CHANNEL_MODES)}, got {channel_mode!r}")
     options = dict(loss=loss, solver=solver, init=init, fixed=fixed, free=free, multistart=multistart,
@@ -797,6 +805,22 @@ def fit(measurements, model, *, loss: str = FIT.loss, solver=FIT.solver, init="a
     if strict and not result.converged:
         raise FitError(f"fit of {result.spec} did not converge: {result.status}", result)
     return result
+
+
+def _fit_for_target(measurements, model, target: str, arguments: dict) -> FitResult:
+    """`fit` with a ``target``: its one model fitted, or `brdffit.select`'s choice among its models."""
+    from ..select import target_models, select
+
+    if model not in (None, "auto"):
+        raise ValueError(f"target={target!r} chooses the model among those {target} represents exactly; give no "
+                         f"model (got {model!r})")
+    renders = target_models(target, None)
+    options = {k: arguments[k] for k in ("loss", "solver", "fixed", "free", "max_steps", "rtol", "atol", "seed")}
+    if len(renders) == 1:
+        options.update({k: arguments[k] for k in ("init", "multistart", "channel_mode", "robust", "coarse",
+                                                  "strict", "progress")})
+        return fit(measurements, renders[0], **options)
+    return select(measurements, (), target=target, progress=arguments["progress"], **options).result
 
 
 def _fit_independent(measurements, model, options: dict, bar: Progress) -> FitResult:
