@@ -1,0 +1,91 @@
+"""MaterialX 1.39: a fitted model as a MaterialX document with two materials, the glTF material and its OpenPBR
+Surface counterpart.
+
+What is written (MaterialX 1.39's standard data libraries, ``libraries/bxdf``):
+
+- ``<gltf_pbr>`` (``ND_gltf_pbr_surfaceshader``) with ``base_color``, ``metallic``, ``roughness``, ``specular``,
+  ``specular_color`` and ``ior``: the glTF 2.0 material, parameter for parameter, in the material
+  ``<surfacematerial name=NAME>``;
+- ``<open_pbr_surface>`` (``ND_open_pbr_surface_surfaceshader``, OpenPBR Surface 1.x) with the same values under
+  OpenPBR's names (``base_color``, ``base_metalness``, ``specular_roughness``, ``specular_ior``,
+  ``specular_weight``, ``specular_color``), in ``<surfacematerial name=NAME_openpbr>``: the mapping from glTF that
+  the OpenPBR specification gives for its metallic-roughness subset. OpenPBR layers the specular over the diffuse
+  by the layer's directional albedo and evaluates an F82-tinted conductor, where glTF mixes per direction by
+  Schlick's Fresnel term, so this one is an approximation, stated as such;
+- comments: the source, the version, the approximations and the measured deviation of the glTF material.
+
+The written glTF material is brdffit's ``gltf`` model, so its deviation is measured exactly as for the glTF export
+(`brdffit.export.gltf`): a model that is that lobe alone is written exactly, any other is refused or, under the
+fit option, replaced by the ``gltf`` model fitted to it. MaterialX's own ``gltf_pbr`` graph is its renderers'
+reading of the same material (it layers, as OpenPBR does); brdffit has no MaterialX evaluator, so the difference
+between a MaterialX renderer's result and Appendix B is not measured here (docs/export.md).
+"""
+
+from __future__ import annotations
+
+from xml.sax.saxutils import escape, quoteattr
+
+from . import gltf
+from . import terms as tm
+
+__all__ = ["write", "OPENPBR_NAMES", "EXPORTABLE"]
+
+EXPORTABLE = gltf.EXPORTABLE
+# The gltf model's parameters -> OpenPBR Surface's inputs (its metallic-roughness subset).
+OPENPBR_NAMES = {"base_color": "base_color", "metallic": "base_metalness", "roughness": "specular_roughness",
+                 "ior": "specular_ior", "specular": "specular_weight", "specular_color": "specular_color"}
+
+
+def _input(name: str, value) -> str:
+    if isinstance(value, list):
+        return f'    <input name="{name}" type="color3" value="{", ".join(tm.number(v) for v in value)}" />'
+    return f'    <input name="{name}" type="float" value="{tm.number(value)}" />'
+
+
+def _shader(node: str, shader: str, material: str, inputs: dict) -> list[str]:
+    lines = [f"  <{node} name={quoteattr(shader)} type=\"surfaceshader\">"]
+    lines += [_input(name, value) for name, value in inputs.items()]
+    lines += [f"  </{node}>",
+              f"  <surfacematerial name={quoteattr(material)} type=\"material\">",
+              f'    <input name="surfaceshader" type="surfaceshader" nodename={quoteattr(shader)} />',
+              "  </surfacematerial>"]
+    return lines
+
+
+def _identifier(name: str) -> str:
+    """A valid MaterialX element name (letters, digits and underscores, not starting with a digit)."""
+    cleaned = "".join(c if c.isalnum() or c == "_" else "_" for c in name) or "material"
+    return cleaned if not cleaned[0].isdigit() else "M_" + cleaned
+
+
+def write(model: tm.Model, name: str, header: list[str], source=None):
+    """The MaterialX document of ``model``.
+
+    Arguments:
+        model: a model that is brdffit's ``gltf`` lobe alone (1 or 3 channels).
+        name: the glTF material's name (made a valid MaterialX name); the OpenPBR one is ``NAME_openpbr``.
+        header: comment lines (source, version, fit).
+        source: the model the deviation is measured against (the original under the fit option).
+
+    Returns:
+        (text, a function (wi, wo) -> f_r of the glTF material written, notes (the OpenPBR approximation),
+        `Deviation` of the glTF material from the source).
+
+    Raises:
+        ExportError: a model other than the ``gltf`` lobe alone, or a channel count other than 1 or 3.
+    """
+    values, written, deviation = gltf.measured(model, source)
+    material = _identifier(name)
+    notes = [f"{material}_openpbr (open_pbr_surface) takes the glTF values under OpenPBR's names; OpenPBR layers the "
+             "specular over the diffuse by albedo and tints its conductor by F82, where glTF mixes by Schlick's "
+             "Fresnel per direction: its deviation is not measured (the deviation below is the glTF material's, "
+             f"{material})"]
+    verdict = "exact: " if tm.is_exact(deviation, notes) else "measured deviation from the source model: "
+    comments = header + [f"approximation: {note}" for note in notes] + [verdict + deviation.describe()]
+    lines = ['<?xml version="1.0"?>', '<materialx version="1.39" colorspace="lin_rec709">']
+    lines += [f"  <!-- {escape(line).replace('--', '- -')} -->" for line in comments]
+    lines += _shader("gltf_pbr", f"SR_{material}", material, values)
+    lines += _shader("open_pbr_surface", f"SR_{material}_openpbr", f"{material}_openpbr",
+                     {OPENPBR_NAMES[k]: v for k, v in values.items()})
+    lines.append("</materialx>")
+    return "\n".join(lines) + "\n", written, notes, deviation

@@ -1,0 +1,96 @@
+"""brdffit.export.materialx: MaterialX (the `materialx` package, in the test extra) reads every document written,
+validates it against its standard libraries, and its GLSL and OSL shader generators produce code for both
+materials; the values are those of the fit under each node's names."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from brdffit import models
+from brdffit.cli import EXIT_OK, main
+from brdffit.export import ExportError, export, export_details
+from brdffit.export.materialx import OPENPBR_NAMES
+
+mx = pytest.importorskip("MaterialX", reason="MaterialX (PyPI package materialx, test extra) is not installed")
+
+SYNTHETIC = Path(__file__).resolve().parents[1] / "data" / "synthetic"
+GLTF = dict(base_color=[0.7, 0.4, 0.15], metallic=0.2, roughness=0.4, specular=0.8, ior=1.6)
+
+
+def _document(text: str):
+    """The document, with MaterialX's standard libraries imported (what validation and generation need)."""
+    doc = mx.createDocument()
+    mx.readFromXmlString(doc, text)
+    libraries = mx.createDocument()
+    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), libraries)
+    doc.importLibrary(libraries)
+    return doc
+
+
+def _inputs(doc, node: str) -> dict:
+    shader = doc.getChild(node)
+    return {i.getName(): i.getValue() for i in shader.getInputs()}
+
+
+@pytest.fixture(scope="module")
+def text():
+    return export(models.get("gltf", **GLTF), "materialx", name="brdffit material")
+
+
+def test_document_validates_against_the_standard_libraries(text):
+    doc = _document(text)
+    valid, message = doc.validate()
+    assert valid, message
+    materials = [m.getName() for m in doc.getMaterialNodes()]
+    assert materials == ["brdffit_material", "brdffit_material_openpbr"]
+    assert doc.getChild("SR_brdffit_material").getNodeDef().getName() == "ND_gltf_pbr_surfaceshader"
+    assert doc.getChild("SR_brdffit_material_openpbr").getNodeDef().getName() == "ND_open_pbr_surface_surfaceshader"
+
+
+def test_values_are_the_fits_under_each_nodes_names(text):
+    doc = _document(text)
+    gltf_inputs, openpbr_inputs = _inputs(doc, "SR_brdffit_material"), _inputs(doc, "SR_brdffit_material_openpbr")
+    expected = {**GLTF, "specular_color": [1.0, 1.0, 1.0]}
+    for name, value in expected.items():
+        np.testing.assert_allclose(np.asarray(gltf_inputs[name].asTuple() if hasattr(gltf_inputs[name], "asTuple")
+                                              else gltf_inputs[name]), value, rtol=1e-7)
+        got = openpbr_inputs[OPENPBR_NAMES[name]]
+        np.testing.assert_allclose(np.asarray(got.asTuple() if hasattr(got, "asTuple") else got), value, rtol=1e-7)
+
+
+@pytest.mark.parametrize("generator", ["glsl", "osl"])
+def test_shader_generators_produce_code(text, generator):
+    from MaterialX import PyMaterialXGenGlsl as genglsl
+    from MaterialX import PyMaterialXGenOsl as genosl
+    from MaterialX import PyMaterialXGenShader as genshader
+
+    doc = _document(text)
+    gen = (genglsl.GlslShaderGenerator if generator == "glsl" else genosl.OslShaderGenerator).create()
+    context = genshader.GenContext(gen)
+    context.registerSourceCodeSearchPath(mx.getDefaultDataSearchPath())
+    elements = genshader.findRenderableElements(doc)
+    assert len(elements) == 2
+    for element in elements:
+        shader = gen.generate(element.getNamePath(), element, context)
+        code = shader.getSourceCode(genshader.PIXEL_STAGE)
+        assert len(code) > 1000 and ("void main" in code or "shader " in code), element.getNamePath()
+
+
+def test_approximation_and_refusal_are_stated(text):
+    assert "<!-- approximation: brdffit_material_openpbr (open_pbr_surface)" in text
+    assert not export_details(models.get("gltf", **GLTF), "materialx").exact  # the OpenPBR material is approximate
+    with pytest.raises(ExportError, match="--for gltf"):
+        export(models.get("lambert+ggx"), "materialx")
+
+
+def test_cli_fit_for_materialx_then_export(tmp_path):
+    out = tmp_path / "fit"
+    assert main(["fit", str(SYNTHETIC / "plastic.h5"), "--for", "materialx", "--quiet", "--no-report", "--out",
+                 str(out)]) == EXIT_OK
+    assert json.loads((out / "selection.json").read_text())["chosen"] == "gltf"
+    target = tmp_path / "plastic.mtlx"
+    assert main(["export", str(out / "result.h5"), "--to", "materialx", "--quiet", "--out", str(target)]) == EXIT_OK
+    valid, message = _document(target.read_text()).validate()
+    assert valid, message
