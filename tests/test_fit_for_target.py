@@ -78,10 +78,17 @@ def test_unknown_or_undeclared_target_is_refused(gltf_data):
 
 def test_cli_fit_for_gltf_then_export(tmp_path):
     out = tmp_path / "fit"
-    assert main(["fit", str(SYNTHETIC / "plastic.h5"), "--for", "gltf", "--quiet", "--no-report", "--out",
-                 str(out)]) == EXIT_OK
+    assert main(["fit", str(SYNTHETIC / "plastic.h5"), "--for", "gltf", "--quiet", "--out", str(out)]) == EXIT_OK
     assert (out / "summary.txt").read_text().startswith("verdict: gltf for gltf: ")
-    assert json.loads((out / "selection.json").read_text())["target"] == "gltf"
+    selection = json.loads((out / "selection.json").read_text())
+    assert selection["target"] == "gltf"
+    # The report's renderer view: the data, the free choice and the glTF fit, with both held-out errors.
+    rows = {row["spec"]: row for row in selection["table"]}
+    report = (out / "report.md").read_text()
+    assert (out / "renderer.png").stat().st_size > 10_000 and "](renderer.png)" in report
+    assert "| gltf | direct | exact | 0 | 0 |" in report
+    free = rows[selection["chosen_by_criterion"]]["heldout_error"]
+    assert free < rows["gltf"]["heldout_error"]
     target = tmp_path / "plastic.gltf"
     assert main(["export", str(out / "result.h5"), "--to", "gltf", "--quiet", "--out", str(target)]) == EXIT_OK
     written = read_material(target.read_text())

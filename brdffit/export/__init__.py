@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import dataclasses
 
-from .registry import EXPORT_FORMATS, TARGETS, ExportError, Target
+from .registry import EXPORT_FORMATS, FIT_TARGETS, TARGETS, ExportError, Target
 
-__all__ = ["EXPORT_FORMATS", "TARGETS", "Target", "Export", "ExportError", "export", "export_details", "f0_to_eta"]
+__all__ = ["EXPORT_FORMATS", "FIT_TARGETS", "TARGETS", "Target", "Export", "ExportError", "export", "export_details", "f0_to_eta"]
 
 
 def __getattr__(name):

@@ -288,6 +288,9 @@ _CAPTIONS = {
     "spheres": "Sphere previews: the measurement (interpolated), the fit and their relative difference. Rings and "
                "speckle in the difference come from interpolating scattered samples (k nearest neighbours), not "
                "necessarily from the fit.",
+    "renderer": "The renderer's view: the measurement, the best model without the renderer's limits and the fit "
+                "made for the renderer (its models, every parameter in its ranges), each with its error on the "
+                "held-out directions of the selection.",
 }
 
 
@@ -427,6 +430,12 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
     captions = _captions(posterior, float(np.nanmax(albedo)))
     jobs += [("albedo", lambda p: F.plot_albedo(p, fit_result, channels=channels, albedo=albedo)),
              ("spheres", lambda p: F.plot_spheres(p, measurements, fit_result))]
+    if selection is not None and selection.target and selection.chosen_by_criterion != selection.chosen:
+        rows = {row["spec"]: row for row in selection.table}
+        free = selection.results[selection.chosen_by_criterion]
+        errors = (rows[selection.chosen_by_criterion]["heldout_error"], rows[selection.chosen]["heldout_error"])
+        jobs.append(("renderer", lambda p: F.plot_renderer_view(p, measurements, free, fit_result,
+                                                                selection.target, errors)))
     figure_paths = []
     for name, draw in jobs:
         path = out / f"{name}.png"

@@ -44,6 +44,7 @@ FIGSIZE = {
     "traces": (10.0, 12.0),
     "albedo": (7.0, 4.8),
     "spheres": (12.0, 4.4),
+    "renderer": (12.0, 4.4),
 }
 
 # zlib's level for the PNGs: 1 writes them several times faster than PIL's default (6), for files about a third
@@ -60,6 +61,7 @@ LAYOUT = {
     "residuals": dict(left=0.052, right=0.868, bottom=0.133, top=0.803, wspace=0.22),
     "albedo": dict(left=0.1, right=0.966, bottom=0.122, top=0.879),
     "spheres": dict(left=0.013, right=0.94, bottom=0.034, top=0.897, wspace=0.042),
+    "renderer": dict(left=0.013, right=0.987, bottom=0.034, top=0.86, wspace=0.042),
 }
 
 # Largest number of parameters shown in the corner and trace plots (the first ones of the posterior).
@@ -493,6 +495,37 @@ def plot_albedo(path, fit_result, channels=None, n: int = 46, albedo: np.ndarray
 
 
 # ------------------------------------------------------------------------------------------ 7. spheres
+def plot_renderer_view(path, measurements, free_result, target_result, target: str, errors: tuple,
+                       resolution: int = 160) -> str:
+    """What a renderer shows against what the data and the best free model show: sphere previews of the measurement
+    (interpolated), the unconstrained fit and the fit for ``target``, each fit titled with its held-out error.
+
+    Arguments:
+        path: the PNG.
+        measurements: the data.
+        free_result, target_result: the unconstrained choice's fit and the target's.
+        target: the renderer's name.
+        errors: the held-out errors ``(free, target)`` (the selection's, on the same rows).
+        resolution: pixels on a side.
+
+    Returns:
+        ``path`` as a string.
+    """
+    images = [(render_sphere(measurements, resolution=resolution), "measurement (k-NN interpolated)"),
+              (_render_fit(free_result, resolution), f"free: {free_result.spec}\nheld-out error {errors[0]:.4g}"),
+              (_render_fit(target_result, resolution),
+               f"for {target}: {target_result.spec}\nheld-out error {errors[1]:.4g} ({errors[1] / errors[0]:.2f}x)")]
+    fig = _new_figure("renderer")
+    for ax, (img, title) in zip(fig.subplots(1, 3), images):
+        shown = _display(img, 1.0)
+        ax.imshow(shown, cmap="gray" if shown.ndim == 2 else None, vmin=0, vmax=1)
+        ax.set_title(title, fontsize=10)
+        ax.set_xticks([]), ax.set_yticks([])
+    fig.suptitle(f"The renderer's view ({resolution}×{resolution} px, key/fill/rim lights, Reinhard tone map): "
+                 f"the data, the best free model and the best model {target} represents", fontsize=11)
+    return _save(fig, path)
+
+
 def sphere_images(measurements, fit_result, resolution: int = 160):
     """HDR sphere renders of the measurement (interpolated) and of the fit, and their relative difference.
 
