@@ -469,7 +469,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
         row["verdict"] = _verdict(row, chosen, best, threshold, criterion, usable, implausible)
     for_target = None
     if renders:
-        for_target = _choose_for_target(rows, usable, finite, renders, measurements, screened, done, options)
+        for_target = _choose_for_target(finite, renders, measurements, screened, done, options, warnings)
         for_target["verdict"] = f"chosen for {target}: its best model by the {criterion} score"
     by_scene, scene_results = None, {}
     if scene is not None:
@@ -498,10 +498,12 @@ def target_models(target: str | None, scene) -> tuple:
     return TARGETS[target].renders
 
 
-def _choose_for_target(rows, usable, finite, renders, measurements, screened, done, options) -> dict:
-    """The row of the target's choice: the best score among its models (converged ones first), its fit to all
-    the data made where the row still holds a screening fit."""
-    own = [r for r in usable if r["spec"] in renders] or [r for r in finite if r["spec"] in renders]
+def _choose_for_target(finite, renders, measurements, screened, done, options, warnings) -> dict:
+    """The row of the target's choice: the best score among its models, its fit to all the data made where the row
+    still holds a screening fit. A screening fit that ran out of steps is measured like any other (its held-out
+    error is that of the values it reached) and continued by the full-data fit; a warning says so if that one does
+    not converge either."""
+    own = [r for r in finite if r["spec"] in renders]
     if not own:
         raise ValueError(f"none of the target's models ({', '.join(renders)}) produced a finite score")
     row = min(own, key=lambda r: (r["score"], _simplicity(r)))
@@ -509,6 +511,9 @@ def _choose_for_target(rows, usable, finite, renders, measurements, screened, do
     if screened is not None and done[spec] is screened.get(spec):
         done[spec] = fit(measurements, spec, init=done[spec].model, **options)
         row.update(_full_fit_fields(done[spec], train_error=False))
+    if not Status(row["status"]).converged:
+        warnings.append(f"the target's choice {spec} ended {row['status']} (fitted to all the data from its "
+                        "screening fit); its values are the best found, not an optimum")
     return row
 
 
