@@ -107,6 +107,13 @@ EQUATIONS = {
         "η = 2/(1 − √(0.08 specular)) − 1,  αc = 0.1 + clearcoat_gloss (0.001 − 0.1)\n"
         "D_GTR1 = (αc² − 1) / (π ln(αc²) (1 + (αc² − 1) ch²))"
     ),
+    "blender": (
+        "f = metallic S(cd; base_color) · D G2/(4 ci co) + (1 − metallic) [F_dielectric(cd; ior) · D G2/(4 ci co)\n"
+        "    + (1 − E(co)) base_color/π]\n"
+        "E = F0 + (1 − F0) s(roughness, co, √((ior − 1)/(ior + 1))),  F0 = ((ior − 1)/(ior + 1))²,  co = ωo·n (the view)\n"
+        "S(c; f0) = f0 + (1 − f0)(1 − c)⁵,  D = GGX,  G2 = 1/(1 + Λ(ωi) + Λ(ωo)),  α = roughness²\n"
+        "s: Cycles' table ggx_gen_schlick_ior_s (16³ nodes, trilinear), computed by quadrature"
+    ),
     "gltf": (
         "f = (1 − metallic) [(1 − specular · max_c F) base_color/π + specular F · D V]\n"
         "  + metallic (base_color + (1 − base_color) w(cd)) · D V\n"
@@ -168,6 +175,12 @@ NOTES = {
                   "writes it exactly; tests/test_principled.py holds it to the plugin at 2,000 random pairs. The "
                   "clearcoat has no 1/(4 ci co), as the plugin evaluates it. anisotropic, spec_tint and sheen_tint "
                   "are held at 0 unless freed. Not reciprocal only in name: every term is symmetric in ωi and ωo.",
+    "blender": "Blender's Principled BSDF (4.2+) with the GGX distribution, as Cycles evaluates it "
+               "(intern/cycles/kernel/svm/closure.h): the inputs Base Color, Metallic, Roughness and IOR, the others "
+               "neutral. The diffuse layer is attenuated by Cycles' estimate of the specular layer's albedo at the "
+               "viewing direction, so the model is not reciprocal, as Cycles' is not; its table is computed again by "
+               "quadrature and agrees with Cycles' to 1e-4. `brdffit fit --for blender`, `brdffit export --to "
+               "blender`; tests/test_export_blender.py renders the export in Cycles against brdffit's render.",
     "gltf": "The BRDF a glTF 2.0 file describes: its metallic-roughness material as the specification's Appendix B "
             "writes it, with KHR_materials_ior (ior) and KHR_materials_specular (specular, specular_color). Every "
             "parameter is declared inside the range a glTF file accepts, so a fit is a material any glTF viewer "

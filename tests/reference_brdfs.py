@@ -39,6 +39,7 @@ __all__ = [
     "sgd",
     "principled",
     "gltf",
+    "blender",
     "sheen",
     "charlie_sheen",
     "charlie_lambda",
@@ -743,6 +744,93 @@ def gltf(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specul
     return _masked(pair, (1.0 - metallic) * dielectric + metallic * metal)
 
 
+@functools.lru_cache(maxsize=1)
+def cycles_layering_table(u_nodes: int = 96, phi_nodes: int = 64) -> np.ndarray:
+    """Cycles' ``ggx_gen_schlick_ior_s`` (``app/cycles_precompute.cpp``): at roughness r and μ = i/15 (clamped to
+    [1e-4, 1]) and z = i/15 (clamped to [1e-4, 0.99], η = (1 + z²)/(1 − z²)), the mean over the GGX visible normals h
+    of a view v at cosine μ (Heitz 2014, Eq. 38: G1(v) (v·h)⁺ D(h)/μ) of the blend factor
+    (F_dielectric(v·h) − F0)/(1 − F0), counting 0 where the mirror direction 2(v·h)h − v is below the surface.
+    Gauss-Legendre in t = tan²θh/(α² + tan²θh), where D cosθh dω = dt dφ/(2π), and in φ ∈ [0, 2π).
+    Returns the table indexed [z, μ, r]."""
+    nodes = np.arange(16) / 15.0
+    t, wt = np.polynomial.legendre.leggauss(u_nodes)
+    t, wt = (t + 1.0) / 2.0, wt / 2.0
+    p, wp = np.polynomial.legendre.leggauss(phi_nodes)
+    p, wp = (p + 1.0) * np.pi / 2.0, wp * np.pi / 2.0  # half the circle; the integrand is even in φ
+    out = np.zeros((16, 16, 16))
+    for ir, r in enumerate(np.clip(nodes, 1e-4, 1.0)):
+        alpha2 = r ** 4
+        theta_h = np.arctan(np.sqrt(alpha2 * t / (1.0 - t)))
+        h = np.stack([np.sin(theta_h)[:, None] * np.cos(p)[None, :], np.sin(theta_h)[:, None] * np.sin(p)[None, :],
+                      np.cos(theta_h)[:, None] * np.ones(phi_nodes)[None, :]], axis=-1)
+        w = (wt[:, None] * wp[None, :]) / np.pi  # 2 (both halves) / (2π)
+        for im, mu in enumerate(np.clip(nodes, 1e-4, 1.0)):
+            v = np.array([math.sqrt(1.0 - mu * mu), 0.0, mu])
+            vh = h @ v
+            mirror_z = 2.0 * vh * h[..., 2] - mu
+            g1 = 1.0 / (1.0 + 0.5 * (math.sqrt(1.0 + alpha2 * (1.0 - mu * mu) / mu ** 2) - 1.0))
+            keep = (vh > 0) & (mirror_z > 0)
+            for iz, z in enumerate(np.clip(nodes, 1e-4, 0.99)):
+                eta = (1.0 + z * z) / (1.0 - z * z)
+                f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+                cos_t = np.sqrt(np.clip(1.0 - (1.0 - np.clip(vh, 0, 1) ** 2) / eta ** 2, 0.0, 1.0))
+                c = np.clip(vh, 0, 1)
+                fresnel = 0.5 * (((c - eta * cos_t) / (c + eta * cos_t)) ** 2 + ((eta * c - cos_t) / (eta * c + cos_t)) ** 2)
+                blend = np.clip((fresnel - f0) / (1.0 - f0), 0.0, 1.0)
+                out[iz, im, ir] = min(max(float(np.sum(np.where(keep, w * g1 * vh / (mu * h[..., 2]) * blend, 0.0))), 0.0), 1.0)
+    return out
+
+
+def _lookup3(table, x, y, z):
+    """Cycles' ``lookup_table_read_3D`` (kernel/util/lookup_table.h): linear per axis over nodes i/(n − 1)."""
+    n = table.shape[0]
+
+    def axis(c):
+        c = np.clip(c, 0.0, 1.0) * (n - 1)
+        i = np.minimum(c.astype(int), n - 1)
+        return i, np.minimum(i + 1, n - 1), c - i
+
+    (x0, x1, tx), (y0, y1, ty), (z0, z1, tz) = axis(np.asarray(x, float)), axis(np.asarray(y, float)), axis(np.asarray(z, float))
+
+    def plane(k):
+        row0 = table[k, y0, x0] * (1 - tx) + table[k, y0, x1] * tx
+        row1 = table[k, y1, x0] * (1 - tx) + table[k, y1, x1] * tx
+        return row0 * (1 - ty) + row1 * ty
+
+    return plane(z0) * (1 - tz) + plane(z1) * tz
+
+
+@_quiet
+def blender(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, ior):
+    """Blender's Principled BSDF with distribution GGX as Cycles evaluates it (intern/cycles/kernel/svm/closure.h,
+    kernel/closure/bsdf_microfacet.h): with V = ωo (the view), L = ωi, α = roughness²,
+
+        spec = D G2 / (4 |N·L| |N·V|),  G2 = 1/(1 + Λ(L) + Λ(V)),  Λ = (√(1 + α² tan²θ) − 1)/2,
+        metal = Schlick(base_color, V·H) spec,  dielectric = F_dielectric(V·H, ior) spec,
+        diffuse = (1 − E) base_color/π,  E = F0 + (1 − F0) S(roughness, N·V, √((ior − 1)/(ior + 1))),
+        f = metallic metal + (1 − metallic)(dielectric + diffuse),
+
+    S Cycles' table `cycles_layering_table`, read by `_lookup3`."""
+    pair = Pair(theta_i, phi_i, theta_o, phi_o)
+    base = _col(base_color)
+    a2 = roughness ** 4
+    ch = np.cos(pair.th)
+    d = a2 / (np.pi * (ch ** 2 * (a2 - 1.0) + 1.0) ** 2)
+
+    def lam(c):
+        return 0.5 * (np.sqrt(1.0 + a2 * (1.0 - c * c) / (c * c)) - 1.0)
+
+    spec = (d / (1.0 + lam(pair.ci) + lam(pair.co)) / (4.0 * pair.ci * pair.co))[:, None]
+    c = pair.cos_d[:, None]
+    schlick = base + (1.0 - base) * (1.0 - c) ** 5
+    cos_t = np.sqrt(1.0 - (1.0 - c * c) / ior ** 2)
+    dielectric = 0.5 * (((c - ior * cos_t) / (c + ior * cos_t)) ** 2 + ((ior * c - cos_t) / (ior * c + cos_t)) ** 2)
+    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+    albedo = f0 + (1.0 - f0) * _lookup3(cycles_layering_table(), roughness, pair.co, math.sqrt((ior - 1.0) / (ior + 1.0)))
+    diffuse = np.clip(1.0 - albedo, 0.0, 1.0)[:, None] * base / np.pi
+    return _masked(pair, metallic * schlick * spec + (1.0 - metallic) * (dielectric * spec + diffuse))
+
+
 REFERENCES = {
     "lambert": lambda ti, pi_, to, po, p: lambert(ti, pi_, to, po, p["rho_d"]),
     "oren-nayar": lambda ti, pi_, to, po, p: oren_nayar(ti, pi_, to, po, p["rho_d"], p["sigma"]),
@@ -762,6 +850,7 @@ REFERENCES = {
     "sheen": lambda ti, pi_, to, po, p: sheen(ti, pi_, to, po, p["ks"]),
     "principled": lambda ti, pi_, to, po, p: principled(ti, pi_, to, po, **p),
     "gltf": lambda ti, pi_, to, po, p: gltf(ti, pi_, to, po, **p),
+    "blender": lambda ti, pi_, to, po, p: blender(ti, pi_, to, po, **p),
     "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),
     "abc-microfacet": lambda ti, pi_, to, po, p: abc_microfacet(ti, pi_, to, po, **p),
     "sgd": lambda ti, pi_, to, po, p: sgd(ti, pi_, to, po, **p),

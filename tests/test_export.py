@@ -372,9 +372,9 @@ def test_schlick_to_conductor_fits_the_curve():
 
 
 def test_registry_and_cli_choices():
-    assert EXPORT_FORMATS == tuple(TARGETS) == ("json", "mitsuba", "pbrt", "gltf")
+    assert EXPORT_FORMATS == tuple(TARGETS) == ("json", "mitsuba", "pbrt", "gltf", "blender", "materialx")
     with pytest.raises(ValueError, match="unknown export format"):
-        export(get("lambert"), to="blender")
+        export(get("lambert"), to="unity")
     from brdffit.cli import build_parser
 
     sub = next(a for a in build_parser()._subparsers._group_actions if a.choices)
@@ -391,7 +391,7 @@ def test_registry_loads_no_jax():
               "build_parser(); print(sorted(TARGETS), 'jax' in sys.modules)")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "['gltf', 'json', 'mitsuba', 'pbrt'] False"
+    assert done.stdout.strip() == "['blender', 'gltf', 'json', 'materialx', 'mitsuba', 'pbrt'] False"
 
 
 def test_json_round_trips():
@@ -449,8 +449,10 @@ def test_cli_export_writes_what_mitsuba_loads(mi, lambert_fit, tmp_path, capsys)
     mi.load_string(out.read_text())
     assert main(["export", str(path), "--to", "pbrt"]) == 0
     assert pr.parse(capsys.readouterr().out)["material"]["type"] == "diffuse"
-    assert main(["export", str(path), "--to", "blender"]) == 2
-    assert "invalid choice: 'blender'" in capsys.readouterr().err
+    assert main(["export", str(path), "--to", "blender"]) == 2  # a Lambert fit: Blender's model is fitted for it
+    assert "Blender has no equivalent of 'lambert'" in capsys.readouterr().err
+    assert main(["export", str(path), "--to", "unity"]) == 2
+    assert "invalid choice: 'unity'" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("f0", [0.5, 0.68, 0.9])

@@ -112,6 +112,7 @@ OTHER_CASES = [
     Case("principled", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.3, "roughness": 0.45, "specular": 0.65,
                             "spec_tint": 0.25, "anisotropic": 0.6, "sheen": 0.4, "sheen_tint": 0.3, "clearcoat": 0.7,
                             "clearcoat_gloss": 0.55}),
+    Case("blender", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.35, "roughness": 0.45, "ior": 1.7}),
     Case("gltf", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.35, "roughness": 0.4, "specular": 0.8,
                       "ior": 1.7, "specular_color": [0.95, 0.6, 0.9]}),
     Case("ashikhmin-shirley", {}, {"rs": RS, "n": 35.0}),
@@ -166,7 +167,7 @@ def _values(case_id):
 
 # The lobes and options of the modern microfacet, Burley and sheen models: against the reference at random
 # directions above the horizon to 1e-12 relative (the fixed configurations above hold every lobe to 1e-10).
-MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "gltf", "abc-smooth",
+MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "gltf", "blender", "abc-smooth",
                                                   "abc-microfacet", "sgd")
           or case.options.get("distribution") in ("std", "gtr")
           or case.options.get("anisotropic") is True and case.spec != "lafortune"
@@ -573,16 +574,17 @@ def test_cli_models_lists_every_lobe_with_its_parameters(capsys):
 
 
 def test_reciprocal_flags():
-    """Every lobe but toon-diffuse is reciprocal by construction, and the flag says so."""
+    """Every lobe but toon-diffuse and blender (Cycles' diffuse weight depends on the view alone) is reciprocal by
+    construction, and the flag says so."""
     flags = {name: models.lobe_class(name).reciprocal for name in models.names()}
-    assert flags.pop("toon-diffuse") is False
+    assert flags.pop("toon-diffuse") is False and flags.pop("blender") is False
     assert all(flags.values())
     assert not models.get("lambert+toon-diffuse").reciprocal
     assert models.get("lambert+toon-specular").reciprocal
 
 
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
-def test_reciprocal_lobes_are_symmetric_and_toon_diffuse_is_not(case):
+def test_reciprocal_lobes_are_symmetric_and_the_others_are_not(case):
     points = np.array(ALL_POINTS, dtype=float)
     model = case.model()
     forward = _values(case.id)[0]

@@ -55,6 +55,8 @@ TARGETS = {t.name: t for t in (
     Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", "pbrt", refines=True),
     Target("gltf", "a glTF 2.0 .gltf file: the material (with KHR_materials_ior and _specular) on a sphere", "gltf",
            family="gltf", renders=("gltf",)),
+    Target("blender", "a Python script that builds the material (Principled BSDF, GGX) with bpy, Blender 4.2+",
+           "blender", family="blender", renders=("blender",)),
     Target("materialx", "a MaterialX 1.39 document: the glTF material (gltf_pbr) and its OpenPBR Surface counterpart",
            "materialx", family="gltf", renders=("gltf",)),
 )}

@@ -259,7 +259,7 @@ def lobe_peaks(lobe, params: dict) -> list[Peak]:
         found = [Peak("half", value("alpha"))]
     elif name == "principled":
         found = [Peak("half", max(0.001, value("roughness") ** 2))]
-    elif name == "gltf":
+    elif name in ("gltf", "blender"):
         found = [Peak("half", value("roughness") ** 2)]
     elif name == "ward-aniso":
         found = [Peak("half", value("alpha_x")), Peak("half", value("alpha_y"))]

@@ -13,6 +13,7 @@ from .._lazy import module
 from .abc import ABCMicrofacet, ABCSmooth
 from .ashikhmin_shirley import AshikhminShirley, AshikhminShirleyAniso
 from .cook_torrance import GGX, CookTorrance
+from .blender import BlenderPrincipled
 from .diffuse import Burley, Lambert, OrenNayar
 from .gltf import GltfMaterial
 from .lafortune import Lafortune
@@ -54,6 +55,7 @@ _LOBES: dict[str, type[Lobe]] = {
         CharlieSheen,
         Principled,
         GltfMaterial,
+        BlenderPrincipled,
         ToonDiffuse,
         ToonSpecular,
     )

@@ -1,0 +1,159 @@
+r"""Blender's Principled BSDF as Cycles evaluates an opaque one with the GGX distribution (Blender 4.2+).
+
+Cycles' principled closure (``intern/cycles/kernel/svm/closure.h``) with no transmission, subsurface, sheen, coat
+or emission, and ``Specular Tint`` white, is a sum of three layers. With h = normalize(ωi + ωo), α = roughness²,
+ωo the direction to the viewer (Cycles' ``sd->wi``) and c = ωi·h:
+
+- metal: metallic · F_S(c; base_color) · D G2 / (4 ci co), F_S Schlick's term with f0 = base_color (Cycles' F82-tint
+  Fresnel with a white tint is Schlick's);
+- dielectric specular: (1 − metallic) · F_d(c; η) · D G2 / (4 ci co), F_d the exact dielectric Fresnel term
+  (Cycles' generalized Schlick with a negative exponent and a white tint) at η = ``ior`` (``Specular IOR Level``
+  0.5 leaves it as it is);
+- diffuse: (1 − metallic) (1 − E(co)) base_color/π, Lambert's, attenuated by the specular layer's albedo as Cycles
+  estimates it (``bsdf_microfacet_estimate_albedo``, ``closure_layering_weight``): E = f0 + (1 − f0) s, f0 = F0(η),
+  with s read by trilinear interpolation from a 16 × 16 × 16 table over (roughness, co, z = √((η − 1)/(η + 1))).
+
+D is GGX and G2 the height-correlated Smith term 1/(1 + Λ(ωi) + Λ(ωo)) (Cycles' ``bsdf_G``). The table is Cycles'
+``ggx_gen_schlick_ior_s`` computed again here by quadrature (`layering_table`): s is the mean of the Fresnel blend
+factor (F_d(h·ωo; η) − F0)/(1 − F0) over the GGX visible normals of ωo whose mirror direction stays above the
+surface (``cycles_precompute.cpp``'s estimator: Monte Carlo with 2²⁰ samples there, Gauss-Legendre here), on Cycles'
+nodes (roughness and co at i/15 clamped to [1e-4, 1], z at i/15 clamped to [1e-4, 0.99], η = (1 + z²)/(1 − z²)).
+
+The diffuse weight depends on the viewing direction alone, so the model is not reciprocal (as Cycles' is not). The
+value is affine in base_color channel by channel, a linear amplitude that a fit solves exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+
+from .._lazy import module
+from ..geometry import LocalPair
+from ..params import ParamSpec
+from . import fresnel as fr
+from .gltf import MIN_ROUGHNESS
+from .lobe import Lobe
+from .microfacet import DISTRIBUTIONS, smith_correlated
+
+jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
+
+__all__ = ["BlenderPrincipled", "layering_table", "TABLE_SIZE"]
+
+TABLE_SIZE = 16
+# Gauss-Legendre nodes of the table's quadrature: in u, the GGX distribution's own CDF variable of θh, and in φh.
+_U_NODES, _PHI_NODES = 96, 64
+_MAX_IOR = 3.0
+
+
+def _fresnel_dielectric_np(c, eta):
+    """The exact dielectric Fresnel reflectance (NumPy, for the table)."""
+    s2 = (1.0 - c * c) / (eta * eta)
+    total = s2 >= 1.0
+    t = np.sqrt(np.where(total, 0.0, 1.0 - s2))
+    rs = (c - eta * t) / (c + eta * t)
+    rp = (eta * c - t) / (eta * c + t)
+    return np.where(total, 1.0, 0.5 * (rs * rs + rp * rp))
+
+
+@functools.lru_cache(maxsize=1)
+def layering_table() -> np.ndarray:
+    """Cycles' ``ggx_gen_schlick_ior_s`` by quadrature, shape ``(z, co, roughness)`` = (16, 16, 16) (module doc).
+
+    s(r, μ, η) = ∫ D_v(h) b(h·v) 1[ℓ·n > 0] dh, with v at cosine μ, ℓ = 2(v·h)h − v its mirror direction,
+    b = (F_d(h·v; η) − F0)/(1 − F0) and D_v(h) = G1(v) (v·h)⁺ D(h)/μ the visible normals of GGX at α = r²
+    (Heitz 2014, Eq. 38). In u = tan²θh/(α² + tan²θh), D cosθh dω_h = du dφ/(2π), so
+    s = G1(v)/(2π μ) ∫∫ (v·h)⁺ b 1[ℓ·n > 0] / cosθh du dφ.
+
+    Returns:
+        The table, float64.
+    """
+    nodes = np.arange(TABLE_SIZE) / (TABLE_SIZE - 1)
+    rough = np.clip(nodes, 1e-4, 1.0)
+    mu = np.clip(nodes, 1e-4, 1.0)
+    z = np.clip(nodes, 1e-4, 0.99)
+    eta = (1.0 + z * z) / (1.0 - z * z)
+    x, wx = np.polynomial.legendre.leggauss(_U_NODES)
+    u, wu = 0.5 * (x + 1.0), 0.5 * wx
+    y, wy = np.polynomial.legendre.leggauss(_PHI_NODES)
+    phi, wphi = np.pi * 0.5 * (y + 1.0), np.pi * 0.5 * wy  # φh in [0, π]: the integrand is even in φh
+    table = np.empty((TABLE_SIZE, TABLE_SIZE, TABLE_SIZE))
+    for i, r in enumerate(rough):
+        a2 = r ** 4
+        tan2 = a2 * u / (1.0 - u)
+        cos_h = 1.0 / np.sqrt(1.0 + tan2)[:, None]
+        sin_h = np.sqrt(tan2)[:, None] * cos_h
+        hx, hy, hz = sin_h * np.cos(phi)[None, :], sin_h * np.sin(phi)[None, :], cos_h * np.ones_like(phi)[None, :]
+        weight = 2.0 * wu[:, None] * wphi[None, :] / (2.0 * np.pi)  # both halves of φh
+        for j, m in enumerate(mu):
+            vx, vz = np.sqrt(1.0 - m * m), m
+            vh = vx * hx + vz * hz
+            lz = 2.0 * vh * hz - vz
+            g1 = 2.0 / (1.0 + np.sqrt(1.0 + a2 * (1.0 - m * m) / (m * m)))
+            visible = (vh > 0.0) & (lz > 0.0)
+            base = np.where(visible, weight * vh / hz, 0.0) * g1 / m
+            for k, e in enumerate(eta):
+                f0 = ((e - 1.0) / (e + 1.0)) ** 2
+                blend = np.clip((_fresnel_dielectric_np(np.clip(vh, 0.0, 1.0), e) - f0) / (1.0 - f0), 0.0, 1.0)
+                table[k, j, i] = np.clip(np.sum(base * blend), 0.0, 1.0)
+    return table
+
+
+def _trilinear(table, x, y, z):
+    """Cycles' ``lookup_table_read_3D``: linear in each of x (fastest), y, z over nodes at i/(n − 1), clamped."""
+    n = table.shape[0]
+
+    def split(c):
+        c = jnp.clip(c, 0.0, 1.0) * (n - 1)
+        i = jnp.minimum(jnp.floor(c), n - 2).astype(jnp.int32)
+        return i, c - i
+
+    (i, tx), (j, ty), (k, tz) = split(x), split(y), split(z)
+
+    def at(dk, dj, di):
+        return table[k + dk, j + dj, i + di]
+
+    def lerp(a, b, t):
+        return a + (b - a) * t
+
+    return lerp(lerp(lerp(at(0, 0, 0), at(0, 0, 1), tx), lerp(at(0, 1, 0), at(0, 1, 1), tx), ty),
+                lerp(lerp(at(1, 0, 0), at(1, 0, 1), tx), lerp(at(1, 1, 0), at(1, 1, 1), tx), ty), tz)
+
+
+@dataclasses.dataclass(frozen=True)
+class BlenderPrincipled(Lobe):
+    """Blender's Principled BSDF with the GGX distribution as Cycles evaluates it (module doc): Base Color,
+    Metallic, Roughness and IOR, the other inputs at their neutral values (Specular IOR Level 0.5, Specular Tint
+    white, no subsurface, sheen, coat, transmission or emission)."""
+
+    name = "blender"
+    reference = ("Blender 4.2+ Principled BSDF as Cycles evaluates it: intern/cycles/kernel/svm/closure.h, "
+                 "kernel/closure/bsdf_microfacet.h, app/cycles_precompute.cpp")
+    reciprocal = False
+    offset = True
+
+    def param_specs(self):
+        return (
+            ParamSpec("base_color", 0.5, 0.0, 1.0, colour=True, linear=True,
+                      doc="Base Color: the diffuse albedo, and the metal's normal reflectance"),
+            ParamSpec("metallic", 0.0, 0.0, 1.0, doc="Metallic: blends the dielectric layers into the metal"),
+            ParamSpec("roughness", 0.5, MIN_ROUGHNESS, 1.0, scale=True, doc="Roughness: GGX α = roughness²"),
+            ParamSpec("ior", 1.5, 1.0, _MAX_IOR, doc="IOR: the dielectric specular layer's index of refraction"),
+        )
+
+    def __call__(self, params, pair: LocalPair):
+        base = params["base_color"]
+        metallic, roughness, eta = params["metallic"], params["roughness"], params["ior"]
+        alpha = roughness * roughness
+        ggx = DISTRIBUTIONS["ggx"]
+        lobe = (ggx.D(pair.cos_h, alpha) * smith_correlated(pair, ggx, alpha) / (4.0 * pair.cos_i * pair.cos_o))
+        metal = fr.schlick(pair.cos_d[..., None], base) * lobe[..., None]
+        specular = fr.dielectric(pair.cos_d, 1.0, eta) * lobe
+        f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+        z = jnp.sqrt((eta - 1.0) / (eta + 1.0))
+        s = _trilinear(jnp.asarray(layering_table()), roughness, pair.cos_o, z)
+        albedo = f0 + (1.0 - f0) * s
+        diffuse = jnp.clip(1.0 - albedo, 0.0, 1.0)[..., None] * base / jnp.pi
+        return metallic * metal + (1.0 - metallic) * (specular[..., None] + diffuse)
