@@ -1,0 +1,174 @@
+"""Every shared real material fitted for each renderer that has declared models (`brdffit fit --for TARGET`), its
+cost against the unconstrained default fit on the same held-out rows, and its exports loaded in the real tools.
+
+For each material of the real-data gallery (`scripts/real_data_gallery.py`: NIST PTFE at each wavelength, the five
+RGL-EPFL materials, CEA's retro-reflective tape) and each target of `brdffit.export.FIT_TARGETS`:
+
+- `brdffit.select(m, DEFAULT_CANDIDATES, target=TARGET)`: the target's choice and the unconstrained choice, with
+  their held-out errors on the selection's own held-out rows (the 20% it holds out, seed 0), and their ratio;
+- every parameter of the target's fit inside its declared bounds (the target's ranges);
+- its export to the target (glTF: the Khronos glTF-Validator, no error; MaterialX: `Document.validate()`; Mitsuba:
+  `mitsuba.load_string` and no ``unbounded`` texture or ``blendbsdf``), and whether the export states it exact.
+
+Writes docs/real-data/renderers.json and prints the markdown table of docs/export.md ("Shared real materials").
+
+Usage: python scripts/renderer_gallery.py [--only NAME ...] [--targets gltf,mitsuba]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT_JSON = ROOT / "docs" / "real-data" / "renderers.json"
+VALIDATOR = ROOT / "tests" / "clients" / "validate_gltf.cjs"
+
+
+def _gallery():
+    spec = importlib.util.spec_from_file_location("real_data_gallery", ROOT / "scripts" / "real_data_gallery.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _in_range(result) -> bool:
+    declared = result.model.param_specs
+    return all(np.all(declared[name].lower <= np.asarray(v)) and np.all(np.asarray(v) <= declared[name].upper)
+               for name, v in result.params.items())
+
+
+def _cycles_difference(text: str, model) -> str:
+    """Cycles' render of a Blender export against brdffit's of the model, as tests/test_export_blender.py compares
+    them (tests/clients/render_blender.py; 96 px, 256 samples a pixel, brdffit box-filtered from 4 × 4 points a
+    pixel): 'ok (mean relative difference X)' within 3%, else the difference."""
+    from brdffit.render import DEFAULT_LIGHTS, render_sphere
+
+    resolution, samples, supersample = 96, 256, 4
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        (folder / "material.py").write_text(text)
+        (folder / "settings.json").write_text(json.dumps({"resolution": resolution, "samples": samples,
+                                                          "lights": [list(light) for light in DEFAULT_LIGHTS]}))
+        subprocess.run([sys.executable, str(ROOT / "tests" / "clients" / "render_blender.py"),
+                        str(folder / "material.py"), str(folder / "settings.json"), str(folder / "cycles.npy")],
+                       check=True, capture_output=True, timeout=600)
+        cycles = np.load(folder / "cycles.npy")
+    fine = render_sphere(model, resolution=resolution * supersample)
+    ours = fine.reshape(resolution, supersample, resolution, supersample, -1).mean(axis=(1, 3))
+    centres = (np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0
+    u, w = np.meshgrid(centres, -centres)
+    luminance = ours.mean(axis=-1)
+    lit = (u * u + w * w < 0.81) & (luminance > 0.01 * luminance.max())
+    difference = float(np.mean(np.abs(cycles - ours)[lit] / ours[lit]))
+    return f"{'ok' if difference <= 0.03 else 'FAILED'} (Cycles render: {difference:.2%})"
+
+
+def _loads(text: str, target: str, model=None) -> str:
+    """'ok' or what the real tool said of the export (``model``: the exported model, for the Cycles render)."""
+    if target == "gltf":
+        node = shutil.which("node")
+        if node is None or not (ROOT / "node_modules" / "gltf-validator").is_dir():
+            return "validator not installed"
+        with tempfile.NamedTemporaryFile("w", suffix=".gltf", delete=False) as f:
+            f.write(text)
+        report = json.loads(subprocess.run([node, str(VALIDATOR), f.name], cwd=ROOT, capture_output=True, text=True,
+                                           check=True, timeout=120).stdout)
+        issues = report["issues"]
+        return "ok" if issues["numErrors"] == 0 and issues["numWarnings"] == 0 else json.dumps(issues["messages"])
+    if target == "materialx":
+        import MaterialX as mx
+
+        doc = mx.createDocument()
+        mx.readFromXmlString(doc, text)
+        libraries = mx.createDocument()
+        mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), libraries)
+        doc.importLibrary(libraries)
+        valid, message = doc.validate()
+        return "ok" if valid else message
+    if target == "blender":
+        return _cycles_difference(text, model)
+    if target == "mitsuba":
+        import mitsuba as mi
+
+        mi.set_variant("scalar_rgb")
+        mi.load_string(text)
+        return "ok" if "unbounded" not in text and "blendbsdf" not in text else "unbounded values or a blend"
+    return "not checked"
+
+
+def run(entry: dict, target: str, gallery) -> dict:
+    from brdffit import select
+    from brdffit.export import export_details
+    from brdffit.select import DEFAULT_CANDIDATES
+
+    measurements = gallery.load_measurements(entry)
+    start = time.perf_counter()
+    selection = select(measurements, DEFAULT_CANDIDATES, target=target)
+    seconds = time.perf_counter() - start
+    rows = {row["spec"]: row for row in selection.table}
+    mine, free = rows[selection.chosen], rows[selection.chosen_by_criterion]
+    details = export_details(selection.result, target, name=entry["name"])
+    return {"material": entry["name"], "target": target, "chosen": selection.chosen,
+            "heldout": mine["heldout_error"], "free_chosen": selection.chosen_by_criterion,
+            "free_heldout": free["heldout_error"], "ratio": mine["heldout_error"] / free["heldout_error"],
+            "plausible": selection.plausible, "in_range": _in_range(selection.result),
+            "exact": details.exact, "loads": _loads(details.text, target, selection.result.model), "seconds": seconds,
+            "params": {k: np.asarray(v).tolist() for k, v in selection.result.params.items()}}
+
+
+def markdown(records: list[dict]) -> str:
+    lines = ["| material | target | its choice | held-out error | unconstrained choice | its held-out error | ratio "
+             "| in range | export loads | exact |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in records:
+        loads = r["loads"] + (f"; MaterialX: {r['loads_materialx']}" if "loads_materialx" in r else "")
+        lines.append(f"| {r['material']} | {r['target']} | `{r['chosen']}` | {r['heldout']:.4g} | `{r['free_chosen']}` "
+                     f"| {r['free_heldout']:.4g} | {r['ratio']:.2f} | {'yes' if r['in_range'] else '**no**'} "
+                     f"| {loads} | {'yes' if r['exact'] else 'no'} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    from brdffit.compilation_cache import enable_compilation_cache
+    from brdffit.export import FIT_TARGETS
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", nargs="*", help="material names (default: all)")
+    parser.add_argument("--targets", default=",".join(t for t in FIT_TARGETS if t != "materialx"),
+                        help="comma-separated targets (default: every --for target but materialx, whose fit is "
+                             "gltf's; its export is checked from the gltf fit)")
+    args = parser.parse_args(argv)
+    enable_compilation_cache()
+    gallery = _gallery()
+    entries = [e for e in gallery.materials() if not args.only or e["name"] in args.only]
+    previous = {(r["material"], r["target"]): r for r in json.loads(OUT_JSON.read_text())} if OUT_JSON.exists() else {}
+    for entry in entries:
+        for target in args.targets.split(","):
+            record = run(entry, target, gallery)
+            if target == "gltf":  # the MaterialX document of the same fit
+                from brdffit import models
+                from brdffit.export import export
+
+                model = models.get("gltf", channels=len(record["params"]["base_color"]), **record["params"])
+                record["loads_materialx"] = _loads(export(model, "materialx", name=entry["name"]), "materialx")
+            previous[(record["material"], target)] = record
+            print(f"{entry['name']:>20} {target:>8}: {record['chosen']} {record['heldout']:.4g} vs "
+                  f"{record['free_chosen']} {record['free_heldout']:.4g} ({record['ratio']:.2f}x), loads "
+                  f"{record['loads']}, {record['seconds']:.1f} s", flush=True)
+    records = sorted(previous.values(), key=lambda r: (r["target"], r["material"]))
+    OUT_JSON.write_text(json.dumps(records, indent=1) + "\n")
+    print(markdown(records))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
