@@ -85,7 +85,8 @@ def layering_table() -> np.ndarray:
         tan2 = a2 * u / (1.0 - u)
         cos_h = 1.0 / np.sqrt(1.0 + tan2)[:, None]
         sin_h = np.sqrt(tan2)[:, None] * cos_h
-        hx, hy, hz = sin_h * np.cos(phi)[None, :], sin_h * np.sin(phi)[None, :], cos_h * np.ones_like(phi)[None, :]
+        # v lies in the xz plane, so only h's x and z components enter.
+        hx, hz = sin_h * np.cos(phi)[None, :], cos_h * np.ones_like(phi)[None, :]
         weight = 2.0 * wu[:, None] * wphi[None, :] / (2.0 * np.pi)  # both halves of φh
         for j, m in enumerate(mu):
             vx, vz = np.sqrt(1.0 - m * m), m
