@@ -19,10 +19,7 @@ the active mesh object if there is one, and prints its name. ``build_material(na
 
 from __future__ import annotations
 
-import numpy as np
-
 from . import terms as tm
-from .mitsuba import check_channels
 
 __all__ = ["write", "FAMILY", "EXPORTABLE", "NODE_INPUTS"]
 
@@ -57,16 +54,8 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     Raises:
         ExportError: a model other than the ``blender`` lobe alone, or a channel count other than 1 or 3.
     """
-    check_channels(model, "Blender")
-    if len(model.lobes) != 1 or model.lobes[0].name != FAMILY:
-        raise tm.ExportError(f"Blender has no equivalent of {model.spec!r}: it writes {EXPORTABLE}; fit that model "
-                             "for Blender (brdffit fit --for blender), or export with the fit option (--fit), which "
-                             "fits it to this one and states the deviation")
-    local = model.layout.local_params(model.params, 0)
-    values = {k: (tuple(tm.rgb(v)) if np.ndim(v) else float(v)) for k, v in local.items()}
-    written = tm.assemble([(model.lobes[0], {k: np.asarray(v, dtype=float) for k, v in values.items()})], 3)
-    reference = model if source is None else source
-    deviation = tm.measure(reference, written, pairs=tm.deviation_pairs(tm.peaks(reference, written)))
+    values, written, deviation = tm.own_model(model, FAMILY, "Blender", EXPORTABLE, source)
+    values = {k: (tuple(v) if isinstance(v, list) else v) for k, v in values.items()}
     notes: list[str] = []
     verdict = "exact: " if tm.is_exact(deviation, notes) else "measured deviation from the source model: "
     inputs = {NODE_INPUTS[k]: (v + (1.0,) if isinstance(v, tuple) else v) for k, v in values.items()}
@@ -104,4 +93,4 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
         "        target.data.materials.append(material)",
         "    print(material.name)",
     ]
-    return "\n".join(lines) + "\n", (lambda wi, wo: np.asarray(tm.evaluate_dirs(written, wi, wo))), notes, deviation
+    return "\n".join(lines) + "\n", written, notes, deviation

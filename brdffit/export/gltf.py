@@ -29,9 +29,8 @@ import math
 import numpy as np
 
 from . import terms as tm
-from .mitsuba import check_channels
 
-__all__ = ["write", "measured", "read_material", "material_values", "sphere_mesh", "EXPORTABLE", "FAMILY"]
+__all__ = ["write", "measured", "read_material", "sphere_mesh", "EXPORTABLE", "FAMILY"]
 
 # The model a glTF file represents exactly (the fit option's family for this target).
 FAMILY = "gltf"
@@ -64,12 +63,6 @@ def sphere_mesh(rings: int = _RINGS, segments: int = _SEGMENTS):
     triangles = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))
                  if len({tuple(positions[i]) for i in t}) == 3]
     return positions, normals.astype(np.float32), np.asarray(triangles, dtype=np.uint16).ravel()
-
-
-def material_values(model: tm.Model) -> dict:
-    """The gltf lobe's parameters (local names) as floats and RGB lists (what a file writes)."""
-    local = model.layout.local_params(model.params, 0)
-    return {name: (tm.rgb(value) if np.ndim(value) else float(value)) for name, value in local.items()}
 
 
 def _document(values: dict, name: str, extras: dict) -> dict:
@@ -113,25 +106,9 @@ def _document(values: dict, name: str, extras: dict) -> dict:
 
 def measured(model: tm.Model, source=None):
     """The glTF material of ``model`` and its deviation from ``source`` (default ``model``), for every target that
-    writes the glTF material (this file, MaterialX's ``gltf_pbr``).
-
-    Returns:
-        ``(values, written, deviation)``: `material_values`, a function (wi, wo) -> f_r of the material as written,
-        and the `Deviation`.
-
-    Raises:
-        ExportError: a model other than the ``gltf`` lobe alone, or a channel count other than 1 or 3.
-    """
-    check_channels(model, "glTF")
-    if len(model.lobes) != 1 or model.lobes[0].name != FAMILY:
-        raise tm.ExportError(f"glTF has no equivalent of {model.spec!r}: it writes {EXPORTABLE}; fit that model "
-                             "for glTF (brdffit fit --for gltf), or export with the fit option (--fit), which fits "
-                             "it to this one and states the deviation")
-    values = material_values(model)
-    material = tm.assemble([(model.lobes[0], {k: np.asarray(v, dtype=float) for k, v in values.items()})], 3)
-    reference = model if source is None else source
-    deviation = tm.measure(reference, material, pairs=tm.deviation_pairs(tm.peaks(reference, material)))
-    return values, (lambda wi, wo: np.asarray(tm.evaluate_dirs(material, wi, wo))), deviation
+    writes the glTF material (this file, MaterialX's ``gltf_pbr``): `brdffit.export.terms.own_model` for the
+    ``gltf`` lobe."""
+    return tm.own_model(model, FAMILY, "glTF", EXPORTABLE, source)
 
 
 def write(model: tm.Model, name: str, header: list[str], source=None):

@@ -40,6 +40,7 @@ import jax
 import numpy as np
 
 from . import terms as tm
+from .terms import check_channels
 
 __all__ = ["write", "evaluate_in_mitsuba", "check_channels", "EXPORTABLE"]
 
@@ -330,14 +331,6 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     head = f'version="3.0.0" id={quoteattr(name)} '
     lines += _tree(leaves, "", head)
     return "\n".join(lines) + "\n", written, notes, deviation
-
-
-def check_channels(model, target: str):
-    """Raise `ExportError` unless the model has 1 or 3 channels (the renderers take RGB)."""
-    if model.channels not in (1, 3):
-        raise tm.ExportError(f"{target} takes RGB colours; model {model.spec!r} has {model.channels} channels "
-                             "(spectral data need the wavelengths, which a model does not carry); fit RGB or "
-                             "single-channel data")
 
 
 def evaluate_in_mitsuba(text: str, wi, wo) -> np.ndarray:

@@ -25,7 +25,7 @@ import numpy as np
 
 from . import pbrt_reference
 from . import terms as tm
-from .mitsuba import check_channels
+from .terms import check_channels
 
 __all__ = ["write", "EXPORTABLE"]
 

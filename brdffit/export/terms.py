@@ -24,6 +24,7 @@ from ..models.model import evaluate_dirs
 from .registry import ExportError
 
 __all__ = ["ExportError", "Term", "terms", "assemble", "evaluate_dirs", "reflects_nothing", "f0_to_eta",
+           "check_channels", "own_model",
            "schlick_to_conductor", "Deviation", "measure", "random_pairs", "Peak", "peaks", "lobe_peaks", "Pairs",
            "deviation_pairs", "is_exact", "number", "rgb"]
 
@@ -521,6 +522,43 @@ def measure(source: Model, written, n: int = DEVIATION_PAIRS, seed: int = DEVIAT
     uniform_rms, uniform_max_rel = _errors(f[u], g[u], cos[u], np.ones(pairs.uniform))
     return Deviation(rms=rms, max_rel=max_rel, pairs=len(pairs), uniform_rms=uniform_rms,
                      uniform_max_rel=uniform_max_rel, near_pairs=int(pairs.near.sum()), sample=pairs)
+
+
+def check_channels(model, target: str):
+    """Raise `ExportError` unless the model has 1 or 3 channels (the renderers take RGB)."""
+    if model.channels not in (1, 3):
+        raise ExportError(f"{target} takes RGB colours; model {model.spec!r} has {model.channels} channels "
+                          "(spectral data need the wavelengths, which a model does not carry); fit RGB or "
+                          "single-channel data")
+
+
+def own_model(model: Model, family: str, target: str, exportable: str, source=None):
+    """The values of a target that writes one brdffit model of its own (glTF's ``gltf``, Blender's ``blender``),
+    the material as written and its deviation from ``source`` (default ``model``).
+
+    Arguments:
+        model: the model to write: that lobe alone, 1 or 3 channels.
+        family: the lobe's name; target: the target's name in messages; exportable: what the target writes, in words.
+        source: the model the deviation is measured against (the original under the fit option).
+
+    Returns:
+        ``(values, written, deviation)``: the lobe's parameters as floats and RGB lists (what the file writes), a
+        function (wi, wo) -> f_r of the material as written, and the `Deviation`.
+
+    Raises:
+        ExportError: another model, or a channel count other than 1 or 3.
+    """
+    check_channels(model, target)
+    if len(model.lobes) != 1 or model.lobes[0].name != family:
+        raise ExportError(f"{target} has no equivalent of {model.spec!r}: it writes {exportable}; fit that model "
+                          f"for {target} (brdffit fit --for {family}), or export with the fit option (--fit), which "
+                          "fits it to this one and states the deviation")
+    local = model.layout.local_params(model.params, 0)
+    values = {name: (rgb(value) if np.ndim(value) else float(value)) for name, value in local.items()}
+    material = assemble([(model.lobes[0], {k: np.asarray(v, dtype=float) for k, v in values.items()})], 3)
+    reference = model if source is None else source
+    deviation = measure(reference, material, pairs=deviation_pairs(peaks(reference, material)))
+    return values, (lambda wi, wo: np.asarray(evaluate_dirs(material, wi, wo))), deviation
 
 
 def number(v) -> str:

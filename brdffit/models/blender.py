@@ -34,9 +34,9 @@ from .._lazy import module
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
-from .gltf import MIN_ROUGHNESS
 from .lobe import Lobe
 from .microfacet import DISTRIBUTIONS, smith_correlated
+from .specs import base_color, metallic, perceptual_roughness
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
@@ -137,10 +137,9 @@ class BlenderPrincipled(Lobe):
 
     def param_specs(self):
         return (
-            ParamSpec("base_color", 0.5, 0.0, 1.0, colour=True, linear=True,
-                      doc="Base Color: the diffuse albedo, and the metal's normal reflectance"),
-            ParamSpec("metallic", 0.0, 0.0, 1.0, doc="Metallic: blends the dielectric layers into the metal"),
-            ParamSpec("roughness", 0.5, MIN_ROUGHNESS, 1.0, scale=True, doc="Roughness: GGX α = roughness²"),
+            base_color("Base Color: the diffuse albedo, and the metal's normal reflectance"),
+            metallic("Metallic: blends the dielectric layers into the metal"),
+            perceptual_roughness("Roughness: GGX α = roughness²"),
             ParamSpec("ior", 1.5, 1.0, _MAX_IOR, doc="IOR: the dielectric specular layer's index of refraction"),
         )
 

@@ -29,14 +29,12 @@ from ..params import ParamSpec
 from . import fresnel as fr
 from .lobe import Lobe
 from .microfacet import DISTRIBUTIONS, smith_correlated
+from .specs import base_color, metallic, perceptual_roughness
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["GltfMaterial", "ior_to_f0", "MIN_ROUGHNESS"]
+__all__ = ["GltfMaterial", "ior_to_f0"]
 
-# The smallest roughness a fit takes: Appendix B's BRDF is singular at α = 0 (its note under "Specular BRDF");
-# roughness 0.03 is α = 9e-4, the width below which renderers clamp (Mitsuba's principled: α ≥ 0.001).
-MIN_ROUGHNESS = 0.03
 # KHR_materials_ior: ior ≥ 1 (or 0, which brdffit does not write); 3 is f0 = 0.25, beyond every common dielectric.
 _MAX_IOR = 3.0
 
@@ -59,11 +57,9 @@ class GltfMaterial(Lobe):
 
     def param_specs(self):
         return (
-            ParamSpec("base_color", 0.5, 0.0, 1.0, colour=True, linear=True,
-                      doc="baseColorFactor: diffuse albedo of the dielectric, normal reflectance of the metal"),
-            ParamSpec("metallic", 0.0, 0.0, 1.0, doc="metallicFactor: blends the dielectric into the metal"),
-            ParamSpec("roughness", 0.5, MIN_ROUGHNESS, 1.0, scale=True,
-                      doc="roughnessFactor: GGX α = roughness²"),
+            base_color("baseColorFactor: diffuse albedo of the dielectric, normal reflectance of the metal"),
+            metallic("metallicFactor: blends the dielectric into the metal"),
+            perceptual_roughness("roughnessFactor: GGX α = roughness² (Appendix B's BRDF is singular at α = 0)"),
             ParamSpec("specular", 1.0, 0.0, 1.0,
                       doc="KHR_materials_specular specularFactor: weight of the dielectric's specular layer"),
             ParamSpec("ior", 1.5, 1.0, _MAX_IOR,

@@ -6,7 +6,7 @@ import math
 
 from ..params import ParamSpec
 
-__all__ = ["RHO_D", "KS", "exponent", "roughness"]
+__all__ = ["RHO_D", "KS", "exponent", "roughness", "base_color", "metallic", "perceptual_roughness"]
 
 RHO_D = ParamSpec("rho_d", 0.5, 0.0, 1.0, colour=True, unit="1", doc="diffuse albedo (reflectance)",
                   linear=True)
@@ -26,3 +26,20 @@ def exponent(name: str = "n", default: float = 20.0, doc: str = "specular expone
 def roughness(name: str = "m", default: float = 0.2, doc: str = "microfacet roughness (RMS slope width)") -> ParamSpec:
     """A microfacet width: shape parameter in [MIN_ROUGHNESS, 1]."""
     return ParamSpec(name, default, MIN_ROUGHNESS, 1.0, colour=False, unit="1", doc=doc, scale=True)
+
+
+def base_color(doc: str) -> ParamSpec:
+    """The base colour of a metallic-roughness material (glTF, Blender): a colour in [0, 1], a linear amplitude
+    (those materials are affine in it, channel by channel)."""
+    return ParamSpec("base_color", 0.5, 0.0, 1.0, colour=True, linear=True, doc=doc)
+
+
+def metallic(doc: str) -> ParamSpec:
+    """The metalness of a metallic-roughness material: the weight in [0, 1] of its metal against its dielectric."""
+    return ParamSpec("metallic", 0.0, 0.0, 1.0, doc=doc)
+
+
+def perceptual_roughness(doc: str) -> ParamSpec:
+    """The roughness r of a metallic-roughness material, GGX α = r² (Burley 2012): in [√MIN_ROUGHNESS, 1], so that
+    α stays at least `MIN_ROUGHNESS`."""
+    return ParamSpec("roughness", 0.5, math.sqrt(MIN_ROUGHNESS), 1.0, scale=True, doc=doc)
