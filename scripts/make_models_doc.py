@@ -118,7 +118,8 @@ EQUATIONS = {
         "f = (1 − metallic) [(1 − specular · max_c F) base_color/π + specular F · D V]\n"
         "  + metallic (base_color + (1 − base_color) w(cd)) · D V\n"
         "F = f0 + (1 − f0) w(cd),  f0 = min(((ior − 1)/(ior + 1))² specular_color, 1),  w(c) = (1 − c)⁵\n"
-        "D = α²/(π (ch² (α² − 1) + 1)²),  V = G2/(4 ci co),  G2 = 1/(1 + Λ(ωi) + Λ(ωo)) (GGX),  α = roughness²"
+        "D = α²/(π (ch² (α² − 1) + 1)²),  V = G2/(4 ci co),  G2 = 1/(1 + Λ(ωi) + Λ(ωo)) (GGX),  α = roughness²\n"
+        "with a clearcoat: f = (1 − c) f + c · D V (α = clearcoat_roughness²),  c = clearcoat (0.04 + 0.96 (1 − co)⁵)"
     ),
     "toon-diffuse": "f = (ρshade + (ρd − ρshade) · S((ci − threshold)/width)) / π,  S(u) = 1/(1 + e^(−u))",
     "toon-specular": "f = ks · S((r·ωo − threshold)/width) / π,  S(u) = 1/(1 + e^(−u))",
@@ -185,8 +186,10 @@ NOTES = {
             "writes it, with KHR_materials_ior (ior) and KHR_materials_specular (specular, specular_color). Every "
             "parameter is declared inside the range a glTF file accepts, so a fit is a material any glTF viewer "
             "takes as written (`brdffit fit --for gltf`, `brdffit export --to gltf`). base_color is a linear "
-            "amplitude (the value is affine in it); specular_color is held at white unless freed. Reciprocal: "
-            "every Fresnel term, the diffuse weight 1 − specular · max F included, is taken at the half vector.",
+            "amplitude (the value is affine in it); specular_color is held at white and the clearcoat "
+            "(KHR_materials_clearcoat) at 0 unless freed. Not reciprocal with a clearcoat: its Fresnel weight takes "
+            "the viewing direction (the extension's layering); without one every Fresnel term is taken at the half "
+            "vector.",
     "toon-diffuse": "Non-photorealistic two-tone shading. width is held fixed by fits unless it is freed. Not "
                     "reciprocal: it switches on ci alone.",
     "toon-specular": "A flat highlight disc; width is held fixed by fits unless it is freed. Reciprocal, since "

@@ -717,7 +717,8 @@ def _ct_ref(ti, pi_, to, po, p, roughness="m", distribution="beckmann", shadowin
 
 
 @_quiet
-def gltf(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specular, ior, specular_color):
+def gltf(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specular, ior, specular_color,
+         clearcoat=0.0, clearcoat_roughness=0.1):
     """The glTF 2.0 metallic-roughness material (glTF 2.0 Specification, Appendix B, "Specular BRDF", "Fresnel" and
     "Metal BRDF and Dielectric BRDF") with KHR_materials_ior and KHR_materials_specular ("Implementation"), written
     from the specification's visibility form: with α = roughness², L = ωi, V = ωo,
@@ -727,7 +728,9 @@ def gltf(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specul
         fr = f0 + (1 − f0)(1 − |V·H|)⁵,  f0 = min(((1 − ior)/(1 + ior))² specular_color, 1),
         dielectric = (1 − specular max(fr)) base_color/π + specular fr specular_brdf,
         metal = specular_brdf (base_color + (1 − base_color)(1 − |V·H|)⁵),
-        material = (1 − metallic) dielectric + metallic metal.
+        material = (1 − metallic) dielectric + metallic metal,
+        coated = mix(material, Vis_c D_c, clearcoat (0.04 + 0.96 (1 − |N·V|)⁵))   (KHR_materials_clearcoat),
+    Vis_c, D_c those of α = clearcoat_roughness².
     """
     pair = Pair(theta_i, phi_i, theta_o, phi_o)
     base, tint = _col(base_color), _col(specular_color)
@@ -741,7 +744,12 @@ def gltf(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specul
     fresnel = f0 + (1.0 - f0) * schlick
     dielectric = (1.0 - specular * fresnel.max(axis=1, keepdims=True)) * base / np.pi + specular * fresnel * brdf
     metal = brdf * (base + (1.0 - base) * schlick)
-    return _masked(pair, (1.0 - metallic) * dielectric + metallic * metal)
+    material = (1.0 - metallic) * dielectric + metallic * metal
+    c2 = clearcoat_roughness ** 4
+    vis_c = 1.0 / (2.0 * (nv * np.sqrt(c2 + (1.0 - c2) * nl ** 2) + nl * np.sqrt(c2 + (1.0 - c2) * nv ** 2)))
+    d_c = c2 / (np.pi * (np.cos(pair.th)[:, None] ** 2 * (c2 - 1.0) + 1.0) ** 2)
+    weight = clearcoat * (0.04 + 0.96 * (1.0 - nv) ** 5)
+    return _masked(pair, (1.0 - weight) * material + weight * vis_c * d_c)
 
 
 @functools.lru_cache(maxsize=1)

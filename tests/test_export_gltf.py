@@ -23,6 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SYNTHETIC = ROOT / "data" / "synthetic"
 VALIDATOR = ROOT / "node_modules" / "gltf-validator"
 GLTF = dict(base_color=[0.7, 0.4, 0.15], metallic=0.2, roughness=0.4, specular=0.8, ior=1.6)
+COATED = dict(GLTF, clearcoat=0.5, clearcoat_roughness=0.2)
 
 
 def _validate(path: Path) -> dict:
@@ -41,12 +42,16 @@ def _problems(report: dict) -> list:
     return [(m["code"], m.get("pointer"), m["message"]) for m in report["issues"]["messages"]]
 
 
-def test_gltf_model_exports_exactly_and_states_what_it_means():
-    model = models.get("gltf", **GLTF)
+@pytest.mark.parametrize("params, written_coat", [(GLTF, dict(clearcoat=0.0, clearcoat_roughness=0.0)),
+                                                  (COATED, {})], ids=["uncoated", "clearcoat"])
+def test_gltf_model_exports_exactly_and_states_what_it_means(params, written_coat):
+    """Without a coat nothing of KHR_materials_clearcoat is written (a reader takes its defaults, 0 and 0)."""
+    model = models.get("gltf", **params)
     details = export_details(model, "gltf")
     assert details.exact and details.deviation.rms == 0.0
     written = read_material(details.text)
-    assert written == {**GLTF, "specular_color": [1.0, 1.0, 1.0]}
+    assert written == {"clearcoat": 0.0, "clearcoat_roughness": 0.1, **params, "specular_color": [1.0, 1.0, 1.0],
+                       **written_coat}
     # The file's values, evaluated by the NumPy re-derivation of Appendix B (not by brdffit), are the model's.
     wi, wo = random_pairs(500, seed=3)
     angles = (*vector_to_spherical(wi), *vector_to_spherical(wo))
@@ -54,13 +59,16 @@ def test_gltf_model_exports_exactly_and_states_what_it_means():
     np.testing.assert_allclose(details.written(wi, wo), want, rtol=1e-12, atol=1e-300)
 
 
-def test_gltf_file_passes_the_khronos_validator(tmp_path):
+@pytest.mark.parametrize("params, extensions", [
+    (GLTF, {"KHR_materials_ior", "KHR_materials_specular"}),
+    (COATED, {"KHR_materials_ior", "KHR_materials_specular", "KHR_materials_clearcoat"})], ids=["uncoated", "clearcoat"])
+def test_gltf_file_passes_the_khronos_validator(tmp_path, params, extensions):
     path = tmp_path / "material.gltf"
-    path.write_text(export(models.get("gltf", **GLTF), "gltf", name="brdffit material"))
+    path.write_text(export(models.get("gltf", **params), "gltf", name="brdffit material"))
     report = _validate(path)
     assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, _problems(report)
     assert report["info"]["materialCount"] == 1 and report["info"]["drawCallCount"] == 1
-    assert set(report["info"]["extensionsUsed"]) == {"KHR_materials_ior", "KHR_materials_specular"}
+    assert set(report["info"]["extensionsUsed"]) == extensions
 
 
 def test_validator_reports_a_value_out_of_range(tmp_path):

@@ -15,7 +15,8 @@ from brdffit.export.materialx import OPENPBR_NAMES
 mx = pytest.importorskip("MaterialX", reason="MaterialX (PyPI package materialx, test extra) is not installed")
 
 SYNTHETIC = Path(__file__).resolve().parents[1] / "data" / "synthetic"
-GLTF = dict(base_color=[0.7, 0.4, 0.15], metallic=0.2, roughness=0.4, specular=0.8, ior=1.6)
+GLTF = dict(base_color=[0.7, 0.4, 0.15], metallic=0.2, roughness=0.4, specular=0.8, ior=1.6, clearcoat=0.5,
+            clearcoat_roughness=0.2)
 
 
 def _document(text: str):

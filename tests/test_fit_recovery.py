@@ -98,3 +98,13 @@ def test_default_loss_recovers_plastic():
     result = fit(data, "lambert+cook-torrance", fixed=["f0"])
     assert result.converged
     _check(result, truth, {"f0"})
+
+
+def test_gltf_clearcoat_is_recovered_when_freed():
+    """KHR_materials_clearcoat's two parameters are held at 0 unless freed; freed, they are recovered."""
+    truth = models.get("gltf", base_color=RGB, metallic=0.0, roughness=0.6, specular=1.0, ior=1.5, clearcoat=0.7,
+                       clearcoat_roughness=0.15)
+    data = synth.generate(truth, pattern="half-diff", n=4000, noise="relative:0.01", seed=1)
+    result = fit(data, "gltf", loss="sigma", fixed=["metallic"], free=["clearcoat", "clearcoat_roughness"])
+    assert result.converged, result.summary()
+    _check(result, truth, ("metallic", "specular_color"))

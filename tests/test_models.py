@@ -114,7 +114,8 @@ OTHER_CASES = [
                             "clearcoat_gloss": 0.55}),
     Case("blender", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.35, "roughness": 0.45, "ior": 1.7}),
     Case("gltf", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.35, "roughness": 0.4, "specular": 0.8,
-                      "ior": 1.7, "specular_color": [0.95, 0.6, 0.9]}),
+                      "ior": 1.7, "specular_color": [0.95, 0.6, 0.9], "clearcoat": 0.6,
+                      "clearcoat_roughness": 0.25}),
     Case("ashikhmin-shirley", {}, {"rs": RS, "n": 35.0}),
     Case("ashikhmin-shirley-aniso", {}, {"rs": RS, "nu": 12.0, "nv": 150.0}),
     Case("lafortune", {}, {"ks_1": KS, "cxy_1": -0.8, "cz_1": 0.6, "n_1": 6.5}),
@@ -574,10 +575,10 @@ def test_cli_models_lists_every_lobe_with_its_parameters(capsys):
 
 
 def test_reciprocal_flags():
-    """Every lobe but toon-diffuse and blender (Cycles' diffuse weight depends on the view alone) is reciprocal by
-    construction, and the flag says so."""
+    """Every lobe but toon-diffuse, blender (Cycles' diffuse weight depends on the view alone) and gltf (the
+    clearcoat's Fresnel weight does) is reciprocal by construction, and the flag says so."""
     flags = {name: models.lobe_class(name).reciprocal for name in models.names()}
-    assert flags.pop("toon-diffuse") is False and flags.pop("blender") is False
+    assert [flags.pop(name) for name in ("toon-diffuse", "blender", "gltf")] == [False] * 3
     assert all(flags.values())
     assert not models.get("lambert+toon-diffuse").reciprocal
     assert models.get("lambert+toon-specular").reciprocal

@@ -7,8 +7,9 @@ KHR_materials_specular):
 - ``pbrMetallicRoughness``: ``baseColorFactor`` (the base colour, alpha 1), ``metallicFactor``,
   ``roughnessFactor``;
 - ``extensions.KHR_materials_ior.ior`` and ``extensions.KHR_materials_specular`` (``specularFactor``,
-  ``specularColorFactor``), listed in ``extensionsUsed`` (not ``extensionsRequired``: a viewer without them
-  renders the core material, with ior 1.5 and specular 1);
+  ``specularColorFactor``), and with a clearcoat ``extensions.KHR_materials_clearcoat`` (``clearcoatFactor``,
+  ``clearcoatRoughnessFactor``), listed in ``extensionsUsed`` (not ``extensionsRequired``: a viewer without them
+  renders the core material, with ior 1.5, specular 1 and no coat);
 - a UV sphere of radius 1 (positions, normals, indices in one base64 buffer) whose one primitive uses the material,
   in a scene of one node, so that a viewer shows the material at once;
 - ``asset.extras.brdffit``: the source model, every approximation made and the measured deviation, the comments a
@@ -73,7 +74,8 @@ def _document(values: dict, name: str, extras: dict) -> dict:
     buffer = b"".join(blobs)
     return {
         "asset": {"version": "2.0", "generator": extras["generator"], "extras": {"brdffit": extras}},
-        "extensionsUsed": ["KHR_materials_ior", "KHR_materials_specular"],
+        "extensionsUsed": ["KHR_materials_ior", "KHR_materials_specular"] + (
+            ["KHR_materials_clearcoat"] if values["clearcoat"] > 0 else []),
         "scene": 0,
         "scenes": [{"name": name, "nodes": [0]}],
         "nodes": [{"name": f"{name} sphere", "mesh": 0}],
@@ -85,7 +87,11 @@ def _document(values: dict, name: str, extras: dict) -> dict:
                                      "metallicFactor": values["metallic"], "roughnessFactor": values["roughness"]},
             "extensions": {"KHR_materials_ior": {"ior": values["ior"]},
                            "KHR_materials_specular": {"specularFactor": values["specular"],
-                                                      "specularColorFactor": values["specular_color"]}},
+                                                      "specularColorFactor": values["specular_color"]},
+                           **({"KHR_materials_clearcoat": {
+                               "clearcoatFactor": values["clearcoat"],
+                               "clearcoatRoughnessFactor": values["clearcoat_roughness"]}}
+                              if values["clearcoat"] > 0 else {})},
         }],
         "accessors": [
             {"bufferView": 0, "componentType": _FLOAT, "count": len(positions), "type": "VEC3",
@@ -144,8 +150,11 @@ def read_material(text: str) -> dict:
     written is what was meant; a viewer reads the same fields)."""
     material = json.loads(text)["materials"][0]
     core, ext = material["pbrMetallicRoughness"], material.get("extensions", {})
+    coat = ext.get("KHR_materials_clearcoat", {})
     return {"base_color": core["baseColorFactor"][:3], "metallic": core.get("metallicFactor", 1.0),
             "roughness": core.get("roughnessFactor", 1.0), "ior": ext.get("KHR_materials_ior", {}).get("ior", 1.5),
             "specular": ext.get("KHR_materials_specular", {}).get("specularFactor", 1.0),
-            "specular_color": ext.get("KHR_materials_specular", {}).get("specularColorFactor", [1.0, 1.0, 1.0])}
+            "specular_color": ext.get("KHR_materials_specular", {}).get("specularColorFactor", [1.0, 1.0, 1.0]),
+            "clearcoat": coat.get("clearcoatFactor", 0.0), "clearcoat_roughness": coat.get("clearcoatRoughnessFactor",
+                                                                                              0.0)}
 

@@ -4,11 +4,13 @@ Surface counterpart.
 What is written (MaterialX 1.39's standard data libraries, ``libraries/bxdf``):
 
 - ``<gltf_pbr>`` (``ND_gltf_pbr_surfaceshader``) with ``base_color``, ``metallic``, ``roughness``, ``specular``,
-  ``specular_color`` and ``ior``: the glTF 2.0 material, parameter for parameter, in the material
+  ``specular_color``, ``ior``, ``clearcoat`` and ``clearcoat_roughness``: the glTF 2.0 material, parameter for
+  parameter, in the material
   ``<surfacematerial name=NAME>``;
 - ``<open_pbr_surface>`` (``ND_open_pbr_surface_surfaceshader``, OpenPBR Surface 1.x) with the same values under
   OpenPBR's names (``base_color``, ``base_metalness``, ``specular_roughness``, ``specular_ior``,
-  ``specular_weight``, ``specular_color``), in ``<surfacematerial name=NAME_openpbr>``: the mapping from glTF that
+  ``specular_weight``, ``specular_color``, ``coat_weight``, ``coat_roughness``), in
+  ``<surfacematerial name=NAME_openpbr>``: the mapping from glTF that
   the OpenPBR specification gives for its metallic-roughness subset. OpenPBR layers the specular over the diffuse
   by the layer's directional albedo and evaluates an F82-tinted conductor, where glTF mixes per direction by
   Schlick's Fresnel term, so this one is an approximation, stated as such;
@@ -33,7 +35,8 @@ __all__ = ["write", "OPENPBR_NAMES", "EXPORTABLE"]
 EXPORTABLE = gltf.EXPORTABLE
 # The gltf model's parameters -> OpenPBR Surface's inputs (its metallic-roughness subset).
 OPENPBR_NAMES = {"base_color": "base_color", "metallic": "base_metalness", "roughness": "specular_roughness",
-                 "ior": "specular_ior", "specular": "specular_weight", "specular_color": "specular_color"}
+                 "ior": "specular_ior", "specular": "specular_weight", "specular_color": "specular_color",
+                 "clearcoat": "coat_weight", "clearcoat_roughness": "coat_roughness"}
 
 
 def _input(name: str, value) -> str:

@@ -1,5 +1,5 @@
 """The glTF 2.0 metallic-roughness material, as the glTF specification's Appendix B defines its BRDF, with the
-ratified extensions KHR_materials_ior and KHR_materials_specular.
+ratified extensions KHR_materials_ior, KHR_materials_specular and KHR_materials_clearcoat.
 
 The Khronos Group, glTF 2.0 Specification, Appendix B "BRDF Implementation"; KHR_materials_ior;
 KHR_materials_specular (its "Implementation" section). With h = normalize(ωi + ωo), cd = |ωo·h|,
@@ -11,10 +11,15 @@ w = (1 − cd)⁵ the Schlick weight and α = roughness²:
 - dielectric_brdf = fresnel_mix(specular_color, ior, specular, base = base_color/π, layer = specular_brdf)
   = (1 − specular · max_c F) base_color/π + specular · F · specular_brdf, with
   F = f0 + (1 − f0) w and f0 = min(((ior − 1)/(ior + 1))² specular_color, 1) (KHR_materials_specular);
-- material = (1 − metallic) dielectric_brdf + metallic metal_brdf.
+- material = (1 − metallic) dielectric_brdf + metallic metal_brdf;
+- with a clearcoat (KHR_materials_clearcoat, "Implementation"): mix(material, clearcoat_brdf, clearcoat · Fc),
+  Fc = 0.04 + 0.96 (1 − |ωo·n|)⁵ and clearcoat_brdf Appendix B's specular_brdf at α = clearcoat_roughness² (the
+  clearcoat normal is the surface's). Fc takes the viewing direction, not h, so a clearcoat makes the material
+  non-reciprocal, as the extension says.
 
 Every parameter is declared in the range a glTF file accepts (base colour, metallic, roughness and specular in
-[0, 1], ior ≥ 1), so that a fit is a material any glTF viewer takes as written. The value is affine in the base
+[0, 1], ior ≥ 1), so that a fit is a material any glTF viewer takes as written. The clearcoat is held at 0 unless
+freed (``free=["clearcoat", "clearcoat_roughness"]``). The value is affine in the base
 colour channel by channel (f = f₀ + base_color · B, with f₀ the Fresnel-weighted specular and the metal's
 grazing tint), so the base colour is a linear amplitude that a fit solves exactly.
 """
@@ -52,7 +57,8 @@ class GltfMaterial(Lobe):
 
     name = "gltf"
     reference = ("The Khronos Group, glTF 2.0 Specification, Appendix B (BRDF Implementation); KHR_materials_ior; "
-                 "KHR_materials_specular")
+                 "KHR_materials_specular; KHR_materials_clearcoat")
+    reciprocal = False  # the clearcoat's Fresnel weight takes the viewing direction
     offset = True
 
     def param_specs(self):
@@ -66,7 +72,15 @@ class GltfMaterial(Lobe):
                       doc="KHR_materials_ior ior: the dielectric's f0 = ((ior − 1)/(ior + 1))²"),
             ParamSpec("specular_color", 1.0, 0.0, 1.0, colour=True, fixed=True,
                       doc="KHR_materials_specular specularColorFactor: tint of the dielectric's f0"),
+            ParamSpec("clearcoat", 0.0, 0.0, 1.0, fixed=True,
+                      doc="KHR_materials_clearcoat clearcoatFactor: weight of the clear coat"),
+            dataclasses.replace(perceptual_roughness("KHR_materials_clearcoat clearcoatRoughnessFactor: the coat's "
+                                                     "GGX α = clearcoat_roughness²"),
+                                name="clearcoat_roughness", default=0.1, fixed=True),
         )
+
+    def amplitude_partners(self, amplitude):
+        return ()  # base_color is no lobe's only amplitude: the specular layers do not vanish with it
 
     def __call__(self, params, pair: LocalPair):
         base = params["base_color"]
@@ -83,4 +97,10 @@ class GltfMaterial(Lobe):
         dielectric = ((1.0 - strength * jnp.max(fresnel, axis=-1, keepdims=True)) * base / jnp.pi
                       + strength * fresnel * specular_brdf)
         metal = (base + (1.0 - base) * weight) * specular_brdf
-        return (1.0 - metallic) * dielectric + metallic * metal
+        material = (1.0 - metallic) * dielectric + metallic * metal
+        # KHR_materials_clearcoat: mix(material, clearcoat_brdf, clearcoat Fc), Fc at the viewing direction.
+        alpha_c = params["clearcoat_roughness"] ** 2
+        coat_brdf = (ggx.D(pair.cos_h, alpha_c) * smith_correlated(pair, ggx, alpha_c)
+                     / (4.0 * pair.cos_i * pair.cos_o))[..., None]
+        coat = params["clearcoat"] * (0.04 + 0.96 * fr.schlick_weight(pair.cos_o))[..., None]
+        return (1.0 - coat) * material + coat * coat_brdf
