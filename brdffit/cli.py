@@ -228,15 +228,21 @@ TABLE_OPTIONS = (
     _TableOption("--channels", "channels", "NAME[,NAME...]",
                  "the channels' names (default: the value columns' headers)",
                  lambda text: [name.strip() for name in text.split(",")]),
-    _TableOption("--radians", "degrees", None, "the angle columns are in radians (default: degrees)",
-                 switched=False),
+    _TableOption("--radians", "degrees", None, "the angle columns are in radians (default: degrees for tables; ASTM "
+                 "E1392 files: decided from the data)", switched=False, formats=("table", "astm")),
+    _TableOption("--degrees", "degrees", None, "ASTM E1392 files: the angles are in degrees (default: decided from "
+                 "the data, radians where every θ is within π/2)", switched=True, formats=("astm",)),
     _TableOption("--delimiter", "delimiter", "D",
                  "the cell separator: one character, 'tab' or 'space' (runs of whitespace); default: a tab for .tsv "
                  "or a tab in the first line, else ',', else ';', else whitespace", _delimiter),
     _TableOption("--negative", "negative", "error|missing",
                  "a negative value is an error (default) or, with 'missing', a missing value (NaN)", _negative),
 )
-TABLE_GROUP = "instrument tables (CSV/TSV/text files only; the options of brdffit.io.read_table)"
+TABLE_GROUP = "instrument tables (CSV/TSV/text files; the options of brdffit.io.read_table, --radians and --degrees "\
+    "also of ASTM E1392 files)"
+# How `_load`'s refusal names the formats an option applies to.
+_FORMAT_WORDS = {"table": "instrument tables (CSV/TSV/text)", "astm": "ASTM E1392 files",
+                 "merl": "tabulated files (MERL, RGL-EPFL)", "rgl": "tabulated files (MERL, RGL-EPFL)"}
 
 
 def _sampling(text: str) -> str:
@@ -293,16 +299,24 @@ def _add_options(group, options) -> None:
                                help=option.help, action="append" if option.repeat else "store")
 
 
+def _given(args) -> list:
+    """The reading options given on the command line."""
+    given = [o for o in READ_OPTIONS
+             if (getattr(args, o.dest, None) if o.metavar is None else getattr(args, o.dest, None) is not None)]
+    keywords = [o.keyword for o in given]
+    for keyword in {k for k in keywords if keywords.count(k) > 1}:
+        raise UsageError(" and ".join(o.flag for o in given if o.keyword == keyword) + " contradict each other: give "
+                         "one")
+    return given
+
+
 def _table_options(args) -> dict:
     """The reader keywords of the reading options (table and tabulated) given on the command line."""
     options = {}
-    for option in READ_OPTIONS:
+    for option in _given(args):
         given = getattr(args, option.dest, None)
         if option.metavar is None:
-            if given:
-                options[option.keyword] = option.switched
-        elif given is None:
-            continue
+            options[option.keyword] = option.switched
         elif option.repeat:
             merged = {}
             for key, value in given:
@@ -344,11 +358,10 @@ def _load(path, args):
         if not options:
             return io.load(path)
         kind = io.detect_format(path)  # a missing path, a directory, a FIFO, ... is refused here
-        misplaced = [o for o in READ_OPTIONS if o.keyword in options and kind not in o.formats]
+        misplaced = [o for o in _given(args) if kind not in o.formats]
         if misplaced:
             verb = "apply" if len(misplaced) > 1 else "applies"
-            where = ("instrument tables (CSV/TSV/text)" if misplaced[0].formats == ("table",)
-                     else "tabulated files (MERL, RGL-EPFL)")
+            where = " and ".join(dict.fromkeys(_FORMAT_WORDS[f] for f in misplaced[0].formats))
             raise UsageError(f"{path} is a {kind} file; {', '.join(o.flag for o in misplaced)} {verb} to {where} "
                              "only: read it without")
         return io.load(path, format=kind, **options)

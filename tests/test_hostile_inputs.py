@@ -28,6 +28,7 @@ READERS = {
     "merl": bio.read_merl,
     "hdf5": bio.read_hdf5,
     "alta": bio.read_alta,
+    "astm": bio.read_astm,
     "rgl": bio.read_rgl,
 }
 

@@ -30,7 +30,7 @@ def load_or_fail_cleanly(path, **options):
 
 @FUZZ
 @given(data=st.binary(max_size=400),
-       ext=st.sampled_from([".csv", ".tsv", ".txt", ".binary", ".h5", ".alta", ".bsdf", ""]))
+       ext=st.sampled_from([".csv", ".tsv", ".txt", ".binary", ".h5", ".alta", ".astm", ".bsdf", ""]))
 def test_random_bytes(workdir, data, ext):
     path = workdir / f"garbage{ext}"
     path.write_bytes(data)
@@ -124,6 +124,30 @@ def test_damaged_alta_files(workdir, param_in, cut, start, junk):
     text = _alta_text(workdir, param_in)
     start %= len(text) + 1
     path = workdir / "damaged.dat"  # a .dat file: the content decides between ALTA and table
+    path.write_text(text[:start] + junk + text[start + cut % 30:])
+    load_or_fail_cleanly(path)
+    path.write_text(text[: cut % (len(text) + 1)])  # truncated anywhere
+    load_or_fail_cleanly(path)
+
+
+ASTM_ALPHABET = "0123456789.,-+eE \t\nnaNUM_POINTSVARthe_isopRGBm\""
+
+
+def _astm_text(workdir) -> str:
+    m = Measurements(np.radians([0, 30, 60]), 0.0, np.radians([10, 40, 70]), np.pi,
+                     [[0.1, np.nan, 0.3], [0.3, 0.4, 0.5], [0.5, 0.6, 0.7]], channels=["400nm", "500nm", "600nm"],
+                     meta={"astm": {"header": {"SAMPLE_NAME": "fuzzed paint"}}})
+    path = workdir / "valid.astm"
+    bio.save(m, path)
+    return path.read_text()
+
+
+@FUZZ
+@given(cut=st.integers(0, 10_000), start=st.integers(0, 10_000), junk=st.text(alphabet=ASTM_ALPHABET, max_size=20))
+def test_damaged_astm_files(workdir, cut, start, junk):
+    text = _astm_text(workdir)
+    start %= len(text) + 1
+    path = workdir / "damaged.txt"  # a .txt file: the content decides between ASTM E1392 and a table
     path.write_text(text[:start] + junk + text[start + cut % 30:])
     load_or_fail_cleanly(path)
     path.write_text(text[: cut % (len(text) + 1)])  # truncated anywhere

@@ -7,6 +7,7 @@ extension; the format modules can also be used directly:
 - `merl` — the MERL binary BRDF tables (Matusik et al. 2003): read, look up, convert, and write from any model;
 - `hdf5` — brdffit's own HDF5 files (measurements, later fits and posteriors);
 - `alta` — the text data files of the ALTA BRDF library (``#DIM``, ``#PARAM_IN``, ... header; read and write);
+- `astm` — ASTM E1392 BRDF data (keyword header, ``VARS`` line, one sample per row; read and write);
 - `rgl` — RGL-EPFL ``.bsdf`` measured BRDFs (Dupuy & Jakob 2018): read, look up, convert to samples;
 - `tabulated` — how a tabulated file (MERL, RGL-EPFL) becomes the samples a fit is given: its lookup at direction
   pairs uniform in solid angle, or its grid.
@@ -24,6 +25,7 @@ from pathlib import Path
 from ..measurements import Measurements
 from ._common import FormatError, check_not_lfs_pointer, read_head
 from .alta import looks_like_alta, read_alta, write_alta
+from .astm import looks_like_astm, read_astm, write_astm
 from .hdf5 import is_hdf5, read_hdf5, read_hdf5_group, update_hdf5, write_hdf5
 from .merl import MerlTable, looks_like_merl, read_merl, write_merl
 from .rgl import RglTable, looks_like_rgl, read_rgl
@@ -31,7 +33,7 @@ from .table import read_table, write_table
 
 __all__ = ["load", "save", "detect_format", "Format", "FORMATS", "FormatError", "read_table", "write_table",
            "read_merl", "write_merl", "MerlTable", "read_hdf5", "write_hdf5", "update_hdf5", "read_hdf5_group",
-           "read_alta", "write_alta", "read_rgl", "RglTable"]
+           "read_alta", "write_alta", "read_astm", "write_astm", "read_rgl", "RglTable"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,8 +61,8 @@ class Format:
     unwritable: str = ""
 
 
-# In the order `detect_format` tries the signatures: HDF5, MERL and RGL-EPFL have magic bytes; ALTA's header is
-# text (an ALTA file in a .dat / .txt is recognised by its #DIM line).
+# In the order `detect_format` tries the signatures: HDF5, MERL and RGL-EPFL have magic bytes; ALTA's and ASTM
+# E1392's headers are text (a .dat / .txt file is recognised by its #DIM or its VARS line).
 FORMATS = {f.name: f for f in (
     Format("hdf5", "brdffit's HDF5 files (measurements, fits, posteriors)", (".h5", ".hdf5", ".he5"),
            read_hdf5, is_hdf5, write_hdf5),
@@ -73,6 +75,8 @@ FORMATS = {f.name: f for f in (
            unwritable="brdffit reads RGL-EPFL .bsdf files but does not write them; save as .csv or .h5"),
     Format("alta", "ALTA text data (#DIM, #PARAM_IN, ... header)", (".alta",), read_alta, looks_like_alta,
            write_alta),
+    Format("astm", "ASTM E1392 BRDF data (keyword header, VARS line; Cornell's and instruments' spectral files)",
+           (".astm",), read_astm, looks_like_astm, write_astm),
     Format("table", "CSV / TSV / whitespace tables, and brdffit's canonical CSV", (".csv", ".tsv", ".txt", ".dat",
                                                                                  ".tab"),
            read_table, None, write_table),
@@ -118,13 +122,15 @@ def load(path, *, format: str | None = None, **options) -> Measurements:  # noqa
 
     Arguments:
         path: a table (``.csv``, ``.tsv``, ``.txt``), a MERL binary (``.binary``, ``.merl``) or a brdffit HDF5 file
-            (``.h5``, ``.hdf5``), ALTA text data (``.alta``, or a ``.dat`` / ``.txt`` with an ALTA header). The
+            (``.h5``, ``.hdf5``), ALTA text data (``.alta``, or a ``.dat`` / ``.txt`` with an ALTA header), ASTM
+            E1392 data (``.astm``, or a text file with a ``VARS`` line). The
             content decides where it is unambiguous (HDF5 signature, MERL header, ALTA ``#DIM`` header), or an
             RGL-EPFL ``.bsdf`` file (recognised by its ``tensor_file`` magic).
-        format: force ``"table"``, ``"merl"``, ``"hdf5"``, ``"alta"`` or ``"rgl"``.
+        format: force ``"table"``, ``"merl"``, ``"hdf5"``, ``"alta"``, ``"astm"`` or ``"rgl"``.
         **options: passed to the reader: `read_table` (``columns``, ``values``, ``sigma``, ``where``,
             ``channel_column``, ``degrees``, ...), `MerlTable.to_measurements` (``sampling``, ``pairs``, ``seed``,
-            ``max_theta``, ``subsample``), `read_hdf5` (``group``), `read_alta` (``channels``) or
+            ``max_theta``, ``subsample``), `read_hdf5` (``group``), `read_alta` (``channels``), `read_astm`
+            (``degrees``) or
             `RglTable.to_measurements` (``sampling``, ``pairs``, ``seed``, ``max_theta``, ``negative``). A tabulated
             file (MERL, RGL-EPFL) is read by default as its own interpolation at quasi-random direction pairs
             uniform in solid angle (`brdffit.io.tabulated`); ``sampling="grid"`` gives its nodes.
@@ -149,8 +155,9 @@ def save(measurements: Measurements, path, *, format: str | None = None, **optio
 
     Arguments:
         measurements: the `Measurements`.
-        path: ``.csv`` / ``.tsv`` / ``.txt`` (the canonical table layout), ``.h5`` / ``.hdf5`` or ``.alta``.
-        format: force ``"table"``, ``"hdf5"`` or ``"alta"``.
+        path: ``.csv`` / ``.tsv`` / ``.txt`` (the canonical table layout), ``.h5`` / ``.hdf5``, ``.alta`` or
+            ``.astm``.
+        format: force ``"table"``, ``"hdf5"``, ``"alta"`` or ``"astm"``.
         **options: passed to `write_table`, `write_hdf5` or `write_alta` (``param_in``, ``param_out``).
 
     Raises:
