@@ -475,3 +475,28 @@ def test_dead_lobe_warning_only_for_amplitudes_at_zero():
     result = fit(dull, "lambert+ggx")
     np.testing.assert_array_equal(result.params["ks"], 0.0)
     assert any(w.startswith("ks went to 0 in every channel") for w in result.warnings), result.warnings
+
+
+def test_summary_of_a_spectrum_gives_one_row_per_channel():
+    """Above SPECTRAL_CHANNELS channels the colour parameters are a per-channel block (one row a band, one column a
+    parameter), so a 31-band fit prints 31 rows, not 62; shape parameters stay in the main table."""
+    from brdffit.fitting.result import SPECTRAL_CHANNELS
+
+    channels = SPECTRAL_CHANNELS + 4
+    rho = np.linspace(0.2, 0.7, channels)
+    truth = models.get("lambert+blinn-phong", channels=channels, rho_d=rho, ks=np.full(channels, 0.3), n=40.0)
+    data = synth.generate(truth, pattern="half-diff", n=600, noise="relative:0.01", seed=2)
+    result = fit(data, "lambert+blinn-phong")
+    lines = result.summary().splitlines()
+    block = next(i for i, line in enumerate(lines) if line.startswith(f"per channel ({channels} channels"))
+    assert lines[block + 1].split() == ["channel", "rho_d", "ks"]
+    rows = lines[block + 2: block + 2 + channels]
+    for c, row in enumerate(rows):
+        cells = row.split()
+        assert int(cells[0]) == c
+        assert float(cells[1]) == pytest.approx(float(result.params["rho_d"][c]), rel=1e-5)
+        assert float(cells[4]) == pytest.approx(float(result.params["ks"][c]), rel=1e-5)
+    assert not any(line.startswith("rho_d[") for line in lines)
+    assert any(line.startswith("n ") for line in lines[:block])
+    three = fit(synth.generate(models.get("lambert", rho_d=[0.2, 0.3, 0.4]), n=200, seed=1), "lambert").summary()
+    assert "rho_d[2]" in three and "per channel" not in three

@@ -16,6 +16,9 @@ from .outcome import STATUSES, Status
 
 __all__ = ["FitResult", "Status", "STATUSES"]
 
+# Above this many channels (a spectrum) the summary gives the colour parameters one row per channel.
+SPECTRAL_CHANNELS = 8
+
 
 def _json_value(value):
     value = np.asarray(value)
@@ -148,12 +151,17 @@ class FitResult:
                  f"run {self.run_time:.2f} s  init {self.init_time:.2f} s",
                  f"{'parameter':<14}{'value':>14}{'± ' + kind:>14}{'(' + other_name + ')':>14}   bounds"]
         others = self._flat_entries(other)[2]
+        spectral = self.models[0].channels * len(self.models) > SPECTRAL_CHANNELS and self.channel_mode != "independent"
         for label, value, err, alt in zip(*self._flat_entries(), others):
             name = label.split("[")[0]
             spec = specs[name]
+            if spectral and spec.colour:
+                continue  # in the per-channel block below
             note = " fixed" if name in self.fixed else (" AT BOUND" if label in self.bounds_hit else "")
             lines.append(f"{label:<14}{value:>14.6g}{err:>14.3g}{alt:>14.3g}   [{spec.lower:g}, {spec.upper:g}] "
                          f"{spec.unit}{note}")
+        if spectral:
+            lines.extend(self._spectral_block(specs, kind))
         lines.append(f"{self._samples_words()}  free parameters {self.n_params}  dof {self.dof}  "
                      f"AIC {self.aic:.6g}  BIC {self.bic:.6g}")
         if self.noise_model is not None:
@@ -171,6 +179,25 @@ class FitResult:
         if plausibility:
             lines.extend(self.plausibility().lines())
         return "\n".join(lines)
+
+    def _spectral_block(self, specs, kind: str) -> list[str]:
+        """The colour parameters of a fit with many channels (a spectrum): one row per channel, one column per
+        parameter, value ± stderr, a parameter at a bound in that channel marked *."""
+        names = [n for n in self.params if specs[n].colour]
+        head = "; ".join(f"{n} [{specs[n].lower:g}, {specs[n].upper:g}] {specs[n].unit}"
+                         + (" fixed" if n in self.fixed else "") for n in names)
+        lines = [f"per channel ({np.size(self.params[names[0]])} channels; value ± {kind}; * at a bound): {head}",
+                 f"{'channel':>8}" + "".join(f"{n:>24}" for n in names)]
+        for c in range(np.size(self.params[names[0]])):
+            cells = []
+            for n in names:
+                value = float(np.asarray(self.params[n], dtype=float)[c])
+                err = float(np.broadcast_to(np.asarray(self.stderr.get(n, np.nan), dtype=float),
+                                            np.shape(self.params[n]))[c])
+                mark = "*" if f"{n}[{c}]" in self.bounds_hit else " "
+                cells.append(f"{value:>12.6g} ± {err:<8.3g}{mark}")
+            lines.append(f"{c:>8}" + "".join(f"{cell:>24}" for cell in cells))
+        return lines
 
     def _samples_words(self) -> str:
         """The data's size in words: samples × channels where every sample has all channels, else the values."""
