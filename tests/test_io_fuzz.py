@@ -28,6 +28,16 @@ def load_or_fail_cleanly(path, **options):
     return m
 
 
+def damaged_and_truncated(path, text: str, cut: int, start: int, junk: str) -> None:
+    """Write ``text`` with ``junk`` put in at ``start`` over up to 30 characters, then ``text`` cut anywhere, and read
+    each: they load or fail cleanly."""
+    start %= len(text) + 1
+    path.write_text(text[:start] + junk + text[start + cut % 30:])
+    load_or_fail_cleanly(path)
+    path.write_text(text[: cut % (len(text) + 1)])  # truncated anywhere
+    load_or_fail_cleanly(path)
+
+
 @FUZZ
 @given(data=st.binary(max_size=400),
        ext=st.sampled_from([".csv", ".tsv", ".txt", ".binary", ".h5", ".alta", ".astm", ".bsdf", ""]))
@@ -60,14 +70,7 @@ def _canonical_text(workdir) -> str:
 @FUZZ
 @given(cut=st.integers(0, 10_000), start=st.integers(0, 10_000), junk=st.text(alphabet=TABLE_ALPHABET, max_size=20))
 def test_damaged_canonical_tables(workdir, cut, start, junk):
-    text = _canonical_text(workdir)
-    start %= len(text) + 1
-    damaged = text[:start] + junk + text[start + cut % 30:]
-    path = workdir / "damaged.csv"
-    path.write_text(damaged)
-    load_or_fail_cleanly(path)
-    path.write_text(text[: cut % (len(text) + 1)])  # truncated anywhere
-    load_or_fail_cleanly(path)
+    damaged_and_truncated(workdir / "damaged.csv", _canonical_text(workdir), cut, start, junk)
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -121,13 +124,8 @@ def _alta_text(workdir, param_in) -> str:
                                  "RUSIN_TH_TD_PD"]),
        cut=st.integers(0, 10_000), start=st.integers(0, 10_000), junk=st.text(alphabet=ALTA_ALPHABET, max_size=20))
 def test_damaged_alta_files(workdir, param_in, cut, start, junk):
-    text = _alta_text(workdir, param_in)
-    start %= len(text) + 1
-    path = workdir / "damaged.dat"  # a .dat file: the content decides between ALTA and table
-    path.write_text(text[:start] + junk + text[start + cut % 30:])
-    load_or_fail_cleanly(path)
-    path.write_text(text[: cut % (len(text) + 1)])  # truncated anywhere
-    load_or_fail_cleanly(path)
+    # A .dat file: the content decides between ALTA and table.
+    damaged_and_truncated(workdir / "damaged.dat", _alta_text(workdir, param_in), cut, start, junk)
 
 
 ASTM_ALPHABET = "0123456789.,-+eE \t\nnaNUM_POINTSVARthe_isopRGBm\""
@@ -145,13 +143,8 @@ def _astm_text(workdir) -> str:
 @FUZZ
 @given(cut=st.integers(0, 10_000), start=st.integers(0, 10_000), junk=st.text(alphabet=ASTM_ALPHABET, max_size=20))
 def test_damaged_astm_files(workdir, cut, start, junk):
-    text = _astm_text(workdir)
-    start %= len(text) + 1
-    path = workdir / "damaged.txt"  # a .txt file: the content decides between ASTM E1392 and a table
-    path.write_text(text[:start] + junk + text[start + cut % 30:])
-    load_or_fail_cleanly(path)
-    path.write_text(text[: cut % (len(text) + 1)])  # truncated anywhere
-    load_or_fail_cleanly(path)
+    # A .txt file: the content decides between ASTM E1392 and a table.
+    damaged_and_truncated(workdir / "damaged.txt", _astm_text(workdir), cut, start, junk)
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
