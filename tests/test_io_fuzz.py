@@ -28,6 +28,13 @@ def load_or_fail_cleanly(path, **options):
     return m
 
 
+def saved_text(workdir, m: Measurements, name: str, **options) -> str:
+    """The text of ``m`` saved as ``name`` (its extension choosing the format)."""
+    path = workdir / name
+    bio.save(m, path, **options)
+    return path.read_text()
+
+
 def damaged_and_truncated(path, text: str, cut: int, start: int, junk: str) -> None:
     """Write ``text`` with ``junk`` put in at ``start`` over up to 30 characters, then ``text`` cut anywhere, and read
     each: they load or fail cleanly."""
@@ -62,9 +69,7 @@ def _canonical_text(workdir) -> str:
     m = Measurements(np.radians([0, 30, 60]), 0.0, np.radians([10, 40, 70]), np.pi, [[0.1, 0.2], [0.3, np.nan],
                                                                                       [0.5, 0.6]],
                      sigma=0.01, weights=[1.0, 2.0, 3.0], channels=("a", "b"), meta={"k": [1, 2]})
-    path = workdir / "canonical.csv"
-    bio.save(m, path)
-    return path.read_text()
+    return saved_text(workdir, m, "canonical.csv")
 
 
 @FUZZ
@@ -114,9 +119,7 @@ def _alta_text(workdir, param_in) -> str:
     m = Measurements(np.radians([0, 30, 60]), [0.0, 1.0, 2.0], np.radians([10, 40, 70]), np.pi,
                      [[0.1, 0.2, 0.3], [0.3, 0.4, 0.5], [0.5, 0.6, 0.7]], sigma=0.01, meta={"alta": {"header": {
                          "URL": "https://example.org"}}})
-    path = workdir / "valid.alta"
-    bio.save(m, path, param_in=param_in)
-    return path.read_text()
+    return saved_text(workdir, m, "valid.alta", param_in=param_in)
 
 
 @FUZZ
@@ -135,9 +138,7 @@ def _astm_text(workdir) -> str:
     m = Measurements(np.radians([0, 30, 60]), 0.0, np.radians([10, 40, 70]), np.pi,
                      [[0.1, np.nan, 0.3], [0.3, 0.4, 0.5], [0.5, 0.6, 0.7]], channels=["400nm", "500nm", "600nm"],
                      meta={"astm": {"header": {"SAMPLE_NAME": "fuzzed paint"}}})
-    path = workdir / "valid.astm"
-    bio.save(m, path)
-    return path.read_text()
+    return saved_text(workdir, m, "valid.astm")
 
 
 @FUZZ
