@@ -288,6 +288,8 @@ _CAPTIONS = {
     "spheres": "Sphere previews: the measurement (interpolated), the fit and their relative difference. Rings and "
                "speckle in the difference come from interpolating scattered samples (k nearest neighbours), not "
                "necessarily from the fit.",
+    "spectra": "The fitted amplitudes of a spectral measurement against wavelength, with their ±1 and ±2 standard "
+               "error bands.",
     "renderer": "The renderer's view: the measurement, the best model without the renderer's limits and the fit "
                 "made for the renderer (its models, every parameter in its ranges), each with its error on the "
                 "held-out directions of the selection.",
@@ -430,6 +432,10 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
     captions = _captions(posterior, float(np.nanmax(albedo)))
     jobs += [("albedo", lambda p: F.plot_albedo(p, fit_result, channels=channels, albedo=albedo)),
              ("spheres", lambda p: F.plot_spheres(p, measurements, fit_result))]
+    wavelengths = F.spectral_axis(measurements, fit_result.models[0].channels) \
+        if fit_result.channel_mode != "independent" else None
+    if wavelengths is not None:
+        jobs.append(("spectra", lambda p: F.plot_spectra(p, fit_result, wavelengths)))
     if selection is not None and selection.target and selection.chosen_by_criterion != selection.chosen:
         rows = {row["spec"]: row for row in selection.table}
         free = selection.results[selection.chosen_by_criterion]

@@ -45,6 +45,7 @@ FIGSIZE = {
     "albedo": (7.0, 4.8),
     "spheres": (12.0, 4.4),
     "renderer": (12.0, 4.4),
+    "spectra": (12.0, 4.4),
 }
 
 # zlib's level for the PNGs: 1 writes them several times faster than PIL's default (6), for files about a third
@@ -62,6 +63,7 @@ LAYOUT = {
     "albedo": dict(left=0.1, right=0.966, bottom=0.122, top=0.879),
     "spheres": dict(left=0.013, right=0.94, bottom=0.034, top=0.897, wspace=0.042),
     "renderer": dict(left=0.013, right=0.987, bottom=0.034, top=0.86, wspace=0.042),
+    "spectra": dict(left=0.07, right=0.98, bottom=0.14, top=0.86, wspace=0.28),
 }
 
 # Largest number of parameters shown in the corner and trace plots (the first ones of the posterior).
@@ -491,6 +493,47 @@ def plot_albedo(path, fit_result, channels=None, n: int = 46, albedo: np.ndarray
     ax.set_title(f"Directional albedo of the fitted {fit_result.spec}\nmax {float(np.nanmax(albedo)):.3f}")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
+    return _save(fig, path)
+
+
+def spectral_axis(measurements, channels: int):
+    """The wavelengths (nm) of a spectral fit's channels, from ``meta["wavelengths_nm"]`` (ASTM E1392 bands), or
+    None where the data do not give one per channel."""
+    wavelengths = (measurements.meta or {}).get("wavelengths_nm")
+    if wavelengths is None or len(wavelengths) != channels:
+        return None
+    return np.asarray(wavelengths, dtype=float)
+
+
+def plot_spectra(path, fit_result, wavelengths) -> str:
+    """The colour parameters of a spectral fit against wavelength, each with its ±1 and ±2 standard-error bands
+    (the stderr the summary states).
+
+    Arguments:
+        path: the PNG.
+        fit_result: a fit whose colour parameters have one value per band.
+        wavelengths: the bands' wavelengths, nm.
+
+    Returns:
+        ``path`` as a string.
+    """
+    specs = fit_result.models[0].param_specs
+    names = [n for n in fit_result.params if specs[n].colour and n not in fit_result.fixed]
+    fig = _new_figure("spectra")
+    axes = np.atleast_1d(fig.subplots(1, len(names), squeeze=False)[0])
+    for ax, name in zip(axes, names):
+        value = np.asarray(fit_result.params[name], dtype=float)
+        err = np.broadcast_to(np.asarray(fit_result.stderr.get(name, np.nan), dtype=float), value.shape)
+        for k, alpha in ((2, 0.15), (1, 0.3)):
+            ax.fill_between(wavelengths, value - k * err, value + k * err, color="C0", alpha=alpha, lw=0,
+                            label=f"±{k} stderr")
+        ax.plot(wavelengths, value, "o-", color="C0", ms=3, lw=1.2, label=name)
+        ax.set_xlabel("wavelength (nm)")
+        ax.set_ylabel(f"{name} ({specs[name].unit})")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"Fitted {fit_result.spec}: amplitudes per band ({len(wavelengths)} bands, "
+                 f"{wavelengths.min():g}–{wavelengths.max():g} nm), stderr {fit_result.stderr_kind}", fontsize=11)
     return _save(fig, path)
 
 
