@@ -57,10 +57,9 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     values, written, deviation = tm.own_model(model, FAMILY, "Blender", EXPORTABLE, source)
     values = {k: (tuple(v) if isinstance(v, list) else v) for k, v in values.items()}
     notes: list[str] = []
-    verdict = "exact: " if tm.is_exact(deviation, notes) else "measured deviation from the source model: "
     inputs = {NODE_INPUTS[k]: (v + (1.0,) if isinstance(v, tuple) else v) for k, v in values.items()}
     inputs.update(_NEUTRAL)
-    lines = [f"# {line}" for line in header + [verdict + deviation.describe()]]
+    lines = [f"# {line}" for line in tm.stated(header, notes, deviation)]
     lines += [
         '"""The brdffit material as a Blender (4.2+) Principled BSDF: run in Blender, with `blender --python FILE`,',
         'or `python FILE` with the bpy module; see brdffit\'s docs/export.md."""',

@@ -1,8 +1,8 @@
 """glTF 2.0: a fitted model as a ``.gltf`` file (JSON, its buffer embedded) that any glTF viewer opens: the material
 and a unit sphere that carries it.
 
-What is written (the glTF 2.0 Specification, §5.19 "Material" and Appendix B; KHR_materials_ior and
-KHR_materials_specular):
+What is written (the glTF 2.0 Specification, §5.19 "Material" and Appendix B; KHR_materials_ior,
+KHR_materials_specular and KHR_materials_clearcoat):
 
 - ``pbrMetallicRoughness``: ``baseColorFactor`` (the base colour, alpha 1), ``metallicFactor``,
   ``roughnessFactor``;
@@ -35,7 +35,8 @@ __all__ = ["write", "measured", "read_material", "sphere_mesh", "EXPORTABLE", "F
 
 # The model a glTF file represents exactly (the fit option's family for this target).
 FAMILY = "gltf"
-EXPORTABLE = "the gltf model alone (the glTF 2.0 metallic-roughness material with KHR_materials_ior and _specular)"
+EXPORTABLE = ("the gltf model alone (the glTF 2.0 metallic-roughness material with KHR_materials_ior, _specular and "
+              "_clearcoat)")
 # The sphere's rings (latitude) and segments (longitude): 2,145 vertices, smooth at a viewer's default zoom.
 _RINGS, _SEGMENTS = 32, 64
 # glTF's component types and targets (Specification §5.1.4 "Accessor", §5.11 "Buffer View").
@@ -136,10 +137,9 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     """
     values, written, deviation = measured(model, source)
     notes: list[str] = []
-    verdict = "exact: " if tm.is_exact(deviation, notes) else "measured deviation from the source model: "
     from . import _generator
 
-    extras = {"generator": _generator(), "comments": header + [verdict + deviation.describe()],
+    extras = {"generator": _generator(), "comments": tm.stated(header, notes, deviation),
               "source": (model if source is None else source).spec}
     text = json.dumps(_document(values, name, extras), indent=1) + "\n"
     return text, written, notes, deviation
@@ -155,6 +155,6 @@ def read_material(text: str) -> dict:
             "roughness": core.get("roughnessFactor", 1.0), "ior": ext.get("KHR_materials_ior", {}).get("ior", 1.5),
             "specular": ext.get("KHR_materials_specular", {}).get("specularFactor", 1.0),
             "specular_color": ext.get("KHR_materials_specular", {}).get("specularColorFactor", [1.0, 1.0, 1.0]),
-            "clearcoat": coat.get("clearcoatFactor", 0.0), "clearcoat_roughness": coat.get("clearcoatRoughnessFactor",
-                                                                                              0.0)}
+            "clearcoat": coat.get("clearcoatFactor", 0.0),
+            "clearcoat_roughness": coat.get("clearcoatRoughnessFactor", 0.0)}
 

@@ -83,10 +83,8 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
              "specular over the diffuse by albedo and tints its conductor by F82, where glTF mixes by Schlick's "
              "Fresnel per direction: its deviation is not measured (the deviation below is the glTF material's, "
              f"{material})"]
-    verdict = "exact: " if tm.is_exact(deviation, notes) else "measured deviation from the source model: "
-    comments = header + [f"approximation: {note}" for note in notes] + [verdict + deviation.describe()]
     lines = ['<?xml version="1.0"?>', '<materialx version="1.39" colorspace="lin_rec709">']
-    lines += [f"  <!-- {escape(line).replace('--', '- -')} -->" for line in comments]
+    lines += [f"  <!-- {escape(line).replace('--', '- -')} -->" for line in tm.stated(header, notes, deviation)]
     lines += _shader("gltf_pbr", f"SR_{material}", material, values)
     lines += _shader("open_pbr_surface", f"SR_{material}_openpbr", f"{material}_openpbr",
                      {OPENPBR_NAMES[k]: v for k, v in values.items()})

@@ -324,10 +324,7 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     # Uniform pairs and pairs near the peaks of the source, of the model written and of the parts written.
     pairs = tm.deviation_pairs(tm.peaks(reference, model, parts=parts))
     deviation = tm.measure(reference, written, pairs=pairs)
-    lines = [_comment(line) for line in header]
-    lines += [_comment(f"approximation: {note}") for note in notes]
-    verdict = "exact: " if tm.is_exact(deviation, notes) else "measured deviation from the source model: "
-    lines.append(_comment(verdict + deviation.describe()))
+    lines = [_comment(line) for line in tm.stated(header, notes, deviation)]
     head = f'version="3.0.0" id={quoteattr(name)} '
     lines += _tree(leaves, "", head)
     return "\n".join(lines) + "\n", written, notes, deviation

@@ -253,8 +253,6 @@ def write(model, name: str, header: list[str], source=None):
         pairs = tm.deviation_pairs(tm.peaks(reference, model, extra=_peaks(parts)))
     body, written = _evaluator(parts, name)
     deviation = tm.measure(reference, written, pairs=pairs)
-    lines = [f"# {line}" for line in header] + [f"# approximation: {note}" for note in notes]
-    verdict = "# exact: " if tm.is_exact(deviation, notes) else (
-        "# measured deviation from the source model (pbrt-v4's formulas, brdffit.export.pbrt_reference): ")
-    lines.append(verdict + deviation.describe())
+    lines = [f"# {line}" for line in tm.stated(header, notes, deviation,
+                                               "pbrt-v4's formulas, brdffit.export.pbrt_reference")]
     return "\n".join(lines) + "\n" + body, written, notes, deviation

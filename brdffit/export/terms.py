@@ -26,7 +26,7 @@ from .registry import ExportError
 __all__ = ["ExportError", "Term", "terms", "assemble", "evaluate_dirs", "reflects_nothing", "f0_to_eta",
            "check_channels", "own_model",
            "schlick_to_conductor", "Deviation", "measure", "random_pairs", "Peak", "peaks", "lobe_peaks", "Pairs",
-           "deviation_pairs", "is_exact", "number", "rgb"]
+           "deviation_pairs", "is_exact", "stated", "number", "rgb"]
 
 MICROFACET_LOBES = ("cook-torrance", "ggx")
 # The distributions the renderers' microfacet materials take (Beckmann or GGX; Blinn as Beckmann of the same m).
@@ -482,6 +482,25 @@ def is_exact(deviation: Deviation, notes) -> bool:
         True for an exact export.
     """
     return not notes and deviation.exact()
+
+
+def stated(header: list[str], notes: list[str], deviation: Deviation, measured_by: str = "") -> list[str]:
+    """The lines every renderer output opens with (as comments, or a glTF file's ``asset.extras``): ``header`` (the
+    source, the version, the fit), one ``approximation:`` line per note, then ``exact:`` (`is_exact`) or the
+    measured deviation, followed by `Deviation.describe`.
+
+    Arguments:
+        header: the opening lines.
+        notes: the approximations the mapping made.
+        deviation: the measured `Deviation`.
+        measured_by: how the written material was evaluated, where that needs saying (pbrt-v4's formulas).
+
+    Returns:
+        The lines, without comment markers.
+    """
+    how = f" ({measured_by})" if measured_by else ""
+    verdict = "exact: " if is_exact(deviation, notes) else f"measured deviation from the source model{how}: "
+    return list(header) + [f"approximation: {note}" for note in notes] + [verdict + deviation.describe()]
 
 
 def _errors(f, g, cos, weight):
