@@ -151,7 +151,7 @@ class FitResult:
                  f"run {self.run_time:.2f} s  init {self.init_time:.2f} s",
                  f"{'parameter':<14}{'value':>14}{'± ' + kind:>14}{'(' + other_name + ')':>14}   bounds"]
         others = self._flat_entries(other)[2]
-        spectral = self.models[0].channels * len(self.models) > SPECTRAL_CHANNELS and self.channel_mode != "independent"
+        spectral = self.models[0].channels > SPECTRAL_CHANNELS and self.channel_mode != "independent"
         for label, value, err, alt in zip(*self._flat_entries(), others):
             name = label.split("[")[0]
             spec = specs[name]
@@ -182,20 +182,19 @@ class FitResult:
 
     def _spectral_block(self, specs, kind: str) -> list[str]:
         """The colour parameters of a fit with many channels (a spectrum): one row per channel, one column per
-        parameter, value ± stderr, a parameter at a bound in that channel marked *."""
+        parameter, value ± stderr (`_flat_entries`), a parameter at a bound in that channel marked *."""
+        entries = {label: (value, err) for label, value, err in zip(*self._flat_entries())}
         names = [n for n in self.params if specs[n].colour]
+        channels = np.size(self.params[names[0]])
         head = "; ".join(f"{n} [{specs[n].lower:g}, {specs[n].upper:g}] {specs[n].unit}"
                          + (" fixed" if n in self.fixed else "") for n in names)
-        lines = [f"per channel ({np.size(self.params[names[0]])} channels; value ± {kind}; * at a bound): {head}",
+        lines = [f"per channel ({channels} channels; value ± {kind}; * at a bound): {head}",
                  f"{'channel':>8}" + "".join(f"{n:>24}" for n in names)]
-        for c in range(np.size(self.params[names[0]])):
+        for c in range(channels):
             cells = []
-            for n in names:
-                value = float(np.asarray(self.params[n], dtype=float)[c])
-                err = float(np.broadcast_to(np.asarray(self.stderr.get(n, np.nan), dtype=float),
-                                            np.shape(self.params[n]))[c])
-                mark = "*" if f"{n}[{c}]" in self.bounds_hit else " "
-                cells.append(f"{value:>12.6g} ± {err:<8.3g}{mark}")
+            for label in (f"{n}[{c}]" for n in names):
+                value, err = entries[label]
+                cells.append(f"{value:>12.6g} ± {err:<8.3g}{'*' if label in self.bounds_hit else ' '}")
             lines.append(f"{c:>8}" + "".join(f"{cell:>24}" for cell in cells))
         return lines
 
