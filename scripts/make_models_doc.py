@@ -110,7 +110,8 @@ EQUATIONS = {
     "blender": (
         "f = metallic S(cd; base_color) · D G2/(4 ci co) + (1 − metallic) [F_dielectric(cd; ior) · D G2/(4 ci co)\n"
         "    + (1 − E(co)) base_color/π]\n"
-        "E = F0 + (1 − F0) s(roughness, co, √((ior − 1)/(ior + 1))),  F0 = ((ior − 1)/(ior + 1))²,  co = ωo·n (the view)\n"
+        "E = F0 + (1 − F0) s(roughness, co, √((ior − 1)/(ior + 1))),  F0 = ((ior − 1)/(ior + 1))²,\n"
+        "co = ωo·n (the view)\n"
         "S(c; f0) = f0 + (1 − f0)(1 − c)⁵,  D = GGX,  G2 = 1/(1 + Λ(ωi) + Λ(ωo)),  α = roughness²\n"
         "s: Cycles' table ggx_gen_schlick_ior_s (16³ nodes, trilinear), computed by quadrature"
     ),

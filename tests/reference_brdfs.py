@@ -783,9 +783,11 @@ def cycles_layering_table(u_nodes: int = 96, phi_nodes: int = 64) -> np.ndarray:
                 f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
                 cos_t = np.sqrt(np.clip(1.0 - (1.0 - np.clip(vh, 0, 1) ** 2) / eta ** 2, 0.0, 1.0))
                 c = np.clip(vh, 0, 1)
-                fresnel = 0.5 * (((c - eta * cos_t) / (c + eta * cos_t)) ** 2 + ((eta * c - cos_t) / (eta * c + cos_t)) ** 2)
+                fresnel = 0.5 * (((c - eta * cos_t) / (c + eta * cos_t)) ** 2
+                                 + ((eta * c - cos_t) / (eta * c + cos_t)) ** 2)
                 blend = np.clip((fresnel - f0) / (1.0 - f0), 0.0, 1.0)
-                out[iz, im, ir] = min(max(float(np.sum(np.where(keep, w * g1 * vh / (mu * h[..., 2]) * blend, 0.0))), 0.0), 1.0)
+                s = float(np.sum(np.where(keep, w * g1 * vh / (mu * h[..., 2]) * blend, 0.0)))
+                out[iz, im, ir] = min(max(s, 0.0), 1.0)
     return out
 
 
@@ -798,7 +800,7 @@ def _lookup3(table, x, y, z):
         i = np.minimum(c.astype(int), n - 1)
         return i, np.minimum(i + 1, n - 1), c - i
 
-    (x0, x1, tx), (y0, y1, ty), (z0, z1, tz) = axis(np.asarray(x, float)), axis(np.asarray(y, float)), axis(np.asarray(z, float))
+    (x0, x1, tx), (y0, y1, ty), (z0, z1, tz) = (axis(np.asarray(c, float)) for c in (x, y, z))
 
     def plane(k):
         row0 = table[k, y0, x0] * (1 - tx) + table[k, y0, x1] * tx
@@ -834,7 +836,8 @@ def blender(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, ior
     cos_t = np.sqrt(1.0 - (1.0 - c * c) / ior ** 2)
     dielectric = 0.5 * (((c - ior * cos_t) / (c + ior * cos_t)) ** 2 + ((ior * c - cos_t) / (ior * c + cos_t)) ** 2)
     f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
-    albedo = f0 + (1.0 - f0) * _lookup3(cycles_layering_table(), roughness, pair.co, math.sqrt((ior - 1.0) / (ior + 1.0)))
+    s = _lookup3(cycles_layering_table(), roughness, pair.co, math.sqrt((ior - 1.0) / (ior + 1.0)))
+    albedo = f0 + (1.0 - f0) * s
     diffuse = np.clip(1.0 - albedo, 0.0, 1.0)[:, None] * base / np.pi
     return _masked(pair, metallic * schlick * spec + (1.0 - metallic) * (dielectric * spec + diffuse))
 

@@ -61,7 +61,8 @@ def test_gltf_model_exports_exactly_and_states_what_it_means(params, written_coa
 
 @pytest.mark.parametrize("params, extensions", [
     (GLTF, {"KHR_materials_ior", "KHR_materials_specular"}),
-    (COATED, {"KHR_materials_ior", "KHR_materials_specular", "KHR_materials_clearcoat"})], ids=["uncoated", "clearcoat"])
+    (COATED, {"KHR_materials_ior", "KHR_materials_specular", "KHR_materials_clearcoat"})],
+    ids=["uncoated", "clearcoat"])
 def test_gltf_file_passes_the_khronos_validator(tmp_path, params, extensions):
     path = tmp_path / "material.gltf"
     path.write_text(export(models.get("gltf", **params), "gltf", name="brdffit material"))

@@ -168,8 +168,8 @@ def _values(case_id):
 
 # The lobes and options of the modern microfacet, Burley and sheen models: against the reference at random
 # directions above the horizon to 1e-12 relative (the fixed configurations above hold every lobe to 1e-10).
-MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "gltf", "blender", "abc-smooth",
-                                                  "abc-microfacet", "sgd")
+MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "gltf", "blender",
+                                                  "abc-smooth", "abc-microfacet", "sgd")
           or case.options.get("distribution") in ("std", "gtr")
           or case.options.get("anisotropic") is True and case.spec != "lafortune"
           or case.options.get("shadowing") == "smith-correlated"]

@@ -1,14 +1,14 @@
 """Export a fitted model: brdffit's JSON, a Mitsuba 3 ``<bsdf>`` document, pbrt-v4 ``MakeNamedMaterial``
-statements or a glTF 2.0 file.
+statements, a glTF 2.0 file, a Blender (bpy) script or a MaterialX document.
 
 One file per target, each with a ``write`` function; `TARGETS` is the registry that the CLI's ``--to`` choices
 and `EXPORT_FORMATS` come from. Shared pieces (the lobes as renderer terms, the measured deviation, the Schlick
 -> index fit) are in `brdffit.export.terms`; the ``fit`` option is `brdffit.export.refit`, and what it wrote for a
 result in a `brdffit fit` output folder is recorded beside it by `brdffit.export.records`. Every renderer output
-opens with comments (in a glTF file, ``asset.extras.brdffit``) naming the source spec and the brdffit version, one ``approximation:`` line per
-approximation made, and the deviation of the written material from the source measured at 2,000 uniform random
-direction pairs and pairs near each lobe's peak, combined by the balance heuristic (`brdffit.export.terms.measure`,
-docs/export.md).
+opens with comments (in a glTF file, ``asset.extras.brdffit``) naming the source spec and the brdffit version, one
+``approximation:`` line per approximation made, and the deviation of the written material from the source measured
+at 2,000 uniform random direction pairs and pairs near each lobe's peak, combined by the balance heuristic
+(`brdffit.export.terms.stated`, `brdffit.export.terms.measure`, docs/export.md).
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ import dataclasses
 
 from .registry import EXPORT_FORMATS, FIT_TARGETS, TARGETS, ExportError, Target
 
-__all__ = ["EXPORT_FORMATS", "FIT_TARGETS", "TARGETS", "Target", "Export", "ExportError", "export", "export_details", "f0_to_eta"]
+__all__ = ["EXPORT_FORMATS", "FIT_TARGETS", "TARGETS", "Target", "Export", "ExportError", "export", "export_details",
+           "f0_to_eta"]
 
 
 def __getattr__(name):
@@ -91,7 +92,7 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
 
     Arguments:
         model_or_result, name, fit: as `export`.
-        to: a renderer in `TARGETS` (``"mitsuba"``, ``"pbrt"``, ``"gltf"``).
+        to: a renderer in `TARGETS` (``"mitsuba"``, ``"pbrt"``, ``"gltf"``, ``"blender"``, ``"materialx"``).
 
     Returns:
         An `Export`.
@@ -140,8 +141,9 @@ def export(model_or_result, to: str = "json", *, name: str = "material", fit: bo
         to: a name in `TARGETS`: ``"json"`` (spec, channels, parameters, plus ``stderr`` and ``status`` for a
             `FitResult`; `brdffit.models.model_from_dict` reads it back), ``"mitsuba"`` (a Mitsuba 3
             ``<bsdf version="3.0.0">`` document for ``mitsuba.load_string``), ``"pbrt"`` (pbrt-v4
-            ``MakeNamedMaterial`` statements, the last one named ``name``) or ``"gltf"`` (a glTF 2.0 file: the
-            material on a sphere, `brdffit.export.gltf`).
+            ``MakeNamedMaterial`` statements, the last one named ``name``), ``"gltf"`` (a glTF 2.0 file: the
+            material on a sphere, `brdffit.export.gltf`), ``"blender"`` (a bpy script, `brdffit.export.blender`)
+            or ``"materialx"`` (a MaterialX 1.39 document, `brdffit.export.materialx`).
         name: the material's id (Mitsuba) or name (pbrt).
         fit: for a renderer, fit the renderer's own model to the model over the hemisphere (cosine-weighted
             least squares: for Mitsuba a brdffit fit of lambert + GGX lobes, `brdffit.export.refit`, unless the

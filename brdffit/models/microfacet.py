@@ -25,8 +25,8 @@ jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`
 jax_special = module("jax.scipy.special")
 jax_lax = module("jax.lax")
 
-__all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "StudentT", "GTR", "DISTRIBUTIONS", "ANISOTROPIC", "v_cavity", "smith",
-           "smith_correlated", "SHADOWING"]
+__all__ = ["Distribution", "Beckmann", "GGX", "BlinnPhong", "StudentT", "GTR", "DISTRIBUTIONS", "ANISOTROPIC",
+           "v_cavity", "smith", "smith_correlated", "SHADOWING"]
 
 # Above this Beckmann a = 1/(m tanθ) the shadowing is 1 to double precision (erfc(27) ~ 1e-319).
 _BECKMANN_A_MAX = 27.0
