@@ -49,28 +49,12 @@ def _in_range(result) -> bool:
 
 def _cycles_difference(text: str, model) -> str:
     """Cycles' render of a Blender export against brdffit's of the model, as tests/test_export_blender.py compares
-    them (tests/clients/render_blender.py; 96 px, 256 samples a pixel, brdffit box-filtered from 4 × 4 points a
-    pixel): 'ok (mean relative difference X)' within 3%, else the difference."""
-    from brdffit.render import DEFAULT_LIGHTS, render_sphere
+    them (tests/clients/cycles_comparison.py): 'ok (...)' within 3%, else 'FAILED (...)'."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from clients.cycles_comparison import brdffit_render, cycles_render, difference
 
-    resolution, samples, supersample = 96, 256, 4
-    with tempfile.TemporaryDirectory() as folder:
-        folder = Path(folder)
-        (folder / "material.py").write_text(text)
-        (folder / "settings.json").write_text(json.dumps({"resolution": resolution, "samples": samples,
-                                                          "lights": [list(light) for light in DEFAULT_LIGHTS]}))
-        subprocess.run([sys.executable, str(ROOT / "tests" / "clients" / "render_blender.py"),
-                        str(folder / "material.py"), str(folder / "settings.json"), str(folder / "cycles.npy")],
-                       check=True, capture_output=True, timeout=600)
-        cycles = np.load(folder / "cycles.npy")
-    fine = render_sphere(model, resolution=resolution * supersample)
-    ours = fine.reshape(resolution, supersample, resolution, supersample, -1).mean(axis=(1, 3))
-    centres = (np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0
-    u, w = np.meshgrid(centres, -centres)
-    luminance = ours.mean(axis=-1)
-    lit = (u * u + w * w < 0.81) & (luminance > 0.01 * luminance.max())
-    difference = float(np.mean(np.abs(cycles - ours)[lit] / ours[lit]))
-    return f"{'ok' if difference <= 0.03 else 'FAILED'} (Cycles render: {difference:.2%})"
+    value = difference(cycles_render(text), brdffit_render(model))
+    return f"{'ok' if value <= 0.03 else 'FAILED'} (Cycles render: {value:.2%})"
 
 
 def _loads(text: str, target: str, model=None) -> str:
