@@ -747,10 +747,15 @@ def _cmd_export(args) -> int:
               "export it anyway", file=sys.stderr)
         return EXIT_IMPLAUSIBLE
     enable_compilation_cache()
+    # A spectral fit is written for a renderer as its RGB model (brdffit.colour.rgb_model).
+    wavelengths = _stored_wavelengths(args.result, result.model.channels) \
+        if TARGETS[args.to].renderer and result.model is not None else None
     # The fit option's export to a renderer is recorded beside the result, for its report.
     recorded = args.fit and TARGETS[args.to].renderer
-    details = export_details(result, args.to, name=args.material, fit=True) if recorded else None
-    text = details.text if recorded else export(result, to=args.to, name=args.material, fit=args.fit)
+    details = export_details(result, args.to, name=args.material, fit=True, wavelengths=wavelengths) \
+        if recorded else None
+    text = details.text if recorded else export(result, to=args.to, name=args.material, fit=args.fit,
+                                                wavelengths=wavelengths)
     if args.out:
         from .io._common import atomic_path
 
@@ -783,16 +788,17 @@ def _record_export(args, details) -> None:
 
 def _render_source(path: Path, args):
     """What `brdffit render` shades: a MERL table, the fit stored in a results file, or the measurements (read
-    with the table options when given)."""
+    with the table options when given); with the wavelengths of spectral channels (None otherwise)."""
     import h5py
 
     from . import FitResult, io
 
     use_data, name = args.data, args.name
     if _table_options(args):
-        return _load(path, args), "measurements (interpolated)"
+        m = _load(path, args)
+        return m, "measurements (interpolated)", _wavelengths(m, len(m.channels), path)
     if io.detect_format(path) == "merl":
-        return io.read_merl(path), "MERL table"
+        return io.read_merl(path), "MERL table", None
     if not use_data and io.detect_format(path) == "hdf5":
         with h5py.File(path, "r") as f:
             has_fit = "fits" in f and len(f["fits"]) > 0
@@ -800,15 +806,35 @@ def _render_source(path: Path, args):
             result = FitResult.load(path, name)
             if result.model is None:
                 raise UsageError(f"{path}: the fit has independent channels; render one channel's model instead")
-            return result.model, f"fit {result.spec}"
-    return _load(path, args), "measurements (interpolated)"
+            return result.model, f"fit {result.spec}", _stored_wavelengths(path, result.model.channels)
+    m = _load(path, args)
+    return m, "measurements (interpolated)", _wavelengths(m, len(m.channels), path)
+
+
+def _wavelengths(measurements, channels: int, path) -> list | None:
+    """The wavelengths of spectral channels in the measurements' metadata (ASTM E1392 bands), or None."""
+    from .colour import wavelengths_of
+
+    return wavelengths_of(measurements.meta, channels, str(path))
+
+
+def _stored_wavelengths(path, channels: int) -> list | None:
+    """The wavelengths of a fit's spectral channels, from the measurements `brdffit fit` stores beside it in the
+    results file (None where the file has none, or they are not spectral)."""
+    from . import io
+
+    try:
+        measurements = io.load(path)
+    except io.FormatError:  # a results file written by FitResult.save alone has no /measurements
+        return None
+    return _wavelengths(measurements, channels, path)
 
 
 def _cmd_render(args) -> int:
     from . import render
 
     path = Path(args.file)
-    source, what = _render_source(path, args)
+    source, what, wavelengths = _render_source(path, args)
     enable_compilation_cache()
     lights = list(render.DEFAULT_LIGHTS)
     if args.area_light:
@@ -820,6 +846,15 @@ def _cmd_render(args) -> int:
         what += f", a plane seen from distance {render.PLANE_VIEW_DISTANCE:g} (side 2)"
     else:
         hdr = render.render_sphere(source, lights, resolution=args.resolution, isotropic=not args.anisotropic)
+    if wavelengths is not None:  # the spectral radiance as linear sRGB under D65 (brdffit.colour)
+        from .colour import ColourError, spectral_colour
+
+        try:
+            hdr = spectral_colour(wavelengths, f"{path}: wavelengths").linear_srgb(hdr)
+            what += f", its {len(wavelengths)} bands shown in sRGB (CIE 1931 XYZ under D65)"
+        except ColourError as exc:  # bands the eye does not see (infrared, say): their mean, in grey
+            hdr = hdr.mean(axis=-1, keepdims=True)
+            what += f", shown in grey as the mean of its bands ({exc})"
     out = Path(args.out) if args.out else path.with_suffix(".png")
     render.save_png(out, render.tonemap(hdr, args.tonemap, args.exposure))
     written = [str(out)]
@@ -1081,7 +1116,8 @@ def _render_command(sub) -> None:
     p.add_argument("--area-light", type=bounded(float, 0.0, 1.5), default=0.0, metavar="RADIUS",
                    help="make the key light an area light of this angular radius (radians), 16 samples")
     p.add_argument("--anisotropic", action="store_true", help="interpolate measured data as anisotropic")
-    p.add_argument("--npy", action="store_true", help="also write the HDR image as float32 .npy")
+    p.add_argument("--npy", action="store_true", help="also write the HDR image as float32 .npy (linear sRGB for "
+                   "spectral data)")
     p.add_argument("--out", help="PNG path (default: the input with .png)")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     _add_table_options(p)

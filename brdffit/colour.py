@@ -34,8 +34,8 @@ standard's rounded matrix it maps to (1.00001, 1.00008, 0.99983) and with the ro
 and its other parameters are shared, the BRDF in band j is f_j = o + Σ_p a_{p,j} B_p (o and B_p independent of the
 band), and the linear sRGB of the model is exactly the same model with each amplitude's spectrum converted:
 M W f = o M W 1 + Σ_p (M W a_p) B_p, where M W 1 = (1, 1, 1) by the white point above (`rgb_model`). A per-band
-parameter that is not an amplitude (a conductor's η and k, a Schlick f0 per band) gives no such model; `rgb_model`
-refuses it unless its value is the same in every band.
+parameter that is not an amplitude (a conductor's η and k, glTF's specular colour when freed) gives no such model;
+`rgb_model` refuses it unless its value is the same in every band.
 """
 
 from __future__ import annotations
@@ -200,6 +200,16 @@ def spectral_colour(wavelengths, where: str = "wavelengths") -> SpectralColour:
         ColourError: no wavelength, one that is not a finite positive number, two equal, or none inside the
             tables' 360-830 nm.
     """
+    values = _checked(wavelengths, where)
+    grid, _, _ = tables()
+    if values.max() < grid[0] or values.min() > grid[-1]:
+        raise ColourError(f"{where}: every band ({values.min():g}-{values.max():g} nm) lies outside the CIE tables' "
+                          f"{grid[0]:g}-{grid[-1]:g} nm, where the eye sees nothing; no colour can be computed")
+    return _spectral_colour(tuple(float(v) for v in values))
+
+
+def _checked(wavelengths, where: str) -> np.ndarray:
+    """The wavelengths as a float vector, or a ColourError naming ``where`` and what was expected."""
     try:
         values = np.asarray(wavelengths, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -208,16 +218,12 @@ def spectral_colour(wavelengths, where: str = "wavelengths") -> SpectralColour:
         raise ColourError(f"{where}: no wavelength given; a spectrum needs one wavelength (nm) per channel")
     bad = ~np.isfinite(values) | (values <= 0.0)
     if bad.any():
-        raise ColourError(f"{where}: wavelength {int(np.argmax(bad))} is {float(values[bad][0])!r}; expected a positive "
-                          "number of nm")
+        raise ColourError(f"{where}: wavelength {int(np.argmax(bad))} is {float(values[bad][0])!r}; expected a "
+                          "positive number of nm")
     if len(np.unique(values)) != values.size:
         twice = sorted({float(v) for v in values if np.sum(values == v) > 1})
         raise ColourError(f"{where}: the wavelength {twice[0]:g} nm is given twice; each band needs its own")
-    grid, _, _ = tables()
-    if values.max() < grid[0] or values.min() > grid[-1]:
-        raise ColourError(f"{where}: every band ({values.min():g}-{values.max():g} nm) lies outside the CIE tables' "
-                          f"{grid[0]:g}-{grid[-1]:g} nm, where the eye sees nothing; no colour can be computed")
-    return _spectral_colour(tuple(float(v) for v in values))
+    return values
 
 
 @functools.lru_cache(maxsize=64)
@@ -253,7 +259,8 @@ def wavelengths_of(meta, channels: int, where: str = "measurements") -> list | N
         A list of ``channels`` floats (nm), or None.
 
     Raises:
-        ColourError: ``wavelengths_nm`` present but not one valid wavelength per channel.
+        ColourError: ``wavelengths_nm`` present but not one positive wavelength per channel, each once (bands
+            outside the visible range are left to `spectral_colour` to refuse).
     """
     found = (meta or {}).get("wavelengths_nm")
     if found is None:
@@ -261,7 +268,7 @@ def wavelengths_of(meta, channels: int, where: str = "measurements") -> list | N
     field = f"{where}: meta wavelengths_nm"
     if not isinstance(found, (list, tuple)) or len(found) != channels:
         raise ColourError(f"{field} must list one wavelength (nm) per channel ({channels}), got {found!r}")
-    return list(spectral_colour(found, field).wavelengths)
+    return [float(v) for v in _checked(found, field)]
 
 
 def rgb_model(model, wavelengths):

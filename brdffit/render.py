@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from .colour import srgb_encode
 from .io._common import atomic_path
 from .io.merl import MerlTable
 from .measurements import Measurements
@@ -225,7 +226,8 @@ def area_light(theta: float, phi: float, intensity: float, radius: float, sample
 
 # ------------------------------------------------------------------------------------------------- tone mapping
 def srgb_oetf(linear) -> np.ndarray:
-    r"""The sRGB transfer function (IEC 61966-2-1:1999, Eq. 5): linear [0, 1] -> encoded [0, 1].
+    r"""The sRGB transfer function (IEC 61966-2-1:1999, Eq. 5): linear [0, 1] -> encoded [0, 1]
+    (`brdffit.colour.srgb_encode`).
 
     V = 12.92 L for L <= 0.0031308, else 1.055 L^(1/2.4) − 0.055. Inputs are clipped to [0, 1] first.
 
@@ -235,8 +237,7 @@ def srgb_oetf(linear) -> np.ndarray:
     Returns:
         Encoded values in [0, 1], same shape.
     """
-    x = np.clip(np.asarray(linear, dtype=float), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return srgb_encode(linear)
 
 
 def luminance(image) -> np.ndarray:

@@ -42,3 +42,19 @@ def test_report_plots_the_spectra_only_for_spectral_data(spectral, tmp_path):
     assert "](spectra.png)" in open(written["md"], encoding="utf-8").read()
     plain = m.replace(meta={k: v for k, v in m.meta.items() if k != "wavelengths_nm"})
     assert not any(str(p).endswith("spectra.png") for p in write_report(tmp_path / "plain", plain, result)["figures"])
+
+
+def test_report_spheres_and_renderer_exports_show_the_spectral_fit_in_srgb(spectral):
+    from brdffit.colour import spectral_colour
+    from brdffit.render import render_sphere
+    from brdffit.report import figures
+    from brdffit.report.assemble import _renderer_table
+
+    _, m, result = spectral
+    data, fitted, _ = figures.sphere_images(m, result, resolution=24)
+    assert data.shape == fitted.shape == (24, 24, 3)
+    bands = render_sphere(result.model, resolution=24)
+    np.testing.assert_allclose(fitted, spectral_colour(WAVELENGTHS).linear_srgb(bands), atol=1e-14)
+    _, rows = _renderer_table(result, [], list(m.meta["wavelengths_nm"]))
+    mitsuba = next(row for row in rows if row[0] == "mitsuba")
+    assert mitsuba[2] in ("exact", "approximate"), mitsuba

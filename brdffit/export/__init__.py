@@ -87,11 +87,12 @@ def _generator() -> str:
     return f"brdffit {getattr(brdffit, '__version__', 'unknown')}"
 
 
-def export_details(model_or_result, to: str, *, name: str = "material", fit: bool = False) -> Export:
+def export_details(model_or_result, to: str, *, name: str = "material", fit: bool = False,
+                   wavelengths=None) -> Export:
     """`export` to a renderer, returning the written material and its measured deviation with the text.
 
     Arguments:
-        model_or_result, name, fit: as `export`.
+        model_or_result, name, fit, wavelengths: as `export`.
         to: a renderer in `TARGETS` (``"mitsuba"``, ``"pbrt"``, ``"gltf"``, ``"blender"``, ``"materialx"``).
 
     Returns:
@@ -109,6 +110,14 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
         raise ExportError(f"a fit in channel_mode='independent' has one model per channel ({result.spec}); "
                           f"{to} needs one material: refit with channel_mode='shared-shape' or export to json")
     header = [f"{_generator()} export of model {model.spec} to {to}"]
+    if wavelengths is not None:
+        from ..colour import ColourError, rgb_model
+
+        try:
+            model, line = rgb_model(model, wavelengths)
+        except ColourError as exc:
+            raise ExportError(f"{to} takes RGB colours, and the spectral fit has no exact RGB model: {exc}") from None
+        header.append(line)
     if not fit:
         return _export(target, model, name, header, None)
     candidates = []
@@ -133,7 +142,8 @@ def _export(target: Target, model, name: str, header: list, source, fitted: str 
     return Export(text, written, source if source is not None else model, notes, deviation, model, fitted)
 
 
-def export(model_or_result, to: str = "json", *, name: str = "material", fit: bool = False) -> str:
+def export(model_or_result, to: str = "json", *, name: str = "material", fit: bool = False,
+           wavelengths=None) -> str:
     """Write a model (or the model of a fit) in a renderer's own terms.
 
     Arguments:
@@ -150,18 +160,23 @@ def export(model_or_result, to: str = "json", *, name: str = "material", fit: bo
             direct mapping is exact; for pbrt-v4 its own parameters, refined) and write the candidate closest
             to the model, with the achieved error in the comments; this also exports lobes with no equivalent
             (Oren-Nayar, Ward, Lafortune, ...). Ignored for JSON.
+        wavelengths: for a spectral model (one channel per band), the bands in nm: a renderer is then given the
+            model's linear sRGB equivalent (`brdffit.colour.rgb_model`: exact where every per-band parameter is an
+            amplitude), and the conversion is stated in the opening comments. Ignored for JSON, which keeps the
+            spectral model. ``brdffit export`` reads them from the measurements stored in the results file.
 
     Returns:
         The text. Renderer outputs open with comments naming the source spec, the brdffit version, each
         approximation the mapping made and the measured deviation of what is written (docs/export.md).
 
     Raises:
-        ExportError: the model has a lobe with no equivalent in that renderer (and ``fit`` is false), or more
-            channels than RGB. ValueError: unknown format.
+        ExportError: the model has a lobe with no equivalent in that renderer (and ``fit`` is false), more
+            channels than RGB without ``wavelengths``, or a spectral model with no exact RGB model (a per-band
+            parameter that is not an amplitude). ValueError: unknown format.
     """
     if to not in TARGETS:
         raise ValueError(f"unknown export format {to!r}; choose one of {', '.join(EXPORT_FORMATS)}")
     if not TARGETS[to].renderer:
         model, result = _unwrap(model_or_result)
         return TARGETS[to].load().write(model, result, _generator())
-    return export_details(model_or_result, to, name=name, fit=fit).text
+    return export_details(model_or_result, to, name=name, fit=fit, wavelengths=wavelengths).text

@@ -546,9 +546,10 @@ def measure(source: Model, written, n: int = DEVIATION_PAIRS, seed: int = DEVIAT
 def check_channels(model, target: str):
     """Raise `ExportError` unless the model has 1 or 3 channels (the renderers take RGB)."""
     if model.channels not in (1, 3):
-        raise ExportError(f"{target} takes RGB colours; model {model.spec!r} has {model.channels} channels "
-                          "(spectral data need the wavelengths, which a model does not carry); fit RGB or "
-                          "single-channel data")
+        raise ExportError(f"{target} takes RGB colours; model {model.spec!r} has {model.channels} channels. A "
+                          "spectral fit is written as its sRGB equivalent when the wavelengths are given (export's "
+                          "wavelengths=...; `brdffit export RESULT.h5` reads them from the measurements that `brdffit "
+                          "fit` stores in the results file); otherwise fit RGB or single-channel data")
 
 
 def own_model(model: Model, family: str, target: str, exportable: str, source=None):

@@ -163,17 +163,17 @@ def _plausibility_blocks(fit_result) -> list:
     return [("h2", "Plausibility"), ("table", ["check", "verdict", "measured", "what to do"], rows)]
 
 
-def _renderer_table(fit_result, recorded):
+def _renderer_table(fit_result, recorded, wavelengths=None):
     """One row per renderer target for ``fit_result`` (or a `Model`): the direct mapping's verdict with its
     measured deviation (3 significant digits, as the export's comments state it) or the reason it has none, then
     the fit-option exports of this fit in ``recorded`` (`brdffit.export.records.ExportRecord`) with their achieved
-    error."""
+    error. A spectral fit (``wavelengths``, nm) is exported as its sRGB model, as `brdffit export` does."""
     from ..export import TARGETS, ExportError, export_details
 
     rows = []
     for target in (t for t in TARGETS.values() if t.renderer):
         try:
-            direct = export_details(fit_result, target.name)
+            direct = export_details(fit_result, target.name, wavelengths=wavelengths)
         except ExportError as exc:
             rows.append([target.name, "direct", "no equivalent", "–", "–", str(exc)])
         else:
@@ -189,8 +189,9 @@ def _renderer_table(fit_result, recorded):
             "approximations and notes"], rows
 
 
-def _renderer_blocks(fit_result, exports: ExportLog) -> list:
-    """The renderer-exports section (docs/report.md), with the exports recorded for this fit."""
+def _renderer_blocks(fit_result, exports: ExportLog, wavelengths=None) -> list:
+    """The renderer-exports section (docs/report.md), with the exports recorded for this fit (a spectral fit's, of
+    its sRGB model: ``wavelengths``)."""
     recorded = exports.for_model(fit_result.model)
     blocks = [("h2", "Renderer exports"),
               ("p", "How this fit is written for each renderer `brdffit export RESULT.h5 --to T` writes to "
@@ -201,7 +202,7 @@ def _renderer_blocks(fit_result, exports: ExportLog) -> list:
                     "none, and `brdffit export RESULT.h5 --to T --fit` fits the renderer's own model to it. "
                     "**--fit**: the fit option's exports of this fit recorded in exports.json beside result.h5, "
                     "with their achieved error."),
-              ("table",) + _renderer_table(fit_result, recorded)]
+              ("table",) + _renderer_table(fit_result, recorded, wavelengths)]
     others = len(exports.records) - len(recorded)
     if others:
         blocks.append(("p", f"{exports.path} also records {others} export{'s' if others > 1 else ''} of another "
@@ -263,7 +264,8 @@ def _blocks(measurements, fit_result, posterior, selection, run_info, figure_pat
         b.append(("h2", "Model selection"))
         b.append(("p", f"criterion {selection.criterion}; best {selection.best}; chosen **{selection.chosen}**."))
         b.append(("table",) + _selection_table(selection))
-    b.extend(_renderer_blocks(fit_result, exports))
+    wavelengths = F.spectral_axis(measurements, fit_result.model.channels) if fit_result.model is not None else None
+    b.extend(_renderer_blocks(fit_result, exports, None if wavelengths is None else list(wavelengths)))
     warnings = list(fit_result.warnings) + [f"posterior: {w}" for w in (posterior.warnings if posterior else [])] \
         + [f"selection: {w}" for w in (selection.warnings if selection else [])] + list(report_warnings)
     b.append(("h2", "Warnings"))
@@ -287,7 +289,8 @@ _CAPTIONS = {
               "below 1 (dashed line).",
     "spheres": "Sphere previews: the measurement (interpolated), the fit and their relative difference. Rings and "
                "speckle in the difference come from interpolating scattered samples (k nearest neighbours), not "
-               "necessarily from the fit.",
+               "necessarily from the fit. Spectral data are rendered band by band and shown in sRGB (CIE 1931 XYZ "
+               "under D65, brdffit.colour); the difference compares their luminance Y.",
     "spectra": "The fitted amplitudes of a spectral measurement against wavelength, with their ±1 and ±2 standard "
                "error bands.",
     "renderer": "The renderer's view: the measurement, the best model without the renderer's limits and the fit "

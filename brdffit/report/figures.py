@@ -19,6 +19,7 @@ from ..arrays import jitted, padded_columns
 from ..geometry import to_half_diff
 from ..io._common import atomic_path
 from ..properties import directional_albedo
+from ..colour import ColourError, spectral_colour
 from ..render import difference, render_sphere, tonemap
 
 __all__ = [
@@ -136,8 +137,19 @@ def _render_fit(fit_result, resolution: int) -> np.ndarray:
     return np.concatenate([render_sphere(m, resolution=resolution) for m in models], axis=-1)
 
 
+def _as_srgb(hdr: np.ndarray, measurements) -> np.ndarray:
+    """A render of spectral data or of their fit as linear sRGB (`brdffit.colour`: CIE 1931 XYZ under D65); other
+    renders as they are."""
+    wavelengths = spectral_axis(measurements, hdr.shape[-1]) if np.ndim(hdr) == 3 else None
+    try:
+        return hdr if wavelengths is None else spectral_colour(wavelengths).linear_srgb(hdr)
+    except ColourError:  # bands the eye does not see (infrared, say): shown as the luminance of other data
+        return hdr
+
+
 def _display(hdr: np.ndarray, exposure: float) -> np.ndarray:
-    """A displayable image: RGB for three channels, the luminance in grey otherwise."""
+    """A displayable image: RGB for three channels (linear sRGB, `_as_srgb` for spectral renders), the luminance
+    in grey otherwise."""
     if hdr.ndim == 3 and hdr.shape[2] not in (1, 3):
         hdr = hdr.mean(axis=-1)
     ldr = tonemap(hdr, exposure=exposure)
@@ -554,9 +566,11 @@ def plot_renderer_view(path, measurements, free_result, target_result, target: s
     Returns:
         ``path`` as a string.
     """
-    images = [(render_sphere(measurements, resolution=resolution), "measurement (k-NN interpolated)"),
-              (_render_fit(free_result, resolution), f"free: {free_result.spec}\nheld-out error {errors[0]:.4g}"),
-              (_render_fit(target_result, resolution),
+    images = [(_as_srgb(render_sphere(measurements, resolution=resolution), measurements),
+               "measurement (k-NN interpolated)"),
+              (_as_srgb(_render_fit(free_result, resolution), measurements),
+               f"free: {free_result.spec}\nheld-out error {errors[0]:.4g}"),
+              (_as_srgb(_render_fit(target_result, resolution), measurements),
                f"for {target}: {target_result.spec}\nheld-out error {errors[1]:.4g} ({errors[1] / errors[0]:.2f}x)")]
     fig = _new_figure("renderer")
     for ax, (img, title) in zip(fig.subplots(1, 3), images):
@@ -573,10 +587,12 @@ def sphere_images(measurements, fit_result, resolution: int = 160):
     """HDR sphere renders of the measurement (interpolated) and of the fit, and their relative difference.
 
     Returns:
-        ``(data_hdr, fit_hdr, diff)``; ``diff`` = `brdffit.render.difference` (fit against data).
+        ``(data_hdr, fit_hdr, diff)``; ``diff`` = `brdffit.render.difference` (fit against data). Spectral data
+        (one wavelength per channel in ``meta["wavelengths_nm"]``) and their fit are rendered band by band and given
+        as linear sRGB (`brdffit.colour`), so that ``diff`` compares luminance Y.
     """
-    data = render_sphere(measurements, resolution=resolution)
-    fitted = _render_fit(fit_result, resolution)
+    data = _as_srgb(render_sphere(measurements, resolution=resolution), measurements)
+    fitted = _as_srgb(_render_fit(fit_result, resolution), measurements)
     return data, fitted, difference(fitted, data)
 
 
