@@ -234,6 +234,11 @@ def test_cli_fit_export_render_of_an_astm_file(tmp_path, mi, capsys):
     expected = colour.spectral_colour([400.0, 500.0, 600.0]).linear_srgb(
         np.asarray(models.evaluate_dirs(spectral, wi, wo)))
     np.testing.assert_allclose(evaluate_in_mitsuba(text, wi, wo), expected, rtol=1e-4)
+    # An export with the fit option is recorded for the report, which finds it for the spectral fit.
+    assert main(["export", str(out / "result.h5"), "--to", "mitsuba", "--fit", "--out", str(tmp_path / "f.xml"),
+                 "--quiet"]) == EXIT_OK
+    assert main(["report", str(out / "result.h5"), "--quiet"]) == EXIT_OK
+    assert "| mitsuba | --fit, " in (out / "report.md").read_text()
     for args in (["render", str(out / "result.h5")], ["render", str(DATA / "cornell_like.astm"), "--plane"]):
         png = tmp_path / f"{args[0]}{len(args)}.png"
         assert main(args + ["--out", str(png), "--resolution", "32", "--npy"]) == EXIT_OK

@@ -192,7 +192,15 @@ def _renderer_table(fit_result, recorded, wavelengths=None):
 def _renderer_blocks(fit_result, exports: ExportLog, wavelengths=None) -> list:
     """The renderer-exports section (docs/report.md), with the exports recorded for this fit (a spectral fit's, of
     its sRGB model: ``wavelengths``)."""
-    recorded = exports.for_model(fit_result.model)
+    exported = fit_result.model
+    if wavelengths is not None and exported is not None:  # `brdffit export` wrote (and recorded) the sRGB model
+        from ..colour import ColourError, rgb_model
+
+        try:
+            exported = rgb_model(exported, wavelengths)[0]
+        except ColourError:
+            pass
+    recorded = exports.for_model(exported)
     blocks = [("h2", "Renderer exports"),
               ("p", "How this fit is written for each renderer `brdffit export RESULT.h5 --to T` writes to "
                     "(docs/export.md). **direct**: the mapping onto the renderer's own plugins, exact or with the "
