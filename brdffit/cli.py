@@ -821,13 +821,15 @@ def _wavelengths(measurements, channels: int, path) -> list | None:
 def _stored_wavelengths(path, channels: int) -> list | None:
     """The wavelengths of a fit's spectral channels, from the measurements `brdffit fit` stores beside it in the
     results file (None where the file has none, or they are not spectral)."""
-    from . import io
+    from .colour import wavelengths_of
+    from .io import FormatError
+    from .io.hdf5 import read_meta
 
     try:
-        measurements = io.load(path)
-    except io.FormatError:  # a results file written by FitResult.save alone has no /measurements
+        meta = read_meta(path)
+    except FormatError:  # a results file written by FitResult.save alone has no /measurements
         return None
-    return _wavelengths(measurements, channels, path)
+    return wavelengths_of(meta, channels, str(path))
 
 
 def _cmd_render(args) -> int:

@@ -219,6 +219,9 @@ def test_cli_fit_export_render_of_an_astm_file(tmp_path, mi, capsys):
 
     out = tmp_path / "fit"
     assert main(["fit", str(DATA / "cornell_like.astm"), "--model", "lambert", "--out", str(out), "--quiet"]) == EXIT_OK
+    from brdffit.io.hdf5 import read_meta
+
+    assert read_meta(out / "result.h5")["wavelengths_nm"] == [400.0, 500.0, 600.0]  # what export reads, alone
     xml = tmp_path / "m.xml"
     assert main(["export", str(out / "result.h5"), "--to", "mitsuba", "--out", str(xml), "--quiet"]) == EXIT_OK
     text = xml.read_text()

@@ -52,7 +52,8 @@ from ._common import (FormatError, atomic_path, check_not_lfs_pointer, memory_gu
                       read_head)
 from .locking import LOCK_TIMEOUT_S, locked
 
-__all__ = ["FORMAT_VERSION", "MEASUREMENTS_GROUP", "read_hdf5", "write_hdf5", "update_hdf5", "read_hdf5_group",
+__all__ = ["FORMAT_VERSION", "MEASUREMENTS_GROUP", "read_hdf5", "read_meta", "write_hdf5", "update_hdf5",
+           "read_hdf5_group",
            "write_measurements_group", "read_measurements_group", "is_hdf5", "inspect_hdf5", "inspect_hdf5_many",
            "open_hdf5", "open_h5_waiting", "read_hdf5_many",
            "MAX_DATASET_BYTES", "MAX_ATTRIBUTE_BYTES", "INSPECT_TIMEOUT_S"]
@@ -660,6 +661,38 @@ def read_hdf5(path, group: str = MEASUREMENTS_GROUP) -> Measurements:
         MeasurementError: stored arrays that break the rules of `Measurements`.
     """
     return read_hdf5_group(path, group, lambda g: read_measurements_group(g, path))
+
+
+def read_meta(path, group: str = MEASUREMENTS_GROUP) -> dict:
+    """The metadata of measurements in a brdffit HDF5 file (``Measurements.meta``) without reading their arrays:
+    a results file's ``/measurements`` can hold millions of samples, and `brdffit export` needs only the
+    wavelengths of their channels.
+
+    Arguments:
+        path: the file.
+        group: the group holding the measurements (default ``/measurements``).
+
+    Returns:
+        The meta dict ({} where the group has none).
+
+    Raises:
+        FormatError: as `read_hdf5` (a missing group, a damaged or oversized attribute, metadata that is not a JSON
+            object).
+    """
+    def meta(g):
+        if "meta" not in g.attrs:
+            return {}
+        where = g.name
+        try:
+            text = _attr_text(_check_attribute(path, g, "meta", where))
+        except UnicodeDecodeError as err:
+            raise FormatError(path, f"attribute meta of {where} is not UTF-8 text: {err}") from None
+        value = parse_meta_json(path, text, f"attribute {where}.meta")
+        if not isinstance(value, dict):
+            raise FormatError(path, f"attribute {where}.meta must be a JSON object")
+        return value
+
+    return read_hdf5_group(path, group, meta)
 
 
 @memory_guarded("reading the HDF5 file")
