@@ -52,8 +52,8 @@ def absolute_fits():
 def test_relative_noise_is_identified_and_the_default_stderr_covers(relative_fits):
     assert all(r.converged for r in relative_fits)
     assert [r.noise_model.name for r in relative_fits] == ["relative"] * REPLICATES
-    # The cosine loss weights for σ ∝ 1/cosθi, not for σ ∝ f: the default is the sandwich.
-    assert {r.stderr_kind for r in relative_fits} == {"sandwich"}
+    # The cosine loss weights for σ ∝ 1/cosθi, not for σ ∝ f: the default is the noise-model covariance.
+    assert {r.stderr_kind for r in relative_fits} == {"noise-model"}
     coverage = _coverage(relative_fits)
     assert all(COVERAGE[0] <= c <= COVERAGE[1] for c in coverage.values()), coverage
     # The Laplace standard error, the old default, does not cover alpha (measured: 0.47 of 150 replicates).
@@ -63,7 +63,7 @@ def test_relative_noise_is_identified_and_the_default_stderr_covers(relative_fit
 def test_absolute_noise_is_identified_and_the_default_stderr_covers(absolute_fits):
     assert all(r.converged for r in absolute_fits)
     assert [r.noise_model.name for r in absolute_fits] == ["absolute"] * REPLICATES
-    assert {r.stderr_kind for r in absolute_fits} == {"sandwich"}  # still not the cosine loss's own noise
+    assert {r.stderr_kind for r in absolute_fits} == {"noise-model"}  # still not the cosine loss's own noise
     coverage = _coverage(absolute_fits)
     assert all(COVERAGE[0] <= c <= COVERAGE[1] for c in coverage.values()), coverage
 
@@ -95,7 +95,7 @@ def test_shipped_plastic_default_stderr_is_consistent_with_the_truth():
     m = brdffit.io.load(ROOT / "data" / "synthetic" / "plastic.h5")
     truth = synth.truth_model(m)
     result = brdffit.fit(m, "lambert+cook-torrance", fixed={"f0": 0.04})
-    assert result.noise_model.name == "relative" and result.stderr_kind == "sandwich"
+    assert result.noise_model.name == "relative" and result.stderr_kind == "noise-model"
     z_default, z_laplace = [], []
     for name in ("rho_d", "ks", "m"):
         error = np.ravel(result.params[name]) - np.ravel(truth.params[name])
@@ -104,7 +104,7 @@ def test_shipped_plastic_default_stderr_is_consistent_with_the_truth():
     assert max(z_default) < 3.0, z_default  # measured: 1.99 (rho_d[0]), 1.71 (ks[0])
     assert max(z_laplace) > 20.0  # the old default put ks[0] 27σ from the truth
     summary = result.summary()
-    assert "noise relative" in summary and "stderr sandwich" in summary
+    assert "noise relative" in summary and "stderr noise-model" in summary
 
 
 def test_noise_model_round_trip_and_old_files(tmp_path, absolute_fits):
@@ -135,7 +135,7 @@ def test_compare_maximum_likelihood_by_hand():
     sums = brdffit.metrics.metric_sums(f[:, None], (f - d)[:, None], np.ones((f.size, 1), bool), cos_i,
                                        np.ones(f.size), xp=np)
     noise = compare(sums, "cosine", n_total=f.size)
-    assert noise.name == "relative" and noise.covariance == "sandwich"
+    assert noise.name == "relative" and noise.covariance == "noise-model" and noise.forms == ("relative",)
     n = f.size
     for name, g in (("absolute", np.ones(n)), ("relative", f ** 2), ("signal", f), ("cosine", 1 / cos_i ** 2)):
         s2 = np.mean(d ** 2 / g)
@@ -156,9 +156,31 @@ def test_independent_channels_merge_their_noise_models():
                                            np.ones(f.size), xp=np)
         models.append(compare(sums, "absolute", n_total=f.size))
     assert [m.name for m in models] == ["relative", "absolute"]
-    assert [m.covariance for m in models] == ["sandwich", "laplace"]
+    assert [m.covariance for m in models] == ["noise-model", "laplace"]
     merged = merge(models)
-    assert merged.name == "relative/absolute" and merged.covariance == "sandwich/laplace"
+    assert merged.name == "relative/absolute" and merged.covariance == "noise-model/laplace"
+    assert merged.forms == ("relative", "absolute")
     assert merged.loglik["signal"] == pytest.approx(models[0].loglik["signal"] + models[1].loglik["signal"])
     assert len(merged.scale["relative"]) == 2 and "per channel relative/absolute" in merged.describe("absolute")[0]
     assert merge([models[1], models[1]]).name == "absolute" and merge([None]) is None
+
+
+def test_a_channel_departs_from_the_common_noise_model_only_where_its_values_show_it():
+    # Three channels of relative noise and one of absolute noise, compared together for the cosine loss.
+    rng = np.random.default_rng(4)
+    f = rng.uniform(0.1, 3.0, (4000, 4))
+    cos_i = rng.uniform(0.2, 1.0, 4000)
+    d = np.concatenate([0.02 * f[:, :3] * rng.standard_normal((4000, 3)), 0.02 * rng.standard_normal((4000, 1))],
+                       axis=1)
+    sums = brdffit.metrics.metric_sums(f, f - d, np.ones(f.shape, bool), cos_i, np.ones(4000), xp=np)
+    noise = compare(sums, "cosine", n_total=f.size)
+    assert noise.name == "relative" and noise.forms == ("relative",) * 3 + ("absolute",)
+    assert noise.covariance == "noise-model"
+    lines = noise.describe("cosine", ["r", "g", "b", "ir"])
+    assert lines[1].startswith("noise per channel: absolute (σ = s, s = 0.0198) in ir (each"), lines
+    assert "ΔAIC over all channels signal -" in lines[0], lines  # signal leads the sum, and no channel chose it
+    # The same absolute channel with the others: each channel's log-likelihoods are its own, so one channel of
+    # another noise does not move the common choice, and channels of the common noise never depart.
+    same = compare(brdffit.metrics.metric_sums(f[:, :3], (f - d)[:, :3], np.ones((4000, 3), bool), cos_i,
+                                               np.ones(4000), xp=np), "cosine", n_total=12000)
+    assert same.forms == ("relative",) * 3 and len(same.describe("cosine")) == 2

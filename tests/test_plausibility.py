@@ -92,6 +92,6 @@ def test_report_shows_noise_model_and_plausibility(implausible, tmp_path):
                                   max_theta=np.deg2rad(80.0), channels=["c0"])
     paths = write_report(tmp_path, data, result)
     md = open(paths["md"], encoding="utf-8").read()
-    assert "## Noise model" in md and "**relative (chosen)**" in md and "stderr sandwich" in md
+    assert "## Noise model" in md and "**relative (chosen)**" in md and "stderr noise-model" in md
     assert "## Plausibility" in md and "| energy | **IMPLAUSIBLE** | max albedo" in md
-    assert "± stderr (sandwich)" in md and "± Laplace" in md
+    assert "± stderr (noise-model)" in md and "± sandwich" in md

@@ -450,18 +450,19 @@ def _result(problem: Problem, model: Model, measurements, data: FitData, params:
     if pruned and status == Status.CONVERGED:
         status = Status.CONVERGED_AT_BOUND
     hit = hit + pruned
-    uncertainty = Uncertainty(normal if problem.free else None, cost, problem.loss, n_valid)
+    channel_cost = normal.channel_cost if normal is not None else np.full(problem.channels, cost / problem.channels)
+    sums = normal.metric_sums if normal is not None else fit_sums(fitted, measurements, pair=data.pair)
+    # The noise model the residuals support decides which covariance the result reports (docs/fitting.md).
+    noise_model = noise.of_fit(problem, sums, data, channel_cost, n_valid)
+    uncertainty = Uncertainty(normal if problem.free else None, cost, problem.loss, n_valid, problem=problem,
+                              noise=noise_model, channel_counts=valid.sum(axis=0))
     labels = layout.labels(problem.free)
     warnings = warnings_of(problem, labels, uncertainty, hit, status, decrease, cost, params)
     warnings = list(outcome.notes) + warnings
     k = len(labels)
     aic, bic = information_criteria(problem.loss, cost, n_valid, k)
-    channel_cost = normal.channel_cost if normal is not None else np.full(problem.channels, cost / problem.channels)
     metrics = {"rmse_loss": np.sqrt(channel_cost / np.maximum(valid.sum(axis=0), 1))}
-    sums = normal.metric_sums if normal is not None else fit_sums(fitted, measurements, pair=data.pair)
     metrics.update(metrics_from_sums(sums))
-    # The noise model the residuals support decides which covariance the result reports (docs/fitting.md).
-    noise_model = noise.of_fit(problem, sums, data, channel_cost, n_valid)
     covariance, correlation, stderr = uncertainty.chosen(noise_model.covariance)
 
     def per_param(flat):

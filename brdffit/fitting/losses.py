@@ -56,8 +56,11 @@ class Loss:
         return self.nonlinear_residual(f_model, f_data, cos_i, sqrt_weight)
 
 
+# The weights are written in arithmetic that keeps NumPy arrays in NumPy (the noise sums of an answer form them
+# on the host, `brdffit.fitting.normal_equations.noise_grams_of`, where a jax.numpy call would compile a program
+# of its own) and traces as before inside a compiled pass; the data's missing values are 0, never NaN.
 def _cosine_weight(f_data, cos_i, sqrt_weight, sigma, eps):
-    return jnp.broadcast_to((cos_i * sqrt_weight)[:, None], jnp.shape(f_data))
+    return (cos_i * sqrt_weight)[:, None] + 0.0 * f_data
 
 
 def _log_weight(f_data, cos_i, sqrt_weight, sigma, eps):
@@ -80,7 +83,7 @@ _REGISTRY = (
     Loss("relative", lambda f_data, cos_i, sqrt_weight, sigma, eps: 1.0 / (f_data + eps), True,
          "(f_m − f_d) / (f_d + ε), ε = 10⁻³ × the channel's mean absolute f_d",
          "relative (multiplicative) noise without known σ"),
-    Loss("absolute", lambda f_data, cos_i, sqrt_weight, sigma, eps: jnp.ones_like(f_data), True, "f_m − f_d",
+    Loss("absolute", lambda f_data, cos_i, sqrt_weight, sigma, eps: 0.0 * f_data + 1.0, True, "f_m − f_d",
          "additive noise of one σ everywhere"),
     Loss("sigma", lambda f_data, cos_i, sqrt_weight, sigma, eps: 1.0 / sigma, True, "(f_m − f_d) / σ",
          "the data carry σ: this is the maximum-likelihood fit and gives calibrated errors", needs_sigma=True),

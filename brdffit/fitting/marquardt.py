@@ -44,7 +44,7 @@ import numpy as np
 
 from ..defaults import FIT
 from .moments import applies, moment_sums
-from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of, timed
+from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of, noise_grams_of, timed
 from .outcome import SolveOutcome
 from .problem import FitData, Problem
 from .search import POLISH_STARTS
@@ -373,7 +373,8 @@ class _Batch:
             channel_cost = np.maximum(sums.channel_cost + change, 0.0)
             moved = NormalEquations(jtj=jtj, jtr=jtr + np.einsum("...pq,...q->...p", jtj, delta),
                                     cost=np.where(np.isfinite(sums.cost), np.sum(channel_cost, axis=-1), sums.cost),
-                                    meat=sums.meat, channel_cost=channel_cost, metric_sums=sums.metric_sums)
+                                    meat=sums.meat, channel_cost=channel_cost, metric_sums=sums.metric_sums,
+                                    noise_grams=sums.noise_grams)
         return _State(x, moved, delta, sums.cost, values, spread)
 
     def unconstrained(self, x):
@@ -527,8 +528,9 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
                               state.sums)
         state.delta = np.where(answers[..., None], 0.0, state.delta)
     elif metrics:
-        state.sums = state.sums._replace(meat=meat_of(problem, [a for a, _ in state.values]),
-                                         metric_sums=metric_sums_of([f for _, f in state.values], pieces))
+        tangents, values = [a for a, _ in state.values], [f for _, f in state.values]
+        state.sums = state.sums._replace(meat=meat_of(problem, tangents), metric_sums=metric_sums_of(values, pieces),
+                                         noise_grams=noise_grams_of(problem, tangents, values, pieces))
     finite = np.isfinite(state.sums.cost)
     exact = (answers | (not compact)) & np.all(np.abs(state.delta) <= EXACT_MOVE * np.abs(state.x) + atol, axis=-1)
     out = []

@@ -18,15 +18,23 @@ AIC are −2 Δℓ. The candidates (`CANDIDATES`; f̃ = max(f, `brdffit.metrics.
 | ``sigma`` | s σ_n (σ_n stored with the data) | what ``loss="sigma"`` assumes, s = 1 if the stated σ are right |
 
 ``cosine`` and ``sigma`` are candidates only for their own loss, which keeps its candidate unless another beats it
-by more than ΔAIC 2 (`TIE_AIC`). The sums come from the model values of the
+by more than ΔAIC 2 (`TIE_AIC`). The candidate is chosen for all channels together, and a channel departs from
+that choice to its own best candidate where its own values favour it by more than ΔAIC `BAND_AIC` (a spectral
+measurement whose short wavelengths carry detector noise of one size and whose long ones carry relative noise);
+where most channels depart to one candidate, that candidate becomes the common choice (a joint choice can be a
+compromise that no channel makes). The sums come from the model values of the
 answer's own pass (`brdffit.metrics.metric_sums`, over up to 4,096 samples of each chunk of 65,536); the
 ``sigma`` candidate's are χ² and Σ ln σ over all values, compared per value.
 
-The loss's weighting implies one of the candidates (`LOSS_NOISE`): the Laplace covariance s² (JᵀJ)⁻¹ assumes the
-loss's residuals have one variance, i.e. that the noise is the loss's own. When the residuals choose that
-candidate, the Laplace standard error is the default; when they choose another, the loss's residuals are
-heteroscedastic and the sandwich (White 1980) is, which stays consistent under any variance pattern
-(docs/fitting.md). A ``log`` loss or a robust rewrite implies none of them: their default is the sandwich.
+The loss's weighting implies one of the candidates (`LOSS_NOISE`): the Laplace covariance assumes the loss's
+residuals have one variance in each channel, i.e. that the noise is the loss's own. When every channel chooses that
+candidate, the Laplace standard error (with one noise variance per channel) is the default; where a channel chooses
+another, its residuals' variance follows that candidate, and the default is the noise-model covariance, which
+weights each residual by the variance its channel's candidate gives it (`brdffit.fitting.uncertainty`;
+docs/fitting.md). The sandwich (White 1980), consistent under any variance pattern but short where a few samples
+carry most of the leverage, is kept beside it (``stderr_robust``). A ``log`` loss implies none of the candidates:
+its default is the noise-model covariance, its residuals linearised at the data. A robust rewrite's default is
+the sandwich (its residuals are not the data's noise).
 
 A model σ² = a² + b² f² (a floor plus relative noise) has no closed-form scale and is not a candidate: profiling
 its ratio a/b would need a grid of sums over every value.
@@ -69,6 +77,14 @@ EXACT_RELATIVE_RMS = 1e-9
 # support); 10 for ``sigma``, whose log-likelihood comes from all values and the others' from the sampled ones, so
 # that a constant stated σ (the same model as ``absolute``) differs by their sampling alone.
 TIE_AIC = (2.0, 10.0)
+# ΔAIC, within one channel's values, by which that channel's best candidate must beat the common choice for the
+# channel to depart from it. The candidates are not nested, and in one channel of ~1,500 values of one noise
+# model another candidate can lead by chance: in 448 channel fits of relative noise (tests/test_band_noise.py)
+# another led in 30, by at most 10.2. A 31-band spectrum makes 31 such tests a fit, so twice Burnham & Anderson
+# (2002)'s "essentially no support" (10). The evidence of a band of another model grows with the range of the
+# values its samples cover: absolute against relative noise of 1% led by 177-292 in 1,500 half-diff samples
+# around the specular peak, by 14-38 in a gonio-grid of as many that rarely meets it (where 20 misses some bands).
+BAND_AIC = 20.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,11 +95,13 @@ class NoiseModel:
         name: the chosen candidate (largest log-likelihood), or ``"exact"`` when the residuals are at rounding
             level (`EXACT_RELATIVE_RMS`).
         loss_model: the candidate the fit's loss implies (None for ``log`` or a robust rewrite).
-        covariance: ``"laplace"`` or ``"sandwich"``: the one `FitResult.stderr` holds.
+        covariance: ``"laplace"``, ``"noise-model"`` or ``"sandwich"``: the one `FitResult.stderr` holds.
         loglik: candidate -> maximised log-likelihood, scaled to all ``n`` values.
         scale: candidate -> ŝ per channel.
         n: the number of (sample, channel) values of the fit.
         compared: the number of values the sums were taken over (all of them up to 8,191 samples).
+        forms: the candidate of each channel (``name`` in every channel but those that depart from it,
+            `BAND_AIC`); empty where not recorded (read as ``name`` in every channel).
     """
 
     name: str
@@ -93,29 +111,51 @@ class NoiseModel:
     scale: dict
     n: int
     compared: int
+    forms: tuple = ()
+
+    def channel_forms(self, channels: int) -> tuple:
+        """The candidate of each of ``channels`` channels."""
+        return tuple(self.forms) if len(self.forms) == channels else (self.name,) * channels
 
     def aic_gap(self) -> dict:
         """candidate -> its AIC minus the best one's (0 for the chosen)."""
         best = max(self.loglik.values(), default=0.0)
         return {k: 2.0 * (best - v) for k, v in self.loglik.items()}
 
-    def describe(self, loss: str) -> list[str]:
-        """Lines for a summary: the chosen model with its scale and the others' AIC gaps, and which standard
-        error the fit reports and why."""
+    def describe(self, loss: str, channels: list | None = None) -> list[str]:
+        """Lines for a summary: the chosen model with its scale and the others' AIC gaps, the channels that depart
+        from it (named by ``channels``), and which standard error the fit reports and why."""
         if self.name == "exact":
             return ["noise: none: the residuals are at rounding level (noise-free data), nothing to compare; stderr "
                     "Laplace"]
         if self.name not in NOISE_FORMULAS:  # independent channels that chose differently (`merge`)
             return [f"noise per channel {self.name}; stderr per channel {self.covariance} (Laplace where the "
                     f"channel's noise is the {loss} loss's own, else the sandwich)"]
-        scale = ", ".join(f"{v:.3g}" for v in self.scale[self.name])
-        gaps = ", ".join(f"{k} +{g:.3g}" for k, g in sorted(self.aic_gap().items(), key=lambda kv: kv[1])
+        forms = self.channel_forms(len(self.scale[self.name]))
+        scale = _scales([v for v, form in zip(self.scale[self.name], forms) if form == self.name])
+        bands = _departures(forms, self.name, self.scale, channels)
+        # ΔAIC of each other candidate in all channels against this one in all channels (with departing channels
+        # a candidate can be ahead in total: it is then signed).
+        own = self.loglik[self.name]
+        gaps = ", ".join(f"{k} {2.0 * (own - v):+.3g}" for k, v in sorted(self.loglik.items(), key=lambda kv: -kv[1])
                          if k != self.name)
         where = "" if self.compared >= self.n else f" on {self.compared} of {self.n} values"
         lines = [f"noise {self.name} ({NOISE_FORMULAS[self.name]}, s = {scale}) by likelihood{where}; "
-                 f"ΔAIC {gaps}"]
+                 f"ΔAIC{' over all channels' if bands else ''} {gaps}"]
+        if bands:
+            lines.append(f"noise per channel: {bands} (each by more than ΔAIC {BAND_AIC:g} in its own values), "
+                         f"{self.name} in the others")
         if self.covariance == "laplace":
-            lines.append(f"stderr Laplace: the {loss} loss's weighting matches this noise (sandwich in stderr_robust)")
+            lines.append(f"stderr Laplace, one noise variance per channel: the {loss} loss's weighting matches this "
+                         "noise (sandwich in stderr_robust)")
+            return lines
+        if self.covariance == "noise-model":
+            implied = (f"the {loss} loss weights the residuals for {self.loss_model} noise "
+                       f"({NOISE_FORMULAS[self.loss_model]})" if self.loss_model
+                       else f"the {loss} loss implies none of these")
+            lines.append(f"stderr noise-model: {implied}, so each residual is weighted by the variance its channel's "
+                         "noise gives it (Laplace in stderr_laplace, sandwich in stderr_robust)"
+                         + _advice(self.name, loss))
             return lines
         implied = (f"the {loss} loss weights the residuals for {self.loss_model} noise "
                    f"({NOISE_FORMULAS[self.loss_model]})" if self.loss_model
@@ -133,7 +173,7 @@ class NoiseModel:
         return {"name": self.name, "loss_model": self.loss_model, "covariance": self.covariance,
                 "loglik": {k: clean(float(v)) for k, v in self.loglik.items()},
                 "scale": {k: [clean(float(x)) for x in v] for k, v in self.scale.items()},
-                "n": int(self.n), "compared": int(self.compared)}
+                "n": int(self.n), "compared": int(self.compared), "forms": list(self.forms)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "NoiseModel":
@@ -142,7 +182,30 @@ class NoiseModel:
         return cls(name=d["name"], loss_model=d.get("loss_model"), covariance=d["covariance"],
                    loglik={k: nan(v) for k, v in d["loglik"].items()},
                    scale={k: [nan(x) for x in v] for k, v in d["scale"].items()}, n=int(d["n"]),
-                   compared=int(d.get("compared", d["n"])))
+                   compared=int(d.get("compared", d["n"])), forms=tuple(d.get("forms", ())))
+
+
+def _scales(values: list) -> str:
+    """Scales as a list, or as their range where there are more than 8 (a spectrum)."""
+    if len(values) > 8:
+        return f"{min(values):.3g}–{max(values):.3g} over {len(values)} channels"
+    return ", ".join(f"{v:.3g}" for v in values)
+
+
+def _departures(forms, name: str, scale: dict, channels: list | None) -> str:
+    """The runs of consecutive channels whose candidate is not ``name``, with their scales, as "absolute
+    (s = ...) in channel 0–channel 9, ..."."""
+    runs = []
+    for c, form in enumerate(forms):
+        if form == name:
+            continue
+        if runs and runs[-1][0] == form and runs[-1][2] == c - 1:
+            runs[-1][2] = c
+        else:
+            runs.append([form, c, c])
+    label = lambda c: str(channels[c]) if channels is not None and c < len(channels) else f"channel {c}"  # noqa: E731
+    return ", ".join(f"{form} ({NOISE_FORMULAS[form]}, s = {_scales(scale[form][a:b + 1])}) in {label(a)}"
+                     + (f"–{label(b)}" if b > a else "") for form, a, b in runs)
 
 
 def _advice(name: str, loss: str) -> str:
@@ -186,15 +249,16 @@ def compare(sums, loss: str, robust=None, *, n_total: int, chi2=None, log_sigma=
         parts["cosine"] = (row("weighted_d2"), -row("log_weight"))
     compared = float(np.sum(n))
     factor = n_total / compared if compared > 0 else 1.0
-    loglik, scale = {}, {}
+    loglik, scale, per_channel = {}, {}, {}
     for name, (rss, log_g_half) in parts.items():
         ll, s = _loglik(n, rss, log_g_half)
+        per_channel[name] = ll * factor
         loglik[name], scale[name] = float(np.sum(ll)) * factor, [float(x) for x in s]
     if loss == "sigma" and chi2 is not None and log_sigma is not None:
         counts = sums[1]
         ll, s = _loglik(counts, np.asarray(chi2, float), np.asarray(log_sigma, float))
-        loglik["sigma"], scale["sigma"] = float(np.sum(ll)) * n_total / max(float(np.sum(counts)), 1.0), \
-            [float(x) for x in s]
+        per_channel["sigma"] = ll * n_total / max(float(np.sum(counts)), 1.0)
+        loglik["sigma"], scale["sigma"] = float(np.sum(per_channel["sigma"])), [float(x) for x in s]
     # Residuals at rounding level (noise-free data): relative RMS error below 1e-9 in every channel.
     relative_rms = np.sqrt(sums[2] / np.maximum(sums[3], 1.0))
     exact = not np.any(row("d2") > 0) or bool(np.all(relative_rms < EXACT_RELATIVE_RMS))
@@ -205,12 +269,28 @@ def compare(sums, loss: str, robust=None, *, n_total: int, chi2=None, log_sigma=
     # between sigma and absolute for a constant stated σ, goes to the loss).
     if loss_model in loglik and 2.0 * (loglik[name] - loglik[loss_model]) <= TIE_AIC[loss_model == "sigma"]:
         name = loss_model
-    laplace = name == loss_model
+    forms = tuple(_channel_form(per_channel, name, c) for c in range(len(n)))
+    # The common choice is the one most channels keep: a joint choice can be a compromise that no channel makes
+    # (three channels of relative noise and one of absolute noise favour, summed, the signal model between them).
+    common = max(dict.fromkeys(forms), key=lambda k: (forms.count(k), k == name))
+    if common != name:
+        name = common
+        forms = tuple(_channel_form(per_channel, name, c) for c in range(len(n)))
+    laplace = all(form == loss_model for form in forms)
     if laplace and name == "sigma":
         lo, hi = SIGMA_SCALE_RANGE
         laplace = all(lo <= x <= hi for x in scale["sigma"] if math.isfinite(x))
-    return NoiseModel(name, loss_model, "laplace" if laplace else "sandwich", loglik, scale, int(n_total),
-                      int(compared))
+    kind = "laplace" if laplace else ("sandwich" if robust or name == "sigma" else "noise-model")
+    return NoiseModel(name, loss_model, kind, loglik, scale, int(n_total), int(compared), forms)
+
+
+def _channel_form(per_channel: dict, name: str, c: int) -> str:
+    """Channel ``c``'s candidate: ``name``, unless its own best beats ``name`` by more than `BAND_AIC` in it."""
+    finite = {k: float(v[c]) for k, v in per_channel.items() if math.isfinite(float(v[c]))}
+    if not finite or name not in finite:
+        return name
+    best = max(finite, key=finite.get)
+    return best if 2.0 * (finite[best] - finite[name]) > BAND_AIC else name
 
 
 def of_fit(problem, sums, data, channel_cost, n_valid: int) -> NoiseModel:
@@ -240,4 +320,5 @@ def merge(models: list) -> NoiseModel | None:
     return NoiseModel(name=join(names), loss_model=models[0].loss_model, covariance=join(kinds),
                       loglik={k: float(sum(m.loglik[k] for m in models)) for k in common},
                       scale={k: [x for m in models for x in m.scale[k]] for k in common},
-                      n=sum(m.n for m in models), compared=sum(m.compared for m in models))
+                      n=sum(m.n for m in models), compared=sum(m.compared for m in models),
+                    forms=tuple(form for m in models for form in (m.forms or (m.name,))))

@@ -28,15 +28,19 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..arrays import on_host
-from ..metrics import metric_sums
+from ..metrics import MODEL_FLOOR, NOISE_MIN_COS, metric_sums
 from ..models.model import evaluate_pair
+from .losses import get_loss
 from .problem import BUCKET_CHUNK, FitData, Problem, physical_params, residuals_of, sample_pieces
 from ..programs import Program
 
 __all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "timed_first_calls",
-           "shape_key", "metric_sums_of", "meat_of", "CHUNK_SAMPLES"]
+           "shape_key", "metric_sums_of", "meat_of", "noise_grams_of", "NOISE_FORMS", "CHUNK_SAMPLES"]
 
 CHUNK_SAMPLES = BUCKET_CHUNK  # padded data then splits into whole chunks
+# The noise forms whose weighted Gram matrices an answer's pass forms (`noise_grams_of`): ``loss``, the residuals'
+# own (JᵀJ per channel, the Laplace covariance's), then the candidates of `brdffit.fitting.noise`.
+NOISE_FORMS = ("loss", "absolute", "relative", "signal", "cosine", "sigma")
 
 
 class NormalEquations(NamedTuple):
@@ -53,6 +57,9 @@ class NormalEquations(NamedTuple):
         metric_sums: the sums of `brdffit.metrics.metric_sums` ``(..., R, C)`` (its R rows: the metrics' and the
             noise models') at the evaluated point when `accumulate` was asked for them, else None
             (`brdffit.metrics.metrics_from_sums` turns them into the metrics).
+        noise_grams: with the metric sums, the per-channel Gram matrices of the tangents weighted by each noise
+            form's variance of the residuals, with the residuals scaled by the form in a last row
+            (`noise_grams_of`) ``(..., F, Q + 1, Q + 1, C)``, F = `NOISE_FORMS`, Q the free names; else None.
     """
 
     jtj: np.ndarray
@@ -61,12 +68,14 @@ class NormalEquations(NamedTuple):
     meat: np.ndarray
     channel_cost: np.ndarray
     metric_sums: np.ndarray
+    noise_grams: np.ndarray = None
 
     def at_point(self, m: int, s: int) -> "NormalEquations":
         """The sums of point ``(m, s)`` of the batch."""
         return NormalEquations(self.jtj[m, s], self.jtr[m, s], float(self.cost[m, s]),
                                None if self.meat is None else self.meat[m, s], self.channel_cost[m, s],
-                               None if self.metric_sums is None else self.metric_sums[m, s])
+                               None if self.metric_sums is None else self.metric_sums[m, s],
+                               None if self.noise_grams is None else self.noise_grams[m, s])
 
 
 def _tangent_groups(problem: Problem) -> list[tuple]:
@@ -200,6 +209,69 @@ def metric_sums_of(values: list, pieces: list[FitData], materials=None) -> np.nd
     return total
 
 
+def noise_grams_of(problem: Problem, tangents: list, values: list, pieces: list[FitData], materials=None,
+                   laplace=None) -> np.ndarray:
+    """Per channel, for each noise form of `NOISE_FORMS`, the Gram matrix of the tangents weighted by the form's
+    variance of the residuals, with the data's residuals scaled by the form in a last row: rows
+    t_n ρ_n √g_n (one per free name) and d_n / √g_n, where t_n are the tangents of the residual of sample n,
+    d_n = f_n − y_n, ρ_n = |∂r/∂f| at the data (`brdffit.fitting.losses.residual_scale`: it carries a variance of
+    the measured value, s² g_n, into the loss's units) and g_n the form's variance function (1 for ``absolute``,
+    f̃² for ``relative``, f̃ for ``signal``, 1/(cos²θi w) for ``cosine``, σ² for ``sigma``, with f̃ and the
+    cosine's floor as in `brdffit.metrics.metric_sums`). The block over the free names is Σ_n v_n t_n t_nᵀ with
+    v_n = ρ_n² g_n, the middle of the noise-model covariance per unit scale (`brdffit.fitting.uncertainty`); the
+    last diagonal entry Σ_n d_n²/g_n over every valid value gives the form's maximum-likelihood scale. The ``loss``
+    form's rows are the pass's own tangents and residuals (v = 1): the Laplace covariance's JᵀJ and rᵀr.
+
+    Arguments:
+        problem: the `Problem`.
+        tangents: a pass's tangents and residuals of each piece ``(M, S, C, Q + 1, N)`` (`accumulate` with
+            ``values=True``); values: its model values ``(M, S, N, C)``.
+        pieces: the data (leading material axis), as passed to the pass.
+        materials: integer indices ``(M,)`` of the pieces' materials (None: the pieces' own M).
+        laplace: the ``loss`` form's sums ``(M, S, C, Q + 1, Q + 1)`` where the caller has them (the pass's own
+            Gram matrices, so that the Laplace covariance is the same to the last bit), else formed here.
+
+    Returns:
+        ``(M, S, F, Q + 1, Q + 1, C)``.
+    """
+    q = len(problem.free)
+    weight = get_loss(problem.loss).weight
+    index = None if materials is None else np.asarray(materials)
+    total = 0.0
+    with np.errstate(all="ignore"):
+        for a, f, piece in zip(tangents, values, pieces):
+            a = np.asarray(a)
+            t = a[..., :q, :]  # (M, S, C, Q, N)
+            f = np.asarray(f)  # (M, S, N, C)
+            data, mask, cos_i, sqrt_weight, sigma, eps = (np.asarray(x) if index is None else np.asarray(x)[index]
+                                                          for x in on_host((piece.values, piece.mask, piece.cos_i,
+                                                                            piece.sqrt_weight, piece.sigma,
+                                                                            piece.eps)))
+            rho = np.stack([np.where(mask[m], np.abs(np.asarray(weight(data[m], cos_i[m], sqrt_weight[m], sigma[m],
+                                                                         eps[m]))), 0.0)
+                            for m in range(data.shape[0])])[:, None]  # (M, 1, N, C)
+            d = np.where(mask[:, None], f - data[:, None], 0.0)  # (M, S, N, C)
+            floored = np.maximum(f, MODEL_FLOOR)
+            omega2 = (np.maximum(cos_i, NOISE_MIN_COS) ** 2 * sqrt_weight ** 2)[:, None, :, None]
+            variance = {"absolute": np.ones_like(f), "relative": floored * floored, "signal": floored,
+                        "cosine": np.where(omega2 > 0, 1.0 / np.where(omega2 > 0, omega2, 1.0), 0.0) + 0 * f,
+                        "sigma": sigma[:, None] ** 2 + 0 * f}
+            grams = []
+            for form in NOISE_FORMS:
+                if form == "loss":
+                    grams.append(_grams(a) if laplace is None else np.zeros(a.shape[:3] + (q + 1, q + 1)))
+                    continue
+                root = np.sqrt(variance[form])
+                rows = np.concatenate([t * np.moveaxis(rho * root, -1, -2)[..., :, None, :],
+                                       np.moveaxis(np.where(root > 0, d / np.where(root > 0, root, 1.0), 0.0),
+                                                   -1, -2)[..., :, None, :]], axis=-2)
+                grams.append(_grams(rows))
+            total = total + np.stack(grams, axis=2)  # (M, S, F, C, Q + 1, Q + 1)
+        if laplace is not None:
+            total[:, :, 0] = laplace
+        return np.moveaxis(total, 3, -1)
+
+
 def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
     """`sample_pieces` of one material's ``data`` (no material axis): equally shaped chunks of ``size`` samples,
     each with a leading material axis of 1 (bounds the memory of the tangents; split once and reuse the list when
@@ -251,6 +323,8 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
             a = np.asarray(a)
             kept.append((a, f))
             gram = gram + _grams(a)  # (M, S, C, Q+1, Q+1): tangents and residuals
+        grams = noise_grams_of(problem, [a for a, _ in kept], [f for _, f in kept], pieces, materials,
+                               laplace=gram) if metrics else None
         gram = np.moveaxis(np.asarray(gram), 2, -1)  # (M, S, Q+1, Q+1, C)
         jtr = np.sum(incidence * gram[..., index, q, :], axis=-1)
         channel_cost = np.array(gram[..., q, q, :], dtype=float)
@@ -259,7 +333,8 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
                                meat=meat_of(problem, [a for a, _ in kept]) if meat else None,
                                channel_cost=channel_cost,
                                metric_sums=(metric_sums_of([f for _, f in kept], pieces, materials) if metrics
-                                            else None))
+                                            else None),
+                               noise_grams=grams)
     return (sums, kept) if values else sums
 
 

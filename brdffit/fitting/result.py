@@ -36,9 +36,11 @@ class FitResult:
         model: the fitted `Model` (None in ``channel_mode="independent"``, where `models` holds one per channel).
         params: name -> fitted value (as ``model.params``; independent mode stacks shape parameters per channel).
         stderr: name -> standard error in physical units (0 for fixed parameters): the one the residuals' noise
-            model supports (`noise_model`): `stderr_laplace` when the noise is the one the loss weights for,
-            `stderr_robust` otherwise (docs/fitting.md).
-        stderr_laplace: name -> Laplace (Gauss-Newton) standard error, s² (JᵀJ)⁻¹.
+            model supports (`noise_model`): `stderr_laplace` when the noise is the one the loss weights for in
+            every channel, else the noise-model standard error, whose covariance weights each residual by the
+            variance its channel's noise model gives it (`stderr_robust` after a robust rewrite; docs/fitting.md).
+        stderr_laplace: name -> Laplace (Gauss-Newton) standard error, s² (JᵀJ)⁻¹ with one noise variance s² per
+            channel (`brdffit.fitting.uncertainty`).
         stderr_robust: name -> sandwich (White 1980, HC1) standard error, valid also when the residual variance
             differs between samples (e.g. relative noise fitted with the cosine loss).
         covariance: covariance matrix of the free scalar parameters (the kind `stderr` comes from), rows labelled
@@ -109,7 +111,7 @@ class FitResult:
 
     @property
     def stderr_kind(self) -> str:
-        """``"laplace"`` or ``"sandwich"``: what `stderr` holds."""
+        """``"laplace"``, ``"noise-model"`` or ``"sandwich"``: what `stderr` holds."""
         return self.noise_model.covariance if self.noise_model is not None else "laplace"
 
     def plausibility(self):
@@ -144,8 +146,8 @@ class FitResult:
         model, metrics, status, warnings and (unless ``plausibility=False``) the plausibility checks."""
         specs = self.models[0].param_specs
         kind = self.stderr_kind
-        other_name, other = ("sandwich", self.stderr_robust) if kind == "laplace" else ("laplace",
-                                                                                         self.stderr_laplace)
+        other_name, other = ("laplace", self.stderr_laplace) if kind == "sandwich" else ("sandwich",
+                                                                                          self.stderr_robust)
         lines = [f"model {self.spec}  loss {self.loss}  solver {self.solver}  channel mode {self.channel_mode}",
                  f"status {self.status}  steps {self.steps}  compile {self.compile_time:.2f} s  "
                  f"run {self.run_time:.2f} s  init {self.init_time:.2f} s",

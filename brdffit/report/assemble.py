@@ -49,14 +49,15 @@ def _flat_stderr(stderr: dict) -> dict:
     return {label: v for label, _, v in _flat(stderr)}
 
 
-_KIND = {"laplace": "Laplace", "sandwich": "sandwich"}
+_KIND = {"laplace": "Laplace", "sandwich": "sandwich", "noise-model": "noise-model"}
 
 
 def _other_stderr(fit_result) -> tuple[str, dict]:
-    """The standard error the result does not report by default, with its name."""
-    if fit_result.stderr_kind == "laplace":
-        return "sandwich", fit_result.stderr_robust
-    return "laplace", fit_result.stderr_laplace
+    """The standard error shown beside the default: the sandwich, which assumes no noise model, or the Laplace
+    where the sandwich is the default."""
+    if fit_result.stderr_kind == "sandwich":
+        return "laplace", fit_result.stderr_laplace
+    return "sandwich", fit_result.stderr_robust
 
 
 # --------------------------------------------------------------------------------------------- content
