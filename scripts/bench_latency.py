@@ -4,7 +4,8 @@ Each figure is the wall time of a new ``brdffit`` process, as a user starts it: 
 ``models``, ``info``), a single-model fit of a 20,000-sample CSV with an empty and with a warm persistent
 compilation cache (and a 17,000-sample file after the 20,000-sample one: another size), the default fit (model
 selection over the standard candidates) with an empty and a warm cache, the README's Quick start job, and the
-default fit of a real RGL-EPFL file (report included) with an empty and a warm cache, where ../shared is. The
+default fit of a real RGL-EPFL file (report included) with an empty and a warm cache, where ../shared is, and the
+default fit of a 31-band ASTM E1392 file of 1,500 rows (report included) with an empty and a warm cache. The
 host is shared, so each light command is run ``--repeats`` times and the median reported, and ``python -c
 "import jax"`` is timed in the same run as the machine's baseline.
 
@@ -35,6 +36,8 @@ TARGETS = {
     "Quick start job (plastic.h5), empty cache": 30.0,
     "default fit of an RGL-EPFL file (paper_white_rgb.bsdf), empty cache": 10.0,
     "default fit of an RGL-EPFL file (paper_white_rgb.bsdf), warm cache": 5.0,
+    "default fit of a 31-band ASTM E1392 file, 1,500 rows, empty cache": 30.0,
+    "default fit of a 31-band ASTM E1392 file, 1,500 rows, warm cache": None,
 }
 # A real tabulated file, read as `brdffit fit FILE.bsdf` reads it (docs/formats.md); left out where ../shared is absent.
 RGL_FILE = ROOT.parent / "shared" / "data" / "rgl-epfl" / "paper_white_rgb.bsdf"
@@ -60,6 +63,23 @@ def _data(folder: Path) -> tuple[Path, Path]:
         brdffit.io.save(m, path)
         paths.append(path)
     return paths[0], paths[1]
+
+
+def _spectral(folder: Path) -> Path:
+    """A 31-band ASTM E1392 file (400-700 nm every 10 nm) of 1,500 gonio-grid rows: Lambert + GGX with per-band
+    amplitudes and one roughness, 1% relative noise (the material of tests/test_spectral.py)."""
+    import numpy as np
+
+    import brdffit
+
+    bands = np.arange(400, 701, 10)
+    rho = 0.2 + 0.5 * np.exp(-((bands - 470) / 60.0) ** 2)
+    truth = brdffit.models.get("lambert+ggx", channels=len(bands), rho_d=rho, ks=np.full(len(bands), 0.3),
+                               alpha=0.15)
+    m = brdffit.synth.generate(truth, pattern="gonio-grid", n=1500, noise="relative:0.01", seed=3)
+    path = folder / "paint-31-bands.astm"
+    brdffit.io.save(m.replace(channels=[f"{w}nm" for w in bands]), path)
+    return path
 
 
 def main(argv=None) -> int:
@@ -99,6 +119,10 @@ def main(argv=None) -> int:
             for k, state in enumerate(("empty", "warm")):
                 rows[f"default fit of an RGL-EPFL file (paper_white_rgb.bsdf), {state} cache"] = _run(
                     BRDFFIT + ["fit", str(RGL_FILE), "--quiet", "--out", str(tmp / f"rgl{k}")], rgl)
+        astm, spectral = _spectral(tmp), dict(env, BRDFFIT_CACHE_DIR=str(tmp / "cache-astm"))
+        for k, state in enumerate(("empty", "warm")):
+            rows[f"default fit of a 31-band ASTM E1392 file, 1,500 rows, {state} cache"] = _run(
+                BRDFFIT + ["fit", str(astm), "--quiet", "--out", str(tmp / f"astm{k}")], spectral)
     print("| what | seconds | target | met |")
     print("|---|---|---|---|")
     for what, seconds in rows.items():

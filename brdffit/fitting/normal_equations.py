@@ -347,11 +347,36 @@ def _grams(a: np.ndarray) -> np.ndarray:
     return a @ np.swapaxes(a, -1, -2)
 
 
-def _expand(problem: Problem, sums):
-    """Per-channel sums over the free names ``(M, S, Q, Q, C)`` expanded to the scalars' ``(M, S, P, P)``."""
+@functools.lru_cache(maxsize=256)
+def _expansion(problem: Problem) -> tuple:
+    """Where each scalar pair's entry of `_expand` comes from: ``(single, shared, names)`` with ``single`` ``(P, P)``
+    the flat index into a ``(Q, Q, C)`` array of the one channel the pair shares (a colour scalar's own, with a
+    shape scalar or the same channel's colour scalar), -1 where the pair shares no channel or is two shape scalars
+    (every channel); ``shared`` the shape scalars' positions and ``names`` their names' indices."""
     index, incidence = problem.layout.channel_incidence(problem.free)
-    both = incidence[:, None, :] * incidence[None, :, :]  # (P, P, C): channels shared by scalars i and j
-    return np.sum(both * sums[..., index, :, :][..., :, index, :], axis=-1)
+    q, channels = len(problem.free), incidence.shape[1]
+    own = incidence.sum(axis=1) == 1  # one channel: a colour scalar (or any scalar of one-channel data)
+    channel = np.argmax(incidence, axis=1)
+    a, b = np.meshgrid(np.arange(index.size), np.arange(index.size), indexing="ij")
+    pair_channel = np.where(own[a], channel[a], channel[b])
+    meets = (own[a] & own[b] & (channel[a] == channel[b])) | (own[a] != own[b])
+    single = np.where(meets, (index[a] * q + index[b]) * channels + pair_channel, -1)
+    shared = np.flatnonzero(~own)
+    return single, shared, index[shared]
+
+
+def _expand(problem: Problem, sums):
+    """Per-channel sums over the free names ``(M, S, Q, Q, C)`` expanded to the scalars' ``(M, S, P, P)``: entry
+    (i, j) sums the channels that scalars i and j both act on (a gather, not a (P, P, C) product: a 31-band
+    spectrum has P = 63 scalars for Lambert + GGX)."""
+    single, shared, names = _expansion(problem)
+    sums = np.asarray(sums)
+    flat = sums.reshape(sums.shape[:-3] + (-1,))
+    out = np.where(single >= 0, np.take(flat, np.maximum(single, 0), axis=-1), 0.0)
+    if shared.size:
+        total = sums.sum(axis=-1)
+        out[..., shared[:, None], shared[None, :]] = total[..., names[:, None], names[None, :]]
+    return out
 
 
 def meat_of(problem: Problem, tangents: list) -> np.ndarray:
