@@ -71,6 +71,32 @@ def test_mitsuba_target_exports_exactly_without_unbounded_values(gltf_data):
     assert details.exact and "unbounded" not in details.text and "blendbsdf" not in details.text
 
 
+def _unbounded_slots(text: str) -> set:
+    """The parameter names that an exported Mitsuba document writes through an unbounded texture."""
+    import re
+
+    return set(re.findall(r'<texture type="srgb" name="(\w+)">\s*<rgb name="color" value="[^"]*"/>\s*'
+                          r'<boolean name="unbounded" value="true"/>', text))
+
+
+def test_mitsuba_roughconductor_is_its_own_model():
+    """A metal fitted for Mitsuba is its roughconductor: the target's choice, recovered, written as that one
+    plugin, exact, and unbounded only in the complex index's slots (η and k are not reflectances: Mitsuba takes
+    them through an unbounded texture)."""
+    spec, plugin = "ggx(fresnel=conductor, bounded=true)", "roughconductor"
+    truth = dict(ks=[0.95, 0.8, 0.55], alpha=0.18, eta=[0.2, 0.45, 1.3], k=[3.6, 2.5, 2.1])
+    data = synth.generate(models.get(spec, **truth), pattern="half-diff", n=2000, noise="relative:0.01", seed=6)
+    selection = select(data, ["lambert", "lambert+ggx"], criterion="heldout", target="mitsuba")
+    assert selection.chosen == spec
+    result = selection.result
+    np.testing.assert_allclose(result.params["ks"], truth["ks"], rtol=0.05)
+    assert float(result.params["alpha"]) == pytest.approx(truth["alpha"], rel=0.05)
+    details = export_details(result, "mitsuba")
+    assert details.exact and f'type="{plugin}"' in details.text and "blendbsdf" not in details.text
+    assert _unbounded_slots(details.text) <= {"eta", "k"}
+    assert '<rgb name="specular_reflectance"' in details.text  # ks in [0, 1]: a plain reflectance
+
+
 def test_unknown_or_undeclared_target_is_refused(gltf_data):
     with pytest.raises(ValueError, match="no fit can be made for 'pbrt'"):
         select(gltf_data, ["lambert"], target="pbrt")
