@@ -115,6 +115,11 @@ EQUATIONS = {
         "S(c; f0) = f0 + (1 − f0)(1 − c)⁵,  D = GGX,  G2 = 1/(1 + Λ(ωi) + Λ(ωo)),  α = roughness²\n"
         "s: Cycles' table ggx_gen_schlick_ior_s (16³ nodes, trilinear), computed by quadrature"
     ),
+    "pbrt": (
+        "f = (1 − amount) reflectance/π + amount · F(cd; eta + i k) · D G2/(4 ci co)\n"
+        "D = 1/(π α² ch⁴ (1 + tan²θh/α²)²) (Trowbridge-Reitz = GGX),  G2 = 1/(1 + Λ(ωi) + Λ(ωo)),\n"
+        "Λ(ω) = (√(1 + α² tan²θ) − 1)/2,  α = roughness (remaproughness false),  F: exact complex-index Fresnel"
+    ),
     "gltf": (
         "f = (1 − metallic) [(1 − specular · max_c F) base_color/π + specular F · D V]\n"
         "  + metallic (base_color + (1 − base_color) w(cd)) · D V\n"
@@ -183,6 +188,12 @@ NOTES = {
                "viewing direction, so the model is not reciprocal, as Cycles' is not; its table is computed again by "
                "quadrature and agrees with Cycles' to 1e-4. `brdffit fit --for blender`, `brdffit export --to "
                "blender`; tests/test_export_blender.py renders the export in Cycles against brdffit's render.",
+    "pbrt": "What pbrt-v4 renders for a `mix` (amount) of a `diffuse` (reflectance) and a `conductor` (eta, k, "
+            "roughness with remaproughness false): pbrt picks the conductor at a shading point with probability "
+            "amount, so the expected BRDF is the convex combination. Every parameter is declared inside the range "
+            "pbrt-v4 takes (roughness from 1e-3: below it pbrt's conductor is a perfect mirror; k = 0 is a "
+            "dielectric's Fresnel term), so a fit is written as it is (`brdffit fit --for pbrt`, `brdffit export "
+            "--to pbrt`). reflectance is a linear amplitude. Reciprocal.",
     "gltf": "The BRDF a glTF 2.0 file describes: its metallic-roughness material as the specification's Appendix B "
             "writes it, with KHR_materials_ior (ior) and KHR_materials_specular (specular, specular_color). Every "
             "parameter is declared inside the range a glTF file accepts, so a fit is a material any glTF viewer "

@@ -40,6 +40,7 @@ __all__ = [
     "principled",
     "gltf",
     "blender",
+    "pbrt",
     "sheen",
     "charlie_sheen",
     "charlie_lambda",
@@ -842,6 +843,35 @@ def blender(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, ior
     return _masked(pair, metallic * schlick * spec + (1.0 - metallic) * (dielectric * spec + diffuse))
 
 
+@_quiet
+def pbrt(theta_i, phi_i, theta_o, phi_o, reflectance, amount, roughness, eta, k):
+    """pbrt-v4's ``mix`` (amount t) of a ``diffuse`` (R) and a ``conductor`` (η, k, roughness α, remaproughness
+    false), transcribed from pbrt-v4's source (github.com/mmp/pbrt-v4): ``DiffuseBxDF::f`` = R/π;
+    ``ConductorBxDF::f`` = FrComplex(|ωo·h|, η + ik) D(h) G(ωo, ωi)/(4 cosθi cosθo) (``src/pbrt/bxdfs.h``) with
+    ``TrowbridgeReitzDistribution`` (``src/pbrt/util/scattering.h``): D = 1/(π α² cos⁴θh (1 + tan²θh/α²)²),
+    Λ(ω) = (√(1 + α² tan²θ) − 1)/2, G = 1/(1 + Λ(ωo) + Λ(ωi)); ``FrComplex``: sin²θt = sin²θ/η², cosθt = √(1 − sin²θt)
+    (complex, principal root), r_∥ = (η cosθ − cosθt)/(η cosθ + cosθt), r_⊥ = (cosθ − η cosθt)/(cosθ + η cosθt),
+    F = (|r_∥|² + |r_⊥|²)/2 with η the complex index; ``MixMaterial`` picks the conductor with probability t, so
+    the expected f is (1 − t) R/π + t f_conductor."""
+    pair = Pair(theta_i, phi_i, theta_o, phi_o)
+    a2 = roughness * roughness
+    tan2_h, cos4_h = np.tan(pair.th) ** 2, np.cos(pair.th) ** 4
+    d = 1.0 / (np.pi * a2 * cos4_h * (1.0 + tan2_h / a2) ** 2)
+
+    def lam(theta):
+        return (np.sqrt(1.0 + a2 * np.tan(theta) ** 2) - 1.0) / 2.0
+
+    g = 1.0 / (1.0 + lam(pair.to) + lam(pair.ti))
+    n = _col(eta) + 1j * _col(k)
+    c = np.clip(pair.cos_d, 0.0, 1.0)[:, None]
+    cos_t = np.sqrt(1.0 - (1.0 - c * c) / (n * n))
+    r_parl = (n * c - cos_t) / (n * c + cos_t)
+    r_perp = (c - n * cos_t) / (c + n * cos_t)
+    fresnel = (np.abs(r_parl) ** 2 + np.abs(r_perp) ** 2) / 2.0
+    conductor = fresnel * (d * g / (4.0 * pair.ci * pair.co))[:, None]
+    return _masked(pair, (1.0 - amount) * _col(reflectance) / np.pi + amount * conductor)
+
+
 REFERENCES = {
     "lambert": lambda ti, pi_, to, po, p: lambert(ti, pi_, to, po, p["rho_d"]),
     "oren-nayar": lambda ti, pi_, to, po, p: oren_nayar(ti, pi_, to, po, p["rho_d"], p["sigma"]),
@@ -862,6 +892,7 @@ REFERENCES = {
     "principled": lambda ti, pi_, to, po, p: principled(ti, pi_, to, po, **p),
     "gltf": lambda ti, pi_, to, po, p: gltf(ti, pi_, to, po, **p),
     "blender": lambda ti, pi_, to, po, p: blender(ti, pi_, to, po, **p),
+    "pbrt": lambda ti, pi_, to, po, p: pbrt(ti, pi_, to, po, **p),
     "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),
     "abc-microfacet": lambda ti, pi_, to, po, p: abc_microfacet(ti, pi_, to, po, **p),
     "sgd": lambda ti, pi_, to, po, p: sgd(ti, pi_, to, po, **p),

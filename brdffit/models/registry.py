@@ -19,6 +19,7 @@ from .gltf import GltfMaterial
 from .lafortune import Lafortune
 from .lobe import Lobe
 from .layout import layout
+from .pbrt import PbrtMaterial
 from .phong import BlinnPhong, Phong
 from .principled import Principled
 from .sgd import SGD
@@ -56,6 +57,7 @@ _LOBES: dict[str, type[Lobe]] = {
         Principled,
         GltfMaterial,
         BlenderPrincipled,
+        PbrtMaterial,
         ToonDiffuse,
         ToonSpecular,
     )
