@@ -15,6 +15,11 @@ per-channel ks is averaged), the diffuse part takes the rest with its reflectanc
 microfacet lobe is exact when it is what pbrt-v4 renders (GGX with ``shadowing=smith-correlated``, a conductor or
 dielectric Fresnel, one ks); otherwise it is approximate (Trowbridge-Reitz only, height-correlated Smith, no
 Schlick Fresnel), and the export states the deviation measured with those formulas.
+
+brdffit's ``pbrt`` model (`brdffit.models.pbrt`) is such a mix of one ``diffuse`` and one ``conductor`` as pbrt-v4
+evaluates it, with every parameter in the range pbrt-v4 takes: a model that is that lobe alone is written as it is
+(the diffuse ``reflectance`` R, the conductor's ``eta``, ``k`` and ``roughness``, the mix ``amount`` t; numbers to
+round-trip precision), exact and with nothing clamped; it is what ``brdffit fit --for pbrt`` fits.
 """
 
 from __future__ import annotations
@@ -29,7 +34,10 @@ from .terms import check_channels
 
 __all__ = ["write", "EXPORTABLE"]
 
-EXPORTABLE = "lambert (any number, summed) and isotropic cook-torrance or ggx lobes with any Fresnel mode, summed"
+EXPORTABLE = ("lambert (any number, summed) and isotropic cook-torrance or ggx lobes with any Fresnel mode, summed; "
+              "or the pbrt model alone")
+# The brdffit model that is pbrt-v4's mix of a diffuse and a conductor (`brdffit.models.pbrt`).
+FAMILY = "pbrt"
 # With a diffuse part beside the conductors, the conductors' weights sum to at most 1 minus this.
 _MIN_DIFFUSE_WEIGHT = 1e-3
 
@@ -103,19 +111,24 @@ def _mix(rho, conductors: list[_Part], scale: float, notes: list) -> tuple[list[
     if total < 1.0:
         base = np.zeros(1) if rho is None else np.asarray(rho) / (1.0 - total)
         if np.any(base > 1.0):
+            # pbrt-v4's scene parser refuses an "rgb reflectance" above 1 (paramdict.cpp, SpectrumType::Albedo):
+            # written as 1, which is also what DiffuseMaterial's clamp would make of it.
             notes.append(f"the diffuse part needs reflectance {', '.join(tm.number(v) for v in tm.rgb(base))} "
-                         f"beside microfacet weights {total:.6g}; pbrt-v4 clamps it to 1")
+                         f"beside microfacet weights {total:.6g}; pbrt-v4 takes at most 1, written as 1")
+            base = np.minimum(base, 1.0)
         parts.insert(0, _Part("diffuse", [("rgb", "reflectance", base)], 1.0 - total))
     return parts, notes
 
 
-def _statement(name: str, kind: str, params: list) -> list[str]:
+def _statement(name: str, kind: str, params: list, number=tm.number) -> list[str]:
+    """The ``MakeNamedMaterial`` lines of one material; ``number`` writes a float (10 significant digits by
+    default)."""
     lines = [f'MakeNamedMaterial "{name}"', f'    "string type" [ "{kind}" ]']
     for tag, key, value in params:
         if tag == "rgb":
-            text = " ".join(tm.number(v) for v in tm.rgb(value))
+            text = " ".join(number(v) for v in tm.rgb(value))
         elif tag == "float":
-            text = tm.number(value)
+            text = number(value)
         elif tag == "string":
             text = " ".join(f'"{v}"' for v in value)
         else:
@@ -214,6 +227,44 @@ def _refine(parts: list[_Part], source, model, name: str) -> list[_Part]:
     return build(least_squares(residual, x0, bounds=(lo, hi), diff_step=1e-4, max_nfev=25).x)
 
 
+def _round_trip(value) -> str:
+    """A float as the shortest text that reads back to the same double."""
+    return repr(float(value))
+
+
+def _own_model(model, name: str):
+    """The statements of brdffit's ``pbrt`` model (a diffuse, a conductor and their mix with amount t), as parts
+    and text; every value as it is, so that the text reads back to the model's own parameters."""
+    v = {key: np.asarray(value, dtype=float) for key, value in model.layout.local_params(model.params, 0).items()}
+    t = float(v["amount"])
+    parts = [_Part("diffuse", [("rgb", "reflectance", v["reflectance"])], 1.0 - t),
+             _Part("conductor", [("rgb", "eta", v["eta"]), ("rgb", "k", v["k"]),
+                                 ("float", "roughness", float(v["roughness"])), ("bool", "remaproughness", False)], t)]
+    names = [f"{name}:{part.kind}-{j + 1}" for j, part in enumerate(parts)]
+    lines = [line for part, leaf in zip(parts, names) for line in _statement(leaf, part.kind, part.params, _round_trip)]
+    # MixMaterial::ChooseMaterial picks materials[1], the conductor, with probability amount.
+    lines += _statement(name, "mix", [("string", "materials", names), ("float", "amount", t)], _round_trip)
+    return parts, "\n".join(lines) + "\n"
+
+
+def _write_own(model, name: str, header: list[str], source=None):
+    """`write` for brdffit's ``pbrt`` model alone: written as it is, no approximation; the deviation (from
+    ``source`` under the fit option, else from the model) measured with pbrt-v4's formulas on the text."""
+    parts, body = _own_model(model, name)
+    materials = pbrt_reference.parse(body)
+
+    def written(wi, wo):
+        return pbrt_reference.evaluate(materials, name, wi, wo)
+
+    reference = model if source is None else source
+    deviation = tm.measure(reference, written, pairs=tm.deviation_pairs(tm.peaks(reference, model,
+                                                                                 extra=_peaks(parts))))
+    notes: list[str] = []
+    lines = [f"# {line}" for line in tm.stated(header, notes, deviation,
+                                               "pbrt-v4's formulas, brdffit.export.pbrt_reference")]
+    return "\n".join(lines) + "\n" + body, written, notes, deviation
+
+
 def write(model, name: str, header: list[str], source=None):
     """The pbrt-v4 statements of ``model``.
 
@@ -222,7 +273,8 @@ def write(model, name: str, header: list[str], source=None):
         name: the material name (the last statement; parts are named ``name:kind-j``).
         header: comment lines that open the text.
         source: for the fit option, the model that pbrt-v4's parameters of the mapping of ``model`` are then
-            refined against (`_refine`) and the deviation measured against; None writes the mapping.
+            refined against (`_refine`) and the deviation measured against; None writes the mapping. brdffit's
+            ``pbrt`` model alone is written as it is (`_write_own`), not refined.
 
     Returns:
         (text, a function (wi, wo) -> f_r of the written material by pbrt-v4's formulas, notes, `Deviation` from
@@ -234,6 +286,8 @@ def write(model, name: str, header: list[str], source=None):
     check_channels(model, "pbrt-v4")
     if '"' in name or "\n" in name:
         raise tm.ExportError(f"a pbrt material name cannot hold quotes or newlines: {name!r}")
+    if len(model.lobes) == 1 and model.lobes[0].name == FAMILY:
+        return _write_own(model, name, header, source)
     notes: list[str] = []
     best = None
     candidates = _candidates(model, notes)

@@ -262,6 +262,8 @@ def lobe_peaks(lobe, params: dict) -> list[Peak]:
         found = [Peak("half", max(0.001, value("roughness") ** 2))]
     elif name in ("gltf", "blender"):
         found = [Peak("half", value("roughness") ** 2)]
+    elif name == "pbrt":
+        found = [Peak("half", value("roughness"))]  # pbrt-v4's conductor roughness is α (remaproughness false)
     elif name == "ward-aniso":
         found = [Peak("half", value("alpha_x")), Peak("half", value("alpha_y"))]
     elif name in ("blinn-phong", "ashikhmin-shirley"):
