@@ -84,3 +84,14 @@ def test_reciprocal():
 def test_pbrt_model_in_a_sum_is_refused_naming_what_pbrt_takes():
     with pytest.raises(tm.ExportError, match="or the pbrt model alone"):
         export_details(models.get("lambert+pbrt"), "pbrt")
+
+
+def test_mitsubas_fit_option_fits_a_diffuse_and_a_conductor_to_it():
+    """Mitsuba has no height-correlated masking: its fit option (`brdffit.export.refit`) fits it a lambert and a
+    conductor GGX lobe, the mix's two parts, and comes close (separable against correlated Smith)."""
+    from brdffit.export.refit import exportable_specs
+
+    model = _model(*CASES[0])
+    assert exportable_specs(model) == ["lambert+ggx(fresnel=conductor)", "lambert"]
+    details = export_details(model, "mitsuba", fit=True)
+    assert details.mapped.spec == "lambert+ggx(fresnel=conductor)" and details.deviation.rms < 0.05

@@ -20,13 +20,17 @@ __all__ = ["fit_exportable", "exportable_spec", "exportable_specs", "fit_data", 
 
 FIT_SAMPLES = 2000
 _DIFFUSE_LOBES = ("lambert", "oren-nayar", "toon-diffuse")
+# Lobes that hold a diffuse part beside a conductor (pbrt-v4's mix, `brdffit.models.pbrt`): a lambert and this lobe.
+_DIFFUSE_AND = {"pbrt": "ggx(fresnel=conductor)"}
 
 
 def exportable_spec(model: Model) -> str:
     """The spec of the exportable family fitted in place of ``model``: one lambert for the diffuse lobes, one
-    GGX lobe per other lobe (conductor Fresnel for a conductor lobe, dielectric otherwise)."""
-    diffuse = any(lobe.name in _DIFFUSE_LOBES for lobe in model.lobes)
-    specular = [f"ggx(fresnel={'conductor' if getattr(lobe, 'fresnel', None) == 'conductor' else 'dielectric'})"
+    GGX lobe per other lobe (conductor Fresnel for a conductor lobe, dielectric otherwise); pbrt-v4's mix of a
+    diffuse and a conductor gives a lambert and a conductor GGX lobe."""
+    diffuse = any(lobe.name in _DIFFUSE_LOBES or lobe.name in _DIFFUSE_AND for lobe in model.lobes)
+    specular = [_DIFFUSE_AND.get(lobe.name)
+                or f"ggx(fresnel={'conductor' if getattr(lobe, 'fresnel', None) == 'conductor' else 'dielectric'})"
                 for lobe in model.lobes if lobe.name not in _DIFFUSE_LOBES]
     return "+".join((["lambert"] if diffuse else []) + specular)
 
