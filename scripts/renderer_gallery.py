@@ -8,7 +8,9 @@ RGL-EPFL materials, CEA's retro-reflective tape) and each target of `brdffit.exp
   their held-out errors on the selection's own held-out rows (the 20% it holds out, seed 0), and their ratio;
 - every parameter of the target's fit inside its declared bounds (the target's ranges);
 - its export to the target (glTF: the Khronos glTF-Validator, no error; MaterialX: `Document.validate()`; Mitsuba:
-  `mitsuba.load_string` and no ``unbounded`` texture or ``blendbsdf``), and whether the export states it exact.
+  `mitsuba.load_string` and no ``unbounded`` texture or ``blendbsdf``; pbrt-v4, which cannot be installed here: the
+  statements read back and every value in the ranges its scene parser takes), and whether the export states it
+  exact.
 
 Writes docs/real-data/renderers.json and prints the markdown table of docs/export.md ("Shared real materials").
 
@@ -87,6 +89,15 @@ def _loads(text: str, target: str, model=None) -> str:
         mi.set_variant("scalar_rgb")
         mi.load_string(text)
         return "ok" if "unbounded" not in text and "blendbsdf" not in text else "unbounded values or a blend"
+    if target == "pbrt":
+        # No pbrt-v4 binary installs here: the statements are read back and held to what pbrt-v4's scene parser
+        # and materials take (paramdict.cpp: an RGB albedo in [0, 1], no negative RGB; FrComplex needs η > 0).
+        from brdffit.export.pbrt_reference import parse
+
+        bad = [f"{name}: {key} {value}" for name, material in parse(text).items() for key, value in material.items()
+               if (key == "reflectance" and not all(0.0 <= v <= 1.0 for v in value))
+               or (key in ("eta", "k") and not all(v >= 0.0 for v in value)) or (key == "eta" and min(value) <= 0.0)]
+        return "read back, in pbrt-v4's ranges (no pbrt-v4 binary)" if not bad else "out of range: " + "; ".join(bad)
     return "not checked"
 
 
