@@ -4,6 +4,7 @@ Kulla."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from .._lazy import module
 from ..geometry import TINY, LocalPair
@@ -14,7 +15,7 @@ from .specs import KS
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["Sheen", "CharlieSheen", "charlie_lambda"]
+__all__ = ["Sheen", "CharlieSheen", "charlie_lambda", "charlie_distribution", "charlie_visibility"]
 
 # Estevez & Kulla (2017), Table 1: the coefficients (a, b, c, d, e) of their fit of the Charlie distribution's
 # log Λ, at r = (1 − α)² = 0 and at r = 1 (linearly interpolated between).
@@ -39,21 +40,55 @@ class Sheen(Lobe):
         return params["ks"] * schlick_weight(pair.cos_d)[..., None]
 
 
-def charlie_lambda(cos_v, alpha):
+def charlie_lambda(cos_v, alpha, xp=jnp):
     """Smith's Λ of the Charlie distribution, Estevez & Kulla (2017)'s fit: exp(L(cosθ)) for cosθ < 1/2, else
     exp(2 L(1/2) − L(1 − cosθ)), L(x) = a/(1 + b x^c) + d x + e, (a, ..., e) interpolated linearly in (1 − α)²
-    between the rows of their Table 1 (`_CHARLIE_FIT`)."""
+    between the rows of their Table 1 (`_CHARLIE_FIT`). ``xp``: ``jax.numpy``, or ``numpy`` for tables computed
+    on the host."""
     r = (1.0 - alpha) ** 2
     a, b, c, d, e = (lo + (hi - lo) * r for lo, hi in zip(*_CHARLIE_FIT))
 
     def log_lambda(x):
         # x^c as 0 at x = 0 (normal incidence, where 1 − cosθ = 0), with the gradient 0 there (x^c ln x: NaN).
         positive = x > 0.0
-        power = jnp.where(positive, jnp.exp(c * jnp.log(jnp.where(positive, x, 1.0))), 0.0)
+        power = xp.where(positive, xp.exp(c * xp.log(xp.where(positive, x, 1.0))), 0.0)
         return a / (1.0 + b * power) + d * x + e
 
     low = cos_v < 0.5
-    return jnp.exp(jnp.where(low, log_lambda(cos_v), 2.0 * log_lambda(0.5) - log_lambda(1.0 - cos_v)))
+    return xp.exp(xp.where(low, log_lambda(cos_v), 2.0 * log_lambda(0.5) - log_lambda(1.0 - cos_v)))
+
+
+def charlie_distribution(cos_h, alpha, xp=jnp):
+    """The Charlie distribution of fibre normals, Estevez & Kulla (2017), Eq. 2: D(h) = (2 + 1/α) sin^(1/α)θh/(2π).
+
+    Arguments:
+        cos_h: n·h, any shape.
+        alpha: the fibre roughness α in (0, 1], broadcastable against ``cos_h``.
+        xp: ``jax.numpy``, or ``numpy`` for tables computed on the host.
+
+    Returns:
+        D in 1/sr, the shape of the broadcast; sin²θh is floored at TINY, so the value and its gradient stay finite
+        at θh = 0.
+    """
+    sin2 = xp.maximum(1.0 - cos_h * cos_h, TINY)
+    return (2.0 + 1.0 / alpha) * xp.exp(0.5 / alpha * xp.log(sin2)) / (2.0 * math.pi)
+
+
+def charlie_visibility(cos_i, cos_o, alpha, xp=jnp):
+    """The Charlie sheen's visibility V = G/(4 cosθi cosθo), G = 1/(1 + Λ(ωi) + Λ(ωo)) the height-correlated Smith
+    term with Estevez & Kulla's fitted Λ (`charlie_lambda`): the "sheen visibility" of KHR_materials_sheen
+    ("Sheen visibility").
+
+    Arguments:
+        cos_i, cos_o: n·ωi and n·ωo (positive), broadcastable.
+        alpha: the fibre roughness α.
+        xp: ``jax.numpy``, or ``numpy``.
+
+    Returns:
+        V, the factor that multiplies D to give the sheen BRDF D V.
+    """
+    lam_i, lam_o = charlie_lambda(cos_i, alpha, xp), charlie_lambda(cos_o, alpha, xp)
+    return 1.0 / ((1.0 + lam_i + lam_o) * (4.0 * cos_i * cos_o))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,7 +113,5 @@ class CharlieSheen(Lobe):
 
     def __call__(self, params, pair: LocalPair):
         alpha = params["alpha"]
-        sin2 = jnp.maximum(1.0 - pair.cos_h * pair.cos_h, TINY)
-        d = (2.0 + 1.0 / alpha) * jnp.exp(0.5 / alpha * jnp.log(sin2)) / (2.0 * jnp.pi)
-        g = 1.0 / (1.0 + charlie_lambda(pair.cos_i, alpha) + charlie_lambda(pair.cos_o, alpha))
-        return params["ks"] * (d * g / (4.0 * pair.cos_i * pair.cos_o))[..., None]
+        value = charlie_distribution(pair.cos_h, alpha) * charlie_visibility(pair.cos_i, pair.cos_o, alpha)
+        return params["ks"] * value[..., None]
