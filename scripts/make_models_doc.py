@@ -125,6 +125,9 @@ EQUATIONS = {
         "  + metallic (base_color + (1 − base_color) w(cd)) · D V\n"
         "F = f0 + (1 − f0) w(cd),  f0 = min(((ior − 1)/(ior + 1))² specular_color, 1),  w(c) = (1 − c)⁵\n"
         "D = α²/(π (ch² (α² − 1) + 1)²),  V = G2/(4 ci co),  G2 = 1/(1 + Λ(ωi) + Λ(ωo)) (GGX),  α = roughness²\n"
+        "with a sheen: f = sheen_color · Ds Vs + f · min(1 − s E(ci), 1 − s E(co)),  s = max_c sheen_color\n"
+        "Ds = (2 + 1/αs) sin^(1/αs)θh/(2π),  Vs = 1/((1 + Λs(ωi) + Λs(ωo)) 4 ci co) (Charlie),  αs = sheen_roughness²\n"
+        "E: the sheen's directional albedo (32 × 32 nodes, bilinear), computed by quadrature\n"
         "with a clearcoat: f = (1 − c) f + c · D V (α = clearcoat_roughness²),  c = clearcoat (0.04 + 0.96 (1 − co)⁵)"
     ),
     "toon-diffuse": "f = (ρshade + (ρd − ρshade) · S((ci − threshold)/width)) / π,  S(u) = 1/(1 + e^(−u))",
@@ -198,10 +201,11 @@ NOTES = {
             "writes it, with KHR_materials_ior (ior) and KHR_materials_specular (specular, specular_color). Every "
             "parameter is declared inside the range a glTF file accepts, so a fit is a material any glTF viewer "
             "takes as written (`brdffit fit --for gltf`, `brdffit export --to gltf`). base_color is a linear "
-            "amplitude (the value is affine in it); specular_color is held at white and the clearcoat "
-            "(KHR_materials_clearcoat) at 0 unless freed. Not reciprocal with a clearcoat: its Fresnel weight takes "
-            "the viewing direction (the extension's layering); without one every Fresnel term is taken at the half "
-            "vector.",
+            "amplitude (the value is affine in it); specular_color is held at white, the sheen "
+            "(KHR_materials_sheen: Estevez & Kulla's Charlie distribution and visibility, the base scaled by the "
+            "sheen's albedo at both directions) and the clearcoat (KHR_materials_clearcoat) at 0 unless freed. Not "
+            "reciprocal with a clearcoat: its Fresnel weight takes the viewing direction (the extension's "
+            "layering); without one every Fresnel term is taken at the half vector and the sheen is reciprocal.",
     "toon-diffuse": "Non-photorealistic two-tone shading. width is held fixed by fits unless it is freed. Not "
                     "reciprocal: it switches on ci alone.",
     "toon-specular": "A flat highlight disc; width is held fixed by fits unless it is freed. Reciprocal, since "

@@ -39,6 +39,10 @@ __all__ = [
     "sgd",
     "principled",
     "gltf",
+    "gltf_sheen_brdf",
+    "gltf_sheen_albedo",
+    "gltf_sheen_table",
+    "gltf_sheen_lookup",
     "blender",
     "pbrt",
     "sheen",
@@ -717,9 +721,70 @@ def _ct_ref(ti, pi_, to, po, p, roughness="m", distribution="beckmann", shadowin
                          fresnel=fresnel, f0=p.get("f0"), eta=p.get("eta"), k=p.get("k"), gamma=p.get("gamma"))
 
 
+def gltf_sheen_brdf(theta_i, theta_o, theta_h, sheen_roughness):
+    """KHR_materials_sheen, "Implementation Notes": the Charlie sheen BRDF of a white sheen colour, D_s ν_s with
+    α = sheenRoughness², D_s = (2 + 1/α) sin(θh)^(1/α)/(2π) and
+    ν_s = 1/((1 + λ(N·V) + λ(N·L)) 4 (N·V)(N·L)), λ Estevez & Kulla's fit (`charlie_lambda`)."""
+    alpha = sheen_roughness ** 2
+    d = (2.0 + 1.0 / alpha) * np.sin(theta_h) ** (1.0 / alpha) / (2.0 * np.pi)
+    vis = 1.0 / ((1.0 + charlie_lambda(theta_o, alpha) + charlie_lambda(theta_i, alpha))
+                 * (4.0 * np.cos(theta_o) * np.cos(theta_i)))
+    return d * vis
+
+
+def _cubed_legendre(n: int, scale: float):
+    """Gauss-Legendre on [0, 1] in u with x = scale u³: nodes x and weights (3 scale u² du)."""
+    t, wt = np.polynomial.legendre.leggauss(n)
+    u, wu = (t + 1.0) / 2.0, wt / 2.0
+    return scale * u ** 3, 3.0 * scale * u ** 2 * wu
+
+
+def gltf_sheen_albedo(mu: float, sheen_roughness, cos_nodes: int = 64, phi_nodes: int = 64):
+    """E(μ) = ∫ D_s ν_s cosθi dωi over the upper hemisphere with the view at cosθo = μ (azimuth 0) and ωi at
+    (θi, φi): Gauss-Legendre in cosθi on [0, ½] and [½, 1] (cosθi = ½u³ and 1 − ½u³) and in φi on [0, π]
+    (φi = π v³, the integrand even in φi: doubled). ``sheen_roughness``: a float or a 1-D array (E for each)."""
+    low, w_low = _cubed_legendre(cos_nodes, 0.5)
+    cos_i = np.concatenate([low, 1.0 - low])[:, None]
+    w_cos = np.concatenate([w_low, w_low])[:, None]
+    phi, w_phi = _cubed_legendre(phi_nodes, np.pi)
+    theta_i = np.arccos(cos_i)
+    theta_o = math.acos(mu)
+    # h ∝ ωi + ωo; θh from its components.
+    hx = np.sin(theta_i) * np.cos(phi)[None, :] + math.sin(theta_o)
+    hy = np.sin(theta_i) * np.sin(phi)[None, :]
+    hz = cos_i + mu
+    theta_h = np.arctan2(np.hypot(hx, hy), hz)
+    rough = np.atleast_1d(np.asarray(sheen_roughness, dtype=float))[:, None, None]
+    f = gltf_sheen_brdf(theta_i, theta_o, theta_h, rough)
+    e = np.sum(f * cos_i * w_cos * 2.0 * w_phi[None, :], axis=(1, 2))
+    return e if np.ndim(sheen_roughness) else float(e[0])
+
+
+@functools.lru_cache(maxsize=1)
+def gltf_sheen_table() -> np.ndarray:
+    """brdffit's sheen albedo table written again from its stated definition (brdffit.models.gltf): 32 × 32 nodes,
+    μ = i/31 (the first at 1e-4) and sheen roughness uniform on [0.1, 1], `gltf_sheen_albedo` at each, clamped to
+    [0, 1]. Indexed [sheen roughness, μ]."""
+    mus = np.maximum(np.arange(32) / 31.0, 1e-4)
+    rough = 0.1 + 0.9 * np.arange(32) / 31.0
+    return np.clip(np.stack([gltf_sheen_albedo(m, rough) for m in mus], axis=1), 0.0, 1.0)
+
+
+def gltf_sheen_lookup(mu, sheen_roughness):
+    """Bilinear interpolation of `gltf_sheen_table` in (μ, (sheen roughness − 0.1)/0.9), both over nodes
+    i/31."""
+    table = gltf_sheen_table()
+    x = np.clip(np.asarray(mu, dtype=float), 0.0, 1.0) * 31.0
+    y = min(max((sheen_roughness - 0.1) / 0.9, 0.0), 1.0) * 31.0
+    i, j = np.minimum(np.floor(x), 30).astype(int), min(int(math.floor(y)), 30)
+    tx, ty = x - i, y - j
+    row = lambda k: table[k, i] * (1.0 - tx) + table[k, i + 1] * tx  # noqa: E731
+    return row(j) * (1.0 - ty) + row(j + 1) * ty
+
+
 @_quiet
 def gltf(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specular, ior, specular_color,
-         clearcoat=0.0, clearcoat_roughness=0.1):
+         clearcoat=0.0, clearcoat_roughness=0.1, sheen_color=0.0, sheen_roughness=0.5):
     """The glTF 2.0 metallic-roughness material (glTF 2.0 Specification, Appendix B, "Specular BRDF", "Fresnel" and
     "Metal BRDF and Dielectric BRDF") with KHR_materials_ior and KHR_materials_specular ("Implementation"), written
     from the specification's visibility form: with α = roughness², L = ωi, V = ωo,
@@ -730,8 +795,10 @@ def gltf(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specul
         dielectric = (1 − specular max(fr)) base_color/π + specular fr specular_brdf,
         metal = specular_brdf (base_color + (1 − base_color)(1 − |V·H|)⁵),
         material = (1 − metallic) dielectric + metallic metal,
-        coated = mix(material, Vis_c D_c, clearcoat (0.04 + 0.96 (1 − |N·V|)⁵))   (KHR_materials_clearcoat),
-    Vis_c, D_c those of α = clearcoat_roughness².
+        sheened = sheen_color D_s ν_s + material min(1 − max(sheen_color) E(N·V), 1 − max(sheen_color) E(N·L))
+                                                                                   (KHR_materials_sheen),
+        coated = mix(sheened, Vis_c D_c, clearcoat (0.04 + 0.96 (1 − |N·V|)⁵))   (KHR_materials_clearcoat),
+    Vis_c, D_c those of α = clearcoat_roughness², D_s ν_s `gltf_sheen_brdf`, E `gltf_sheen_lookup`.
     """
     pair = Pair(theta_i, phi_i, theta_o, phi_o)
     base, tint = _col(base_color), _col(specular_color)
@@ -746,6 +813,12 @@ def gltf(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, specul
     dielectric = (1.0 - specular * fresnel.max(axis=1, keepdims=True)) * base / np.pi + specular * fresnel * brdf
     metal = brdf * (base + (1.0 - base) * schlick)
     material = (1.0 - metallic) * dielectric + metallic * metal
+    sheen = _col(sheen_color)
+    strength = float(np.max(sheen))
+    if strength > 0:  # "If sheenColorFactor is zero, the whole sheen layer is disabled."
+        scaling = np.minimum(1.0 - strength * gltf_sheen_lookup(pair.co, sheen_roughness),
+                             1.0 - strength * gltf_sheen_lookup(pair.ci, sheen_roughness))[:, None]
+        material = sheen * gltf_sheen_brdf(pair.ti, pair.to, pair.th, sheen_roughness)[:, None] + material * scaling
     c2 = clearcoat_roughness ** 4
     vis_c = 1.0 / (2.0 * (nv * np.sqrt(c2 + (1.0 - c2) * nl ** 2) + nl * np.sqrt(c2 + (1.0 - c2) * nv ** 2)))
     d_c = c2 / (np.pi * (np.cos(pair.th)[:, None] ** 2 * (c2 - 1.0) + 1.0) ** 2)

@@ -115,7 +115,7 @@ OTHER_CASES = [
     Case("blender", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.35, "roughness": 0.45, "ior": 1.7}),
     Case("gltf", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.35, "roughness": 0.4, "specular": 0.8,
                       "ior": 1.7, "specular_color": [0.95, 0.6, 0.9], "clearcoat": 0.6,
-                      "clearcoat_roughness": 0.25}),
+                      "clearcoat_roughness": 0.25, "sheen_color": [0.6, 0.3, 0.45], "sheen_roughness": 0.4}),
     Case("pbrt", {}, {"reflectance": [0.7, 0.4, 0.15], "amount": 0.35, "roughness": 0.3, "eta": [0.2, 0.9, 1.45],
                       "k": [3.2, 0.6, 0.001]}),
     Case("ashikhmin-shirley", {}, {"rs": RS, "n": 35.0}),
