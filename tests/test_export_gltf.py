@@ -24,6 +24,8 @@ SYNTHETIC = ROOT / "data" / "synthetic"
 VALIDATOR = ROOT / "node_modules" / "gltf-validator"
 GLTF = dict(base_color=[0.7, 0.4, 0.15], metallic=0.2, roughness=0.4, specular=0.8, ior=1.6)
 COATED = dict(GLTF, clearcoat=0.5, clearcoat_roughness=0.2)
+SHEENED = dict(GLTF, sheen_color=[0.8, 0.5, 0.3], sheen_roughness=0.37)
+NO_SHEEN = dict(sheen_color=[0.0, 0.0, 0.0], sheen_roughness=0.0)  # what a reader takes without the extension
 
 
 def _validate(path: Path) -> dict:
@@ -42,10 +44,13 @@ def _problems(report: dict) -> list:
     return [(m["code"], m.get("pointer"), m["message"]) for m in report["issues"]["messages"]]
 
 
-@pytest.mark.parametrize("params, written_coat", [(GLTF, dict(clearcoat=0.0, clearcoat_roughness=0.0)),
-                                                  (COATED, {})], ids=["uncoated", "clearcoat"])
+@pytest.mark.parametrize("params, written_coat", [
+    (GLTF, dict(clearcoat=0.0, clearcoat_roughness=0.0, **NO_SHEEN)),
+    (COATED, NO_SHEEN),
+    (SHEENED, dict(clearcoat=0.0, clearcoat_roughness=0.0))], ids=["uncoated", "clearcoat", "sheen"])
 def test_gltf_model_exports_exactly_and_states_what_it_means(params, written_coat):
-    """Without a coat nothing of KHR_materials_clearcoat is written (a reader takes its defaults, 0 and 0)."""
+    """Without a coat or a sheen nothing of KHR_materials_clearcoat or KHR_materials_sheen is written (a reader
+    takes their defaults, 0 and 0)."""
     model = models.get("gltf", **params)
     details = export_details(model, "gltf")
     assert details.exact and details.deviation.rms == 0.0
@@ -61,8 +66,10 @@ def test_gltf_model_exports_exactly_and_states_what_it_means(params, written_coa
 
 @pytest.mark.parametrize("params, extensions", [
     (GLTF, {"KHR_materials_ior", "KHR_materials_specular"}),
-    (COATED, {"KHR_materials_ior", "KHR_materials_specular", "KHR_materials_clearcoat"})],
-    ids=["uncoated", "clearcoat"])
+    (COATED, {"KHR_materials_ior", "KHR_materials_specular", "KHR_materials_clearcoat"}),
+    (dict(SHEENED, clearcoat=0.5), {"KHR_materials_ior", "KHR_materials_specular", "KHR_materials_sheen",
+                                    "KHR_materials_clearcoat"})],
+    ids=["uncoated", "clearcoat", "sheen and clearcoat"])
 def test_gltf_file_passes_the_khronos_validator(tmp_path, params, extensions):
     path = tmp_path / "material.gltf"
     path.write_text(export(models.get("gltf", **params), "gltf", name="brdffit material"))
@@ -88,7 +95,8 @@ def test_validator_reports_a_value_out_of_range(tmp_path):
 def test_every_declared_bound_is_inside_the_files_range():
     specs = models.get("gltf").param_specs
     for name, (lower, upper) in {"base_color": (0, 1), "metallic": (0, 1), "roughness": (0, 1),
-                                 "specular": (0, 1), "ior": (1, np.inf), "specular_color": (0, np.inf)}.items():
+                                 "specular": (0, 1), "ior": (1, np.inf), "specular_color": (0, np.inf),
+                                 "sheen_color": (0, 1), "sheen_roughness": (0, 1)}.items():
         assert lower <= specs[name].lower and specs[name].upper <= upper, name
 
 

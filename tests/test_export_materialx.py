@@ -17,6 +17,7 @@ mx = pytest.importorskip("MaterialX", reason="MaterialX (PyPI package materialx,
 SYNTHETIC = Path(__file__).resolve().parents[1] / "data" / "synthetic"
 GLTF = dict(base_color=[0.7, 0.4, 0.15], metallic=0.2, roughness=0.4, specular=0.8, ior=1.6, clearcoat=0.5,
             clearcoat_roughness=0.2)
+SHEENED = dict(GLTF, sheen_color=[0.8, 0.5, 0.4], sheen_roughness=0.37)
 
 
 def _document(text: str):
@@ -34,9 +35,14 @@ def _inputs(doc, node: str) -> dict:
     return {i.getName(): i.getValue() for i in shader.getInputs()}
 
 
+@pytest.fixture(scope="module", params=[GLTF, SHEENED], ids=["clearcoat", "clearcoat and sheen"])
+def params(request):
+    return request.param
+
+
 @pytest.fixture(scope="module")
-def text():
-    return export(models.get("gltf", **GLTF), "materialx", name="brdffit material")
+def text(params):
+    return export(models.get("gltf", **params), "materialx", name="brdffit material")
 
 
 def test_document_validates_against_the_standard_libraries(text):
@@ -49,15 +55,25 @@ def test_document_validates_against_the_standard_libraries(text):
     assert doc.getChild("SR_brdffit_material_openpbr").getNodeDef().getName() == "ND_open_pbr_surface_surfaceshader"
 
 
-def test_values_are_the_fits_under_each_nodes_names(text):
+def _value(value):
+    return np.asarray(value.asTuple() if hasattr(value, "asTuple") else value)
+
+
+def test_values_are_the_fits_under_each_nodes_names(text, params):
     doc = _document(text)
     gltf_inputs, openpbr_inputs = _inputs(doc, "SR_brdffit_material"), _inputs(doc, "SR_brdffit_material_openpbr")
-    expected = {**GLTF, "specular_color": [1.0, 1.0, 1.0]}
+    expected = {"sheen_color": [0.0, 0.0, 0.0], "sheen_roughness": 0.5, **params, "specular_color": [1.0, 1.0, 1.0]}
     for name, value in expected.items():
-        np.testing.assert_allclose(np.asarray(gltf_inputs[name].asTuple() if hasattr(gltf_inputs[name], "asTuple")
-                                              else gltf_inputs[name]), value, rtol=1e-7)
-        got = openpbr_inputs[OPENPBR_NAMES[name]]
-        np.testing.assert_allclose(np.asarray(got.asTuple() if hasattr(got, "asTuple") else got), value, rtol=1e-7)
+        np.testing.assert_allclose(_value(gltf_inputs[name]), value, rtol=1e-7)
+        if name in OPENPBR_NAMES:
+            np.testing.assert_allclose(_value(openpbr_inputs[OPENPBR_NAMES[name]]), value, rtol=1e-7)
+    # A sheen is OpenPBR's fuzz: its weight the colour's largest channel, its colour the rest.
+    if "sheen_color" in params:
+        np.testing.assert_allclose(_value(openpbr_inputs["fuzz_weight"]), 0.8, rtol=1e-7)
+        np.testing.assert_allclose(_value(openpbr_inputs["fuzz_color"]), [1.0, 0.625, 0.5], rtol=1e-7)
+        np.testing.assert_allclose(_value(openpbr_inputs["fuzz_roughness"]), 0.37, rtol=1e-7)
+    else:
+        assert "fuzz_weight" not in openpbr_inputs
 
 
 @pytest.mark.parametrize("generator", ["glsl", "osl"])
@@ -78,8 +94,10 @@ def test_shader_generators_produce_code(text, generator):
         assert len(code) > 1000 and ("void main" in code or "shader " in code), element.getNamePath()
 
 
-def test_approximation_and_refusal_are_stated(text):
+def test_approximation_and_refusal_are_stated(text, params):
     assert "<!-- approximation: brdffit_material_openpbr (open_pbr_surface)" in text
+    sheen_note = "<!-- approximation: brdffit_material (gltf_pbr): MaterialX's sheen_bsdf (conty_kulla)"
+    assert (sheen_note in text) == ("sheen_color" in params)
     assert not export_details(models.get("gltf", **GLTF), "materialx").exact  # the OpenPBR material is approximate
     with pytest.raises(ExportError, match="--for gltf"):
         export(models.get("lambert+ggx"), "materialx")

@@ -2,21 +2,25 @@
 and a unit sphere that carries it.
 
 What is written (the glTF 2.0 Specification, §5.19 "Material" and Appendix B; KHR_materials_ior,
-KHR_materials_specular and KHR_materials_clearcoat):
+KHR_materials_specular, KHR_materials_sheen and KHR_materials_clearcoat):
 
 - ``pbrMetallicRoughness``: ``baseColorFactor`` (the base colour, alpha 1), ``metallicFactor``,
   ``roughnessFactor``;
 - ``extensions.KHR_materials_ior.ior`` and ``extensions.KHR_materials_specular`` (``specularFactor``,
-  ``specularColorFactor``), and with a clearcoat ``extensions.KHR_materials_clearcoat`` (``clearcoatFactor``,
+  ``specularColorFactor``), with a sheen ``extensions.KHR_materials_sheen`` (``sheenColorFactor``,
+  ``sheenRoughnessFactor``) and with a clearcoat ``extensions.KHR_materials_clearcoat`` (``clearcoatFactor``,
   ``clearcoatRoughnessFactor``), listed in ``extensionsUsed`` (not ``extensionsRequired``: a viewer without them
-  renders the core material, with ior 1.5, specular 1 and no coat);
+  renders the core material, with ior 1.5, specular 1, no sheen and no coat);
 - a UV sphere of radius 1 (positions, normals, indices in one base64 buffer) whose one primitive uses the material,
   in a scene of one node, so that a viewer shows the material at once;
 - ``asset.extras.brdffit``: the source model, every approximation made and the measured deviation, the comments a
   JSON file cannot hold.
 
 brdffit's ``gltf`` model is the material a glTF file describes, parameter for parameter and inside the ranges the
-file accepts (`brdffit.models.gltf`), so a model that is that lobe alone is written exactly. Any other model has no
+file accepts (`brdffit.models.gltf`), so a model that is that lobe alone is written exactly. The sheen's albedo
+scaling reads a table of the sheen's directional albedo that the extension leaves to each viewer: brdffit's is
+computed by quadrature (32 × 32 nodes, bilinear); a viewer's own table (the Sample Viewer's 8-bit texture) differs
+from it by its resolution and precision, which the parameters written cannot carry. Any other model has no
 glTF equivalent: it is refused, or under the fit option replaced by brdffit's fit of the ``gltf`` model to it
 (`brdffit.export.refit`), with the achieved deviation stated.
 """
@@ -35,8 +39,8 @@ __all__ = ["write", "measured", "read_material", "sphere_mesh", "EXPORTABLE", "F
 
 # The model a glTF file represents exactly (the fit option's family for this target).
 FAMILY = "gltf"
-EXPORTABLE = ("the gltf model alone (the glTF 2.0 metallic-roughness material with KHR_materials_ior, _specular and "
-              "_clearcoat)")
+EXPORTABLE = ("the gltf model alone (the glTF 2.0 metallic-roughness material with KHR_materials_ior, _specular, "
+              "_sheen and _clearcoat)")
 # The sphere's rings (latitude) and segments (longitude): 2,145 vertices, smooth at a viewer's default zoom.
 _RINGS, _SEGMENTS = 32, 64
 # glTF's component types and targets (Specification §5.1.4 "Accessor", §5.11 "Buffer View").
@@ -67,6 +71,11 @@ def sphere_mesh(rings: int = _RINGS, segments: int = _SEGMENTS):
     return positions, normals.astype(np.float32), np.asarray(triangles, dtype=np.uint16).ravel()
 
 
+def _has_sheen(values: dict) -> bool:
+    """Whether the material has a sheen (KHR_materials_sheen: a sheenColorFactor of zero disables the layer)."""
+    return max(values["sheen_color"]) > 0
+
+
 def _document(values: dict, name: str, extras: dict) -> dict:
     """The glTF JSON of the material on a sphere."""
     positions, normals, indices = sphere_mesh()
@@ -75,8 +84,9 @@ def _document(values: dict, name: str, extras: dict) -> dict:
     buffer = b"".join(blobs)
     return {
         "asset": {"version": "2.0", "generator": extras["generator"], "extras": {"brdffit": extras}},
-        "extensionsUsed": ["KHR_materials_ior", "KHR_materials_specular"] + (
-            ["KHR_materials_clearcoat"] if values["clearcoat"] > 0 else []),
+        "extensionsUsed": ["KHR_materials_ior", "KHR_materials_specular"]
+        + (["KHR_materials_sheen"] if _has_sheen(values) else [])
+        + (["KHR_materials_clearcoat"] if values["clearcoat"] > 0 else []),
         "scene": 0,
         "scenes": [{"name": name, "nodes": [0]}],
         "nodes": [{"name": f"{name} sphere", "mesh": 0}],
@@ -89,6 +99,9 @@ def _document(values: dict, name: str, extras: dict) -> dict:
             "extensions": {"KHR_materials_ior": {"ior": values["ior"]},
                            "KHR_materials_specular": {"specularFactor": values["specular"],
                                                       "specularColorFactor": values["specular_color"]},
+                           **({"KHR_materials_sheen": {"sheenColorFactor": values["sheen_color"],
+                                                       "sheenRoughnessFactor": values["sheen_roughness"]}}
+                              if _has_sheen(values) else {}),
                            **({"KHR_materials_clearcoat": {
                                "clearcoatFactor": values["clearcoat"],
                                "clearcoatRoughnessFactor": values["clearcoat_roughness"]}}
@@ -150,11 +163,13 @@ def read_material(text: str) -> dict:
     written is what was meant; a viewer reads the same fields)."""
     material = json.loads(text)["materials"][0]
     core, ext = material["pbrMetallicRoughness"], material.get("extensions", {})
-    coat = ext.get("KHR_materials_clearcoat", {})
+    coat, sheen = ext.get("KHR_materials_clearcoat", {}), ext.get("KHR_materials_sheen", {})
     return {"base_color": core["baseColorFactor"][:3], "metallic": core.get("metallicFactor", 1.0),
             "roughness": core.get("roughnessFactor", 1.0), "ior": ext.get("KHR_materials_ior", {}).get("ior", 1.5),
             "specular": ext.get("KHR_materials_specular", {}).get("specularFactor", 1.0),
             "specular_color": ext.get("KHR_materials_specular", {}).get("specularColorFactor", [1.0, 1.0, 1.0]),
+            "sheen_color": sheen.get("sheenColorFactor", [0.0, 0.0, 0.0]),
+            "sheen_roughness": sheen.get("sheenRoughnessFactor", 0.0),
             "clearcoat": coat.get("clearcoatFactor", 0.0),
             "clearcoat_roughness": coat.get("clearcoatRoughnessFactor", 0.0)}
 

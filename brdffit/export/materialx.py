@@ -4,13 +4,19 @@ Surface counterpart.
 What is written (MaterialX 1.39's standard data libraries, ``libraries/bxdf``):
 
 - ``<gltf_pbr>`` (``ND_gltf_pbr_surfaceshader``) with ``base_color``, ``metallic``, ``roughness``, ``specular``,
-  ``specular_color``, ``ior``, ``clearcoat`` and ``clearcoat_roughness``: the glTF 2.0 material, parameter for
-  parameter, in the material
-  ``<surfacematerial name=NAME>``;
+  ``specular_color``, ``ior``, ``sheen_color``, ``sheen_roughness``, ``clearcoat`` and ``clearcoat_roughness``: the
+  glTF 2.0 material, parameter for parameter, in the material ``<surfacematerial name=NAME>``. Its sheen is not
+  KHR_materials_sheen's BRDF exactly: the node's graph (``libraries/bxdf/gltf_pbr.mtlx``) layers a ``sheen_bsdf`` in
+  its default ``conty_kulla`` mode, whose shader code (``pbrlib/genglsl/lib/mx_microfacet_sheen.glsl``) has the
+  Charlie distribution but Neubelt and Pettineo's visibility 1/(4 (n·l + n·v − (n·l)(n·v))) in place of the Charlie
+  visibility, and scales the layers beneath by 1 − max(sheen_color) E(n·v) alone (E that BRDF's albedo, a fit)
+  where the extension takes the smaller of the weights at n·v and n·l; a document with a sheen states this
+  approximation;
 - ``<open_pbr_surface>`` (``ND_open_pbr_surface_surfaceshader``, OpenPBR Surface 1.x) with the same values under
   OpenPBR's names (``base_color``, ``base_metalness``, ``specular_roughness``, ``specular_ior``,
-  ``specular_weight``, ``specular_color``, ``coat_weight``, ``coat_roughness``), in
-  ``<surfacematerial name=NAME_openpbr>``: the mapping from glTF that
+  ``specular_weight``, ``specular_color``, ``coat_weight``, ``coat_roughness``, and a sheen as ``fuzz_weight`` =
+  max(sheen_color), ``fuzz_color`` = sheen_color/max(sheen_color), ``fuzz_roughness`` = sheen_roughness, the split
+  MaterialX's gltf_pbr graph makes), in ``<surfacematerial name=NAME_openpbr>``: the mapping from glTF that
   the OpenPBR specification gives for its metallic-roughness subset. OpenPBR layers the specular over the diffuse
   by the layer's directional albedo and evaluates an F82-tinted conductor, where glTF mixes per direction by
   Schlick's Fresnel term, so this one is an approximation, stated as such;
@@ -37,6 +43,19 @@ EXPORTABLE = gltf.EXPORTABLE
 OPENPBR_NAMES = {"base_color": "base_color", "metallic": "base_metalness", "roughness": "specular_roughness",
                  "ior": "specular_ior", "specular": "specular_weight", "specular_color": "specular_color",
                  "clearcoat": "coat_weight", "clearcoat_roughness": "coat_roughness"}
+# The sheen's parameters, written to OpenPBR's fuzz by `_openpbr` (a split, not a renaming).
+_SHEEN = ("sheen_color", "sheen_roughness")
+
+
+def _openpbr(values: dict) -> dict:
+    """OpenPBR Surface's inputs for the glTF values: renamed by `OPENPBR_NAMES`; a sheen as fuzz (weight the
+    sheen colour's largest channel, colour the sheen colour divided by it, roughness the sheen's)."""
+    inputs = {OPENPBR_NAMES[k]: v for k, v in values.items() if k not in _SHEEN}
+    strength = max(values["sheen_color"])
+    if strength > 0:
+        inputs.update(fuzz_weight=strength, fuzz_color=[c / strength for c in values["sheen_color"]],
+                      fuzz_roughness=values["sheen_roughness"])
+    return inputs
 
 
 def _input(name: str, value) -> str:
@@ -83,10 +102,16 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
              "specular over the diffuse by albedo and tints its conductor by F82, where glTF mixes by Schlick's "
              "Fresnel per direction: its deviation is not measured (the deviation below is the glTF material's, "
              f"{material})"]
+    if max(values["sheen_color"]) > 0:
+        notes.append(f"{material} (gltf_pbr): MaterialX's sheen_bsdf (conty_kulla) takes the Charlie distribution "
+                     "with Neubelt and Pettineo's visibility 1/(4 (n.l + n.v - n.l n.v)) instead of the Charlie "
+                     "visibility of KHR_materials_sheen, and scales the base by 1 - max(sheen_color) E(n.v) at the "
+                     "view alone: its sheen is not measured (the deviation below is brdffit's glTF material's); "
+                     f"{material}_openpbr writes the sheen as OpenPBR's fuzz (Zeltner et al.'s LTC sheen)")
     lines = ['<?xml version="1.0"?>', '<materialx version="1.39" colorspace="lin_rec709">']
     lines += [f"  <!-- {escape(line).replace('--', '- -')} -->" for line in tm.stated(header, notes, deviation)]
     lines += _shader("gltf_pbr", f"SR_{material}", material, values)
     lines += _shader("open_pbr_surface", f"SR_{material}_openpbr", f"{material}_openpbr",
-                     {OPENPBR_NAMES[k]: v for k, v in values.items()})
+                     _openpbr(values))
     lines.append("</materialx>")
     return "\n".join(lines) + "\n", written, notes, deviation

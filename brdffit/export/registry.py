@@ -53,7 +53,8 @@ TARGETS = {t.name: t for t in (
     Target("mitsuba", "a Mitsuba 3 <bsdf version=\"3.0.0\"> document", "mitsuba",
            renders=("lambert", "principled", "ggx(fresnel=conductor, bounded=true)")),
     Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", "pbrt", refines=True, renders=("pbrt",)),
-    Target("gltf", "a glTF 2.0 .gltf file: the material (with KHR_materials_ior, _specular, _clearcoat) on a sphere",
+    Target("gltf", "a glTF 2.0 .gltf file: the material (with KHR_materials_ior, _specular, _sheen, _clearcoat) on a "
+                   "sphere",
            "gltf", family="gltf", renders=("gltf",)),
     Target("blender", "a Python script that builds the material (Principled BSDF, GGX) with bpy, Blender 4.2+",
            "blender", family="blender", renders=("blender",)),
