@@ -93,7 +93,7 @@ def _leaves(model: tm.Model, notes: list) -> list[_Leaf]:
     channels = model.channels
     leaves, schlick = [], []
     rho = None
-    for term in tm.terms(model, EXPORTABLE):
+    for term in tm.terms(model, EXPORTABLE, "Mitsuba 3"):
         if term.diffuse:
             rho = term.params["rho_d"] if rho is None else rho + term.params["rho_d"]
             continue

@@ -54,7 +54,7 @@ class _Part:
 def _candidates(model, notes: list) -> list[tuple[list[_Part], list]]:
     """The mixes that could stand for ``model``, each with its own notes (``notes`` gets the shared ones)."""
     rho, conductors = None, []
-    for term in tm.terms(model, EXPORTABLE):
+    for term in tm.terms(model, EXPORTABLE, "pbrt-v4"):
         if term.diffuse:
             rho = term.params["rho_d"] if rho is None else rho + term.params["rho_d"]
             continue

@@ -64,12 +64,13 @@ class Term:
         return float(self.params[self.lobe.roughness_name])
 
 
-def terms(model: Model, exportable: str) -> list[Term]:
+def terms(model: Model, exportable: str, target: str) -> list[Term]:
     """The model's lobes as `Term`s.
 
     Arguments:
         model: the source model.
         exportable: the sentence naming what the target takes, for the error message.
+        target: the renderer's name, for the error message.
 
     Returns:
         One `Term` per lobe, in the model's order.
@@ -81,9 +82,9 @@ def terms(model: Model, exportable: str) -> list[Term]:
     for j, lobe in enumerate(model.lobes):
         if lobe.name != "lambert" and (lobe.name not in MICROFACET_LOBES or lobe.anisotropic
                                        or lobe.distribution not in RENDERED_DISTRIBUTIONS):
-            raise ExportError(f"lobe {lobe.token()!r} of model {model.spec!r} has no equivalent in Mitsuba 3 or "
-                              f"pbrt-v4; exportable: {exportable}; or export with fit=True (--fit), which fits "
-                              "the renderer's own model to it (docs/export.md)")
+            raise ExportError(f"lobe {lobe.token()!r} of model {model.spec!r} has no equivalent in {target}; "
+                              f"exportable: {exportable}; or export with fit=True (--fit), which fits the "
+                              "renderer's own model to it (docs/export.md)")
         local = model.layout.local_params(model.params, j)
         out.append(Term(lobe, {k: np.asarray(v, dtype=float) for k, v in local.items()}))
     return out
