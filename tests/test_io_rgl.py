@@ -120,6 +120,24 @@ def test_parser_reads_every_type_rank_and_offset(tmp_path):
     assert int(read["scalar_u64"]) == 2 ** 40 + 7 and not read["f64"].flags.writeable
 
 
+@pytest.mark.parametrize("shape, message", [
+    ((0,) * 40, "rank 40, more than the 32 dimensions"),
+    ((0, 2 ** 64 - 1), "an extent of 18,446,744,073,709,551,615, more than an array's axis can hold"),
+])
+def test_an_empty_field_of_damaged_rank_or_extent_is_a_format_error(tmp_path, shape, message):
+    """A zero extent leaves no data to lie outside the file: a rank or an extent beyond what an array can have is
+    refused by the reader, naming the file and field, rather than by NumPy's reshape."""
+    name = b"table"
+    header = rgl.MAGIC + struct.pack("<BB", *rgl.VERSION) + struct.pack("<I", 1)
+    header += struct.pack("<H", len(name)) + name + struct.pack("<HBQ", len(shape), 10, 0)
+    header += struct.pack(f"<{len(shape)}Q", *shape)
+    path = tmp_path / "damaged.bsdf"
+    path.write_bytes(header)
+    with pytest.raises(FormatError, match=message) as err:
+        rgl.read_tensor_file(path)
+    assert str(path) in str(err.value) and "field 'table'" in str(err.value)
+
+
 def test_read_rgl_gives_the_fields_as_float64(synthetic):
     path, fields = synthetic
     table = read_rgl(path)

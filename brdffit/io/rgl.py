@@ -85,6 +85,12 @@ __all__ = ["RglTable", "read_rgl", "read_tensor_file", "looks_like_rgl", "direct
 MAGIC = b"tensor_file\0"
 VERSION = (1, 0)
 HEADER_BYTES = len(MAGIC) + 2 + 4  # magic, version (2 x uint8), field count (uint32)
+# The most dimensions a field may declare: NumPy 1's limit on an array's dimensions (NumPy 2 allows 64), far beyond
+# the RGL-EPFL files' (their RGB table has 5). A damaged rank, or extent, beside a zero extent would otherwise pass
+# the size check (no data) and fail in reshape with NumPy's own message.
+MAX_RANK = 32
+# The largest extent of an axis (NumPy's intp); a damaged uint64 extent beside a zero one passes the size check too.
+_MAX_EXTENT = np.iinfo(np.intp).max
 # Type codes of the container and their NumPy types (little endian).
 DTYPES = {1: "u1", 2: "i1", 3: "<u2", 4: "<i2", 5: "<u4", 6: "<i4", 7: "<u8", 8: "<i8", 9: "<f2", 10: "<f4",
           11: "<f8"}
@@ -159,7 +165,13 @@ def read_tensor_file(path) -> dict[str, np.ndarray]:
             raise FormatError(path, f"the name of field {index + 1} of {count} is not UTF-8: {raw_name!r}") from None
         where = f"field {name!r}"
         rank, code, offset = cursor.take("<HBQ", f"the rank, type and offset of {where}")
+        if rank > MAX_RANK:
+            raise FormatError(path, f"{where}: rank {rank}, more than the {MAX_RANK} dimensions brdffit reads (the "
+                                    "RGL-EPFL fields have at most 5): damaged")
         shape = cursor.take(f"<{rank}Q", f"the shape of {where}")
+        if any(extent > _MAX_EXTENT for extent in shape):
+            raise FormatError(path, f"{where}: an extent of {max(shape):,}, more than an array's axis can hold "
+                                    f"({_MAX_EXTENT:,}): damaged")
         if code not in DTYPES:
             raise FormatError(path, f"{where}: unknown type code {code} (a tensor_file has codes 1-11: u8, i8, "
                                     "u16, i16, u32, i32, u64, i64, f16, f32, f64)")
