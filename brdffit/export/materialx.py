@@ -1,5 +1,5 @@
-"""MaterialX 1.39: a fitted model as a MaterialX document with two materials, the glTF material and its OpenPBR
-Surface counterpart.
+"""MaterialX 1.39: a fitted model as a MaterialX document with three materials, the glTF material and its OpenPBR
+Surface and Autodesk Standard Surface counterparts.
 
 What is written (MaterialX 1.39's standard data libraries, ``libraries/bxdf``):
 
@@ -20,6 +20,14 @@ What is written (MaterialX 1.39's standard data libraries, ``libraries/bxdf``):
   the OpenPBR specification gives for its metallic-roughness subset. OpenPBR layers the specular over the diffuse
   by the layer's directional albedo and evaluates an F82-tinted conductor, where glTF mixes per direction by
   Schlick's Fresnel term, so this one is an approximation, stated as such;
+- ``<standard_surface>`` (``ND_standard_surface_surfaceshader``) in ``<surfacematerial name=NAME_standard>``, with
+  the values that MaterialX's own translation graph ``ND_standard_surface_to_gltf_pbr``
+  (``libraries/bxdf/translation/standard_surface_to_gltf_pbr.mtlx``) carries back to the glTF values: ``base`` 1,
+  ``base_color``, ``metalness``, ``specular``, ``specular_color``, ``specular_roughness``, ``specular_IOR``,
+  ``coat`` with ``coat_color`` white and ``coat_roughness``, ``sheen`` = max(sheen_color), ``sheen_color`` =
+  sheen_color/max(sheen_color) and ``sheen_roughness`` = sheen_roughness² (the graph takes its square root).
+  Standard Surface layers its lobes by albedo, as OpenPBR does, and its sheen is its own: an approximation,
+  stated as such;
 - comments: the source, the version, the approximations and the measured deviation of the glTF material.
 
 The written glTF material is brdffit's ``gltf`` model, so its deviation is measured exactly as for the glTF export
@@ -36,14 +44,20 @@ from xml.sax.saxutils import escape, quoteattr
 from . import gltf
 from . import terms as tm
 
-__all__ = ["write", "OPENPBR_NAMES", "EXPORTABLE"]
+__all__ = ["write", "OPENPBR_NAMES", "STANDARD_SURFACE_NAMES", "EXPORTABLE"]
 
 EXPORTABLE = gltf.EXPORTABLE
 # The gltf model's parameters -> OpenPBR Surface's inputs (its metallic-roughness subset).
 OPENPBR_NAMES = {"base_color": "base_color", "metallic": "base_metalness", "roughness": "specular_roughness",
                  "ior": "specular_ior", "specular": "specular_weight", "specular_color": "specular_color",
                  "clearcoat": "coat_weight", "clearcoat_roughness": "coat_roughness"}
-# The sheen's parameters, written to OpenPBR's fuzz by `_openpbr` (a split, not a renaming).
+# The gltf model's parameters -> Standard Surface's inputs: the inverse of MaterialX's translation graph
+# ND_standard_surface_to_gltf_pbr, where it renames (the sheen is split and squared by `_standard_surface`).
+STANDARD_SURFACE_NAMES = {"base_color": "base_color", "metallic": "metalness", "roughness": "specular_roughness",
+                          "ior": "specular_IOR", "specular": "specular", "specular_color": "specular_color",
+                          "clearcoat": "coat", "clearcoat_roughness": "coat_roughness"}
+# The sheen's parameters, written to OpenPBR's fuzz by `_openpbr` and Standard Surface's sheen by
+# `_standard_surface` (a split, not a renaming).
 _SHEEN = ("sheen_color", "sheen_roughness")
 
 
@@ -51,10 +65,28 @@ def _openpbr(values: dict) -> dict:
     """OpenPBR Surface's inputs for the glTF values: renamed by `OPENPBR_NAMES`; a sheen as fuzz (weight the
     sheen colour's largest channel, colour the sheen colour divided by it, roughness the sheen's)."""
     inputs = {OPENPBR_NAMES[k]: v for k, v in values.items() if k not in _SHEEN}
-    strength = max(values["sheen_color"])
+    strength, colour = _split_sheen(values)
     if strength > 0:
-        inputs.update(fuzz_weight=strength, fuzz_color=[c / strength for c in values["sheen_color"]],
-                      fuzz_roughness=values["sheen_roughness"])
+        inputs.update(fuzz_weight=strength, fuzz_color=colour, fuzz_roughness=values["sheen_roughness"])
+    return inputs
+
+
+def _split_sheen(values: dict) -> tuple:
+    """The sheen colour as (weight, colour): its largest channel and the colour divided by it ((0, None) for no
+    sheen), the split MaterialX's translation graphs make."""
+    strength = max(values["sheen_color"])
+    return (strength, [c / strength for c in values["sheen_color"]]) if strength > 0 else (0.0, None)
+
+
+def _standard_surface(values: dict) -> dict:
+    """Standard Surface's inputs for the glTF values: the ones MaterialX's ND_standard_surface_to_gltf_pbr
+    translates back to them (module doc)."""
+    inputs = {"base": 1.0}
+    inputs.update({STANDARD_SURFACE_NAMES[k]: v for k, v in values.items() if k not in _SHEEN})
+    inputs["coat_color"] = [1.0, 1.0, 1.0]  # white: the graph's clearcoat is then the coat weight itself
+    strength, colour = _split_sheen(values)
+    if strength > 0:
+        inputs.update(sheen=strength, sheen_color=colour, sheen_roughness=values["sheen_roughness"] ** 2)
     return inputs
 
 
@@ -85,12 +117,14 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
 
     Arguments:
         model: a model that is brdffit's ``gltf`` lobe alone (1 or 3 channels).
-        name: the glTF material's name (made a valid MaterialX name); the OpenPBR one is ``NAME_openpbr``.
+        name: the glTF material's name (made a valid MaterialX name); the OpenPBR one is ``NAME_openpbr``, the
+            Standard Surface one ``NAME_standard``.
         header: comment lines (source, version, fit).
         source: the model the deviation is measured against (the original under the fit option).
 
     Returns:
-        (text, a function (wi, wo) -> f_r of the glTF material written, notes (the OpenPBR approximation),
+        (text, a function (wi, wo) -> f_r of the glTF material written, notes (the OpenPBR and Standard Surface
+        approximations),
         `Deviation` of the glTF material from the source).
 
     Raises:
@@ -101,7 +135,10 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     notes = [f"{material}_openpbr (open_pbr_surface) takes the glTF values under OpenPBR's names; OpenPBR layers the "
              "specular over the diffuse by albedo and tints its conductor by F82, where glTF mixes by Schlick's "
              "Fresnel per direction: its deviation is not measured (the deviation below is the glTF material's, "
-             f"{material})"]
+             f"{material})",
+             f"{material}_standard (standard_surface) takes the values that MaterialX's translation graph "
+             "standard_surface_to_gltf_pbr carries back to the glTF ones; Standard Surface layers its lobes by "
+             "albedo and has its own sheen: its deviation is not measured"]
     if max(values["sheen_color"]) > 0:
         notes.append(f"{material} (gltf_pbr): MaterialX's sheen_bsdf (conty_kulla) takes the Charlie distribution "
                      "with Neubelt and Pettineo's visibility 1/(4 (n.l + n.v - n.l n.v)) instead of the Charlie "
@@ -113,5 +150,7 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     lines += _shader("gltf_pbr", f"SR_{material}", material, values)
     lines += _shader("open_pbr_surface", f"SR_{material}_openpbr", f"{material}_openpbr",
                      _openpbr(values))
+    lines += _shader("standard_surface", f"SR_{material}_standard", f"{material}_standard",
+                     _standard_surface(values))
     lines.append("</materialx>")
     return "\n".join(lines) + "\n", written, notes, deviation

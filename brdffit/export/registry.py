@@ -58,8 +58,8 @@ TARGETS = {t.name: t for t in (
            "gltf", family="gltf", renders=("gltf",)),
     Target("blender", "a Python script that builds the material (Principled BSDF, GGX) with bpy, Blender 4.2+",
            "blender", family="blender", renders=("blender",)),
-    Target("materialx", "a MaterialX 1.39 document: the glTF material (gltf_pbr) and its OpenPBR Surface counterpart",
-           "materialx", family="gltf", renders=("gltf",)),
+    Target("materialx", "a MaterialX 1.39 document: the glTF material (gltf_pbr) and its OpenPBR Surface and "
+           "Standard Surface counterparts", "materialx", family="gltf", renders=("gltf",)),
 )}
 EXPORT_FORMATS = tuple(TARGETS)
 # The targets a fit can be made for (`brdffit fit --for`): those with models declared exact and in range.
