@@ -149,18 +149,15 @@ class NoiseModel:
             lines.append(f"stderr Laplace, one noise variance per channel: the {loss} loss's weighting matches this "
                          "noise (sandwich in stderr_robust)")
             return lines
-        if self.covariance == "noise-model":
-            implied = (f"the {loss} loss weights the residuals for {self.loss_model} noise "
-                       f"({NOISE_FORMULAS[self.loss_model]})" if self.loss_model
-                       else f"the {loss} loss implies none of these")
-            lines.append(f"stderr noise-model: {implied}, so each residual is weighted by the variance its channel's "
-                         "noise gives it (Laplace in stderr_laplace, sandwich in stderr_robust)"
-                         + _advice(self.name, loss))
-            return lines
         implied = (f"the {loss} loss weights the residuals for {self.loss_model} noise "
                    f"({NOISE_FORMULAS[self.loss_model]})" if self.loss_model
                    else f"the robust rewrite of the {loss} loss implies none of these" if LOSS_NOISE.get(loss)
                    else f"the {loss} loss implies none of these")
+        if self.covariance == "noise-model":
+            lines.append(f"stderr noise-model: {implied}, so each residual is weighted by the variance its channel's "
+                         "noise gives it (Laplace in stderr_laplace, sandwich in stderr_robust)"
+                         + _advice(self.name, loss))
+            return lines
         if self.name == "sigma":
             implied = f"the stated σ are off by a factor {np.max(self.scale['sigma']):.3g}"
         lines.append(f"stderr sandwich (White 1980, HC1): {implied}, so the Laplace in stderr_laplace is not "
@@ -249,16 +246,15 @@ def compare(sums, loss: str, robust=None, *, n_total: int, chi2=None, log_sigma=
         parts["cosine"] = (row("weighted_d2"), -row("log_weight"))
     compared = float(np.sum(n))
     factor = n_total / compared if compared > 0 else 1.0
-    loglik, scale, per_channel = {}, {}, {}
+    scale, per_channel = {}, {}
     for name, (rss, log_g_half) in parts.items():
         ll, s = _loglik(n, rss, log_g_half)
-        per_channel[name] = ll * factor
-        loglik[name], scale[name] = float(np.sum(ll)) * factor, [float(x) for x in s]
+        per_channel[name], scale[name] = ll * factor, [float(x) for x in s]
     if loss == "sigma" and chi2 is not None and log_sigma is not None:
         counts = sums[1]
         ll, s = _loglik(counts, np.asarray(chi2, float), np.asarray(log_sigma, float))
-        per_channel["sigma"] = ll * n_total / max(float(np.sum(counts)), 1.0)
-        loglik["sigma"], scale["sigma"] = float(np.sum(per_channel["sigma"])), [float(x) for x in s]
+        per_channel["sigma"], scale["sigma"] = ll * n_total / max(float(np.sum(counts)), 1.0), [float(x) for x in s]
+    loglik = {name: float(np.sum(ll)) for name, ll in per_channel.items()}
     # Residuals at rounding level (noise-free data): relative RMS error below 1e-9 in every channel.
     relative_rms = np.sqrt(sums[2] / np.maximum(sums[3], 1.0))
     exact = not np.any(row("d2") > 0) or bool(np.all(relative_rms < EXACT_RELATIVE_RMS))
@@ -321,4 +317,4 @@ def merge(models: list) -> NoiseModel | None:
                       loglik={k: float(sum(m.loglik[k] for m in models)) for k in common},
                       scale={k: [x for m in models for x in m.scale[k]] for k in common},
                       n=sum(m.n for m in models), compared=sum(m.compared for m in models),
-                    forms=tuple(form for m in models for form in (m.forms or (m.name,))))
+                      forms=tuple(form for m in models for form in (m.forms or (m.name,))))

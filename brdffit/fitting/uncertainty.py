@@ -33,7 +33,7 @@ import numpy as np
 from .normal_equations import NOISE_FORMS, NormalEquations, _expand, accumulate, chunks
 from .problem import FitData, Problem
 
-__all__ = ["normal_equations_at", "covariances", "Uncertainty"]
+__all__ = ["normal_equations_at", "covariances", "pseudo_inverse", "Uncertainty"]
 
 
 def normal_equations_at(problem: Problem, params: dict, data: FitData, width: int = 1) -> NormalEquations:
@@ -81,13 +81,15 @@ class Uncertainty:
             self.stderr = self.stderr_robust = np.zeros(0)
             self.variance, self.undetermined = float("nan"), np.zeros(0, bool)
             return
-        self.covariance, self.sandwich, self.variance, self.undetermined = covariances(
-            normal.jtj, normal.meat, cost, loss, n_valid)
+        inv, self.undetermined = pseudo_inverse(normal.jtj)
+        self.covariance, self.sandwich, self.variance = covariances(inv, self.undetermined, normal.meat, cost, loss,
+                                                                    n_valid)
         self.noise_model = self.covariance
         if problem is not None and noise is not None and normal.noise_grams is not None and loss != "sigma" \
                 and noise.name != "exact" and channel_counts is not None:
             laplace, noise_model = _channel_covariances(problem, normal, noise, cost, n_valid,
-                                                        np.asarray(channel_counts, dtype=float), self.undetermined)
+                                                        np.asarray(channel_counts, dtype=float), inv,
+                                                        self.undetermined)
             self.covariance = laplace
             self.noise_model = laplace if noise.covariance == "laplace" else noise_model
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -107,29 +109,25 @@ class Uncertainty:
 
 
 def _channel_covariances(problem: Problem, normal: NormalEquations, noise, cost: float, n_valid: int,
-                         counts: np.ndarray, undetermined: np.ndarray):
+                         counts: np.ndarray, inv: np.ndarray, undetermined: np.ndarray):
     """The Laplace covariance with one noise variance per channel and the noise-model covariance (module doc),
     each written as s² [(JᵀJ)⁻¹ + (JᵀJ)⁻¹ D (JᵀJ)⁻¹] with s² = Σr²/dof and D = Σ_c ((v_c/v̄) G_c − J_cᵀJ_c),
     G_c the channel's Gram matrix weighted for its noise form, v_c its variance per unit weight and v̄ = Σr²/n:
     D is exactly 0 for one channel whose noise is the loss's own, so that the Laplace is then the plain one to the
     last bit.
 
+    ``inv`` is (JᵀJ)⁻¹ on its determined directions (`pseudo_inverse`).
+
     Returns:
         ``(laplace, noise_model)`` ``(P, P)``, infinite on the ``undetermined`` scalars.
     """
-    jtj = normal.jtj
-    p = jtj.shape[0]
-    dof = max(n_valid - p, 1)
+    dof = max(n_valid - normal.jtj.shape[0], 1)
     sums = np.asarray(normal.noise_grams, dtype=float)  # (F, Q + 1, Q + 1, C)
     grams, rss = sums[:, :-1, :-1], sums[:, -1, -1]  # the weighted Gram matrices; each form's Σ d²/g (F, C)
     channels = grams.shape[-1]
     forms = noise.channel_forms(channels)
     own = grams[NOISE_FORMS.index("loss")]
     with np.errstate(all="ignore"):
-        finite = np.all(np.isfinite(jtj))
-        eigval, eigvec = np.linalg.eigh(jtj if finite else np.nan_to_num(jtj, posinf=0.0, neginf=0.0, nan=0.0))
-        good = eigval > 1e-12 * max(eigval.max(initial=0.0), 1e-300)
-        inv = (eigvec[:, good] / eigval[good]) @ eigvec[:, good].T
         channel_cost = np.asarray(normal.channel_cost, dtype=float)
         mean = cost / max(n_valid, 1)
         laplace_ratio = (channel_cost / np.maximum(counts, 1.0)) / mean if mean > 0 else np.ones(channels)
@@ -152,32 +150,44 @@ def _channel_covariances(problem: Problem, normal: NormalEquations, noise, cost:
         return laplace, covariance(ratio, weighted)
 
 
-def covariances(jtj, meat, rss: float, loss: str, n_valid: int):
-    """The Laplace and sandwich covariances (see the module doc).
+def pseudo_inverse(jtj):
+    """(JᵀJ)⁻¹ on the directions the data determine, and the scalars along the others (module doc).
 
     Arguments:
-        jtj: JᵀJ ``(P, P)``; meat: Jᵀ diag(r²) J.
-        rss: Σr² at the optimum.
-        loss: the fit's loss name.
-        n_valid: number of valid residuals.
+        jtj: JᵀJ ``(P, P)``.
 
     Returns:
-        ``(laplace, sandwich, variance, undetermined)``.
+        ``(inverse (P, P), undetermined (P,))``; every scalar is undetermined where JᵀJ is not finite.
     """
     p = jtj.shape[0]
-    dof = max(n_valid - p, 1)
-    variance = 1.0 if loss == "sigma" else rss / dof
     with np.errstate(over="ignore", invalid="ignore"):
         finite = np.all(np.isfinite(jtj))
         eigval, eigvec = np.linalg.eigh(jtj if finite else np.nan_to_num(jtj, posinf=0.0, neginf=0.0, nan=0.0))
     good = eigval > 1e-12 * max(eigval.max(initial=0.0), 1e-300)
     inv = (eigvec[:, good] / eigval[good]) @ eigvec[:, good].T
+    undetermined = np.any(np.abs(eigvec[:, ~good]) > 1e-6, axis=1) if (~good).any() else np.zeros(p, bool)
+    return inv, (undetermined if finite else np.ones(p, bool))
+
+
+def covariances(inv, undetermined, meat, rss: float, loss: str, n_valid: int):
+    """The Laplace and sandwich covariances (see the module doc).
+
+    Arguments:
+        inv, undetermined: (JᵀJ)⁻¹ on its determined directions and the scalars along the others
+            (`pseudo_inverse`).
+        meat: Jᵀ diag(r²) J.
+        rss: Σr² at the optimum.
+        loss: the fit's loss name.
+        n_valid: number of valid residuals.
+
+    Returns:
+        ``(laplace, sandwich, variance)``: the covariances, infinite on the undetermined scalars, and s².
+    """
+    dof = max(n_valid - inv.shape[0], 1)
+    variance = 1.0 if loss == "sigma" else rss / dof
     cov = variance * inv
     sandwich = (max(n_valid, 1) / dof) * (inv @ np.nan_to_num(meat) @ inv)
-    undetermined = np.any(np.abs(eigvec[:, ~good]) > 1e-6, axis=1) if (~good).any() else np.zeros(p, bool)
-    if not finite:
-        undetermined = np.ones(p, bool)
     for matrix in (cov, sandwich):
         matrix[undetermined, :] = np.inf
         matrix[:, undetermined] = np.inf
-    return cov, sandwich, variance, undetermined
+    return cov, sandwich, variance
