@@ -71,7 +71,10 @@ def tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
     with resources.files("brdffit").joinpath(TABLE_FILE).open("r", encoding="utf-8") as handle:
         table = np.loadtxt(handle, delimiter=",", comments="#")
-    return table[:, 0].copy(), table[:, 1:4].copy(), table[:, 4].copy()
+    columns = table[:, 0].copy(), table[:, 1:4].copy(), table[:, 4].copy()
+    for column in columns:  # cached and shared by every conversion: read-only
+        column.flags.writeable = False
+    return columns
 
 
 @functools.lru_cache(maxsize=1)
@@ -79,8 +82,9 @@ def _object_weights() -> np.ndarray:
     """k S(λ) x̄(λ) Δλ, ... at the table's 1 nm grid, ``(471, 3)``, with k making Σ of the ȳ column 1."""
     _, cmfs, d65 = tables()
     weights = d65[:, None] * cmfs  # Δλ = 1 nm cancels in k
-    weights.flags.writeable = False
-    return weights / weights[:, 1].sum()
+    weights /= weights[:, 1].sum()
+    weights.flags.writeable = False  # cached and shared by every conversion
+    return weights
 
 
 def white_xyz() -> np.ndarray:

@@ -58,3 +58,14 @@ def test_report_spheres_and_renderer_exports_show_the_spectral_fit_in_srgb(spect
     _, rows = _renderer_table(result, [], list(m.meta["wavelengths_nm"]))
     mitsuba = next(row for row in rows if row[0] == "mitsuba")
     assert mitsuba[2] in ("exact", "approximate"), mitsuba
+
+
+def test_a_spectral_fit_with_every_amplitude_fixed_has_no_spectra_figure_and_its_report_is_written(spectral, tmp_path):
+    """Nothing to plot against wavelength: the report leaves the figure out (plotting no panel raised)."""
+    import dataclasses
+
+    _, m, result = spectral
+    colours = [n for n in result.params if result.models[0].param_specs[n].colour]
+    fixed = dataclasses.replace(result, fixed=sorted(set(result.fixed) | set(colours)))
+    written = write_report(tmp_path / "fixed", m, fixed)
+    assert not any(str(p).endswith("spectra.png") for p in written["figures"])

@@ -446,7 +446,7 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
              ("spheres", lambda p: F.plot_spheres(p, measurements, fit_result))]
     wavelengths = F.spectral_axis(measurements, fit_result.models[0].channels) \
         if fit_result.channel_mode != "independent" else None
-    if wavelengths is not None:
+    if wavelengths is not None and F.spectral_parameters(fit_result):  # with every amplitude fixed, no panel
         jobs.append(("spectra", lambda p: F.plot_spectra(p, fit_result, wavelengths)))
     if selection is not None and selection.target and selection.chosen_by_criterion != selection.chosen:
         rows = {row["spec"]: row for row in selection.table}

@@ -517,6 +517,12 @@ def spectral_axis(measurements, channels: int):
     return np.asarray(wavelengths, dtype=float)
 
 
+def spectral_parameters(fit_result) -> list:
+    """The names of a fit's free colour parameters: the panels of `plot_spectra` (none: no figure to draw)."""
+    specs = fit_result.models[0].param_specs
+    return [n for n in fit_result.params if specs[n].colour and n not in fit_result.fixed]
+
+
 def plot_spectra(path, fit_result, wavelengths) -> str:
     """The colour parameters of a spectral fit against wavelength, each with its ±1 and ±2 standard-error bands
     (the stderr the summary states).
@@ -530,9 +536,9 @@ def plot_spectra(path, fit_result, wavelengths) -> str:
         ``path`` as a string.
     """
     specs = fit_result.models[0].param_specs
-    names = [n for n in fit_result.params if specs[n].colour and n not in fit_result.fixed]
+    names = spectral_parameters(fit_result)
     fig = _new_figure("spectra")
-    axes = np.atleast_1d(fig.subplots(1, len(names), squeeze=False)[0])
+    axes = fig.subplots(1, len(names), squeeze=False)[0]
     for ax, name in zip(axes, names):
         value = np.asarray(fit_result.params[name], dtype=float)
         err = np.broadcast_to(np.asarray(fit_result.stderr.get(name, np.nan), dtype=float), value.shape)
