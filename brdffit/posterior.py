@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaln
 
+from .blas_threads import one_blas_thread
 from .defaults import POSTERIOR
 from .fitting.result import FitResult
 from .fitting.losses import loss_epsilon, residual_scale
@@ -622,6 +623,7 @@ def _quantiles(x: np.ndarray) -> dict:
             "q2.5": float(q[0]), "q16": float(q[1]), "q84": float(q[3]), "q97.5": float(q[4])}
 
 
+@one_blas_thread()
 def posterior(fit_result: FitResult, measurements, *, nwalkers: int = POSTERIOR.walkers, nsteps: int = POSTERIOR.steps, burn="auto",
               thin="auto", likelihood: str = "gaussian", noise="estimate", prior="bounds", nu: float = 4.0,
               max_samples: int | None = None, store=None, name: str | None = None, resume: bool = True,

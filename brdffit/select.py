@@ -19,6 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 import jax
 import numpy as np
 
+from .blas_threads import one_blas_thread
 from .defaults import FIT
 from .criteria import CRITERIA, DEFAULT_MARGIN, HELDOUT_MARGIN, resolve_criterion
 from .fitting.api import COARSE_ATOL, COARSE_RTOL, fit
@@ -362,6 +363,7 @@ def _simplest(rows: list[dict], eligible) -> dict:
     return min((r for r in rows if eligible(r)), key=_simplicity)
 
 
+@one_blas_thread()
 def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto", *, loss: str = FIT.loss,
            margin: float | None = None, folds: int = 5, holdout: float = 0.2, scene=None,
            tolerance: float | None = None, scene_metric: str = "relative", reference: str = "data", seed: int = 0,

@@ -29,6 +29,7 @@ import jax
 import numpy as np
 
 from ..arrays import host_arrays, on_device, to_device
+from ..blas_threads import one_blas_thread
 from ..defaults import FIT
 from ..metrics import fit_sums, metrics_from_sums
 from ..models.model import Model
@@ -744,6 +745,7 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
 
 
 # ---------------------------------------------------------------------------------------------------- public API
+@one_blas_thread()
 def fit(measurements, model=None, *, loss: str = FIT.loss, solver=FIT.solver, init="auto", fixed=None, free=None,
         multistart: int = 0, channel_mode: str = "shared-shape", robust=None, max_steps: int = FIT.max_steps,
         rtol: float = FIT.rtol, atol: float = FIT.atol, seed: int = FIT.seed, coarse="auto",
@@ -875,6 +877,7 @@ def _fit_independent(measurements, model, options: dict, bar: Progress) -> FitRe
     )
 
 
+@one_blas_thread()
 def fit_many(measurements_list, model, *, loss: str = FIT.loss, solver=FIT.solver, init="auto", fixed=None,
              free=None, robust=None, max_steps: int = FIT.max_steps, rtol: float = FIT.rtol, atol: float = FIT.atol,
              seed: int = FIT.seed) -> list[FitResult]:
