@@ -19,20 +19,18 @@ from ..models import Model
 __all__ = ["fit_exportable", "exportable_spec", "exportable_specs", "fit_data", "FIT_SAMPLES"]
 
 FIT_SAMPLES = 2000
-_DIFFUSE_LOBES = ("lambert", "oren-nayar", "toon-diffuse")
-# Lobes that hold a diffuse part beside a conductor (pbrt-v4's mix, `brdffit.models.pbrt`): a lambert and this lobe.
-_DIFFUSE_AND = {"pbrt": "ggx(fresnel=conductor)"}
 
 
 def exportable_spec(model: Model) -> str:
-    """The spec of the exportable family fitted in place of ``model``: one lambert for the diffuse lobes, one
-    GGX lobe per other lobe (conductor Fresnel for a conductor lobe, dielectric otherwise); pbrt-v4's mix of a
-    diffuse and a conductor gives a lambert and a conductor GGX lobe."""
-    diffuse = any(lobe.name in _DIFFUSE_LOBES or lobe.name in _DIFFUSE_AND for lobe in model.lobes)
-    specular = [_DIFFUSE_AND.get(lobe.name)
-                or f"ggx(fresnel={'conductor' if getattr(lobe, 'fresnel', None) == 'conductor' else 'dielectric'})"
-                for lobe in model.lobes if lobe.name not in _DIFFUSE_LOBES]
-    return "+".join((["lambert"] if diffuse else []) + specular)
+    """The spec of the exportable family fitted in place of ``model``: each lobe's `brdffit.models.lobe.Lobe`
+    ``stand_in`` (a lambert for a diffuse lobe, a lambert and a GGX lobe for a renderer's material with a diffuse
+    base) or else one GGX lobe with the lobe's Fresnel term (conductor for a conductor lobe, dielectric otherwise);
+    the lamberts merged into one, first."""
+    parts = []
+    for lobe in model.lobes:
+        fresnel = "conductor" if getattr(lobe, "fresnel", None) == "conductor" else "dielectric"
+        parts += (lobe.stand_in or f"ggx(fresnel={fresnel})").split("+")
+    return "+".join((["lambert"] if "lambert" in parts else []) + [part for part in parts if part != "lambert"])
 
 
 # (spec, channels, parameter values, seed) -> (fitted model, comment): exporting one model to both renderers

@@ -130,6 +130,7 @@ class BlenderPrincipled(Lobe):
     white, no subsurface, sheen, coat, transmission or emission)."""
 
     name = "blender"
+    stand_in = "lambert+ggx(fresnel=dielectric)"
     reference = ("Blender 4.2+ Principled BSDF as Cycles evaluates it: intern/cycles/kernel/svm/closure.h, "
                  "kernel/closure/bsdf_microfacet.h, app/cycles_precompute.cpp")
     reciprocal = False

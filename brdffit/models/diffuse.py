@@ -22,6 +22,7 @@ class Lambert(Lobe):
     """Lambertian diffuse reflection: f = ρd/π."""
 
     name = "lambert"
+    stand_in = "lambert"
     reference = "Lambert, Photometria (1760)"
 
     def param_specs(self):
@@ -42,6 +43,7 @@ class OrenNayar(Lobe):
     """
 
     name = "oren-nayar"
+    stand_in = "lambert"
     reference = "Oren & Nayar, Generalization of Lambert's reflectance model, SIGGRAPH 1994, Eq. 30"
 
     def param_specs(self):

@@ -191,6 +191,7 @@ class GltfMaterial(Lobe):
     ``ior`` and ``specular``), the sheen and the clearcoat at 0."""
 
     name = "gltf"
+    stand_in = "lambert+ggx(fresnel=dielectric)"
     reference = ("The Khronos Group, glTF 2.0 Specification, Appendix B (BRDF Implementation); KHR_materials_ior; "
                  "KHR_materials_specular; KHR_materials_sheen; KHR_materials_clearcoat")
     reciprocal = False  # the clearcoat's Fresnel weight takes the viewing direction

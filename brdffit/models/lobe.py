@@ -33,6 +33,11 @@ class Lobe(abc.ABC):
       them: Ashikhmin-Shirley's Fresnel term rs + (1 − rs)(1 − h·k)⁵); False for most lobes, whose value is zero
       with every amplitude at zero, so that the separable solve does not evaluate them there
       (`brdffit.fitting.separable.amplitude_basis`);
+    - ``stand_in``: the lobes of Mitsuba 3's exact family (``lambert`` and GGX lobes) that the export's fit option
+      fits in place of this lobe (`brdffit.export.refit.exportable_spec`), where one GGX lobe with the lobe's own
+      Fresnel term (None, the default) would miss a part of it: ``"lambert"`` for a diffuse lobe, a lambert beside
+      the GGX lobe for a renderer's material with a diffuse base (glTF's, Blender's, the principled BRDF, pbrt-v4's
+      mix);
     - ``param_specs()``: the parameter declarations, in order;
     - ``__call__(params, pair)``: the BRDF value in 1/sr, without the cosine factor.
 
@@ -51,6 +56,7 @@ class Lobe(abc.ABC):
     reference: ClassVar[str]
     reciprocal: ClassVar[bool] = True
     offset: ClassVar[bool] = False
+    stand_in: ClassVar[str | None] = None
 
     share: str = ""
     bounded: bool = False

@@ -58,6 +58,7 @@ class PbrtMaterial(Lobe):
     ``remaproughness`` false): f = (1 − t) R/π + t F_complex D G/(4 cosθi cosθo) (module doc)."""
 
     name = "pbrt"
+    stand_in = "lambert+ggx(fresnel=conductor)"
     reference = ("pbrt-v4 (Pharr, Jakob & Humphreys, Physically Based Rendering, 4th ed., §9.2, §9.3.6, §9.4, §9.6, "
                  "§10.5): MixMaterial of DiffuseMaterial and ConductorMaterial, src/pbrt/materials.h, bxdfs.h, "
                  "util/scattering.h")

@@ -76,6 +76,7 @@ class Principled(Lobe):
     are held at 0 unless freed (a fit of an isotropic file keeps αx = αy)."""
 
     name = "principled"
+    stand_in = "lambert+ggx(fresnel=dielectric)"
     reference = ("Burley, Physically-based shading at Disney, SIGGRAPH 2012 course notes; Burley, Extending the "
                  "Disney BRDF to a BSDF with integrated subsurface scattering, SIGGRAPH 2015; Mitsuba 3's principled "
                  "plugin")

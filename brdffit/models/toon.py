@@ -32,6 +32,7 @@ class ToonDiffuse(Lobe):
     """(rho_shade + (rho_d − rho_shade) S((cosθi − threshold)/width))/π: lit above the threshold, shaded below."""
 
     name = "toon-diffuse"
+    stand_in = "lambert"
     reference = _REFERENCE
     reciprocal = False
 
