@@ -35,7 +35,8 @@ from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
 from .lobe import Lobe
-from .microfacet import DISTRIBUTIONS, smith_correlated
+from .lookup import multilinear
+from .microfacet import ggx_correlated
 from .specs import base_color, metallic, perceptual_roughness
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
@@ -102,27 +103,6 @@ def layering_table() -> np.ndarray:
     return table
 
 
-def _trilinear(table, x, y, z):
-    """Cycles' ``lookup_table_read_3D``: linear in each of x (fastest), y, z over nodes at i/(n − 1), clamped."""
-    n = table.shape[0]
-
-    def split(c):
-        c = jnp.clip(c, 0.0, 1.0) * (n - 1)
-        i = jnp.minimum(jnp.floor(c), n - 2).astype(jnp.int32)
-        return i, c - i
-
-    (i, tx), (j, ty), (k, tz) = split(x), split(y), split(z)
-
-    def at(dk, dj, di):
-        return table[k + dk, j + dj, i + di]
-
-    def lerp(a, b, t):
-        return a + (b - a) * t
-
-    return lerp(lerp(lerp(at(0, 0, 0), at(0, 0, 1), tx), lerp(at(0, 1, 0), at(0, 1, 1), tx), ty),
-                lerp(lerp(at(1, 0, 0), at(1, 0, 1), tx), lerp(at(1, 1, 0), at(1, 1, 1), tx), ty), tz)
-
-
 @dataclasses.dataclass(frozen=True)
 class BlenderPrincipled(Lobe):
     """Blender's Principled BSDF with the GGX distribution as Cycles evaluates it (module doc): Base Color,
@@ -151,13 +131,12 @@ class BlenderPrincipled(Lobe):
         base = params["base_color"]
         metallic, roughness, eta = params["metallic"], params["roughness"], params["ior"]
         alpha = roughness * roughness
-        ggx = DISTRIBUTIONS["ggx"]
-        lobe = (ggx.D(pair.cos_h, alpha) * smith_correlated(pair, ggx, alpha) / (4.0 * pair.cos_i * pair.cos_o))
+        lobe = ggx_correlated(pair, alpha)
         metal = fr.schlick(pair.cos_d[..., None], base) * lobe[..., None]
         specular = fr.dielectric(pair.cos_d, 1.0, eta) * lobe
         f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
         z = jnp.sqrt((eta - 1.0) / (eta + 1.0))
-        s = _trilinear(jnp.asarray(layering_table()), roughness, pair.cos_o, z)
+        s = multilinear(layering_table(), z, pair.cos_o, roughness)  # Cycles: x roughness (fastest), y μ, z
         albedo = f0 + (1.0 - f0) * s
         diffuse = jnp.clip(1.0 - albedo, 0.0, 1.0)[..., None] * base / jnp.pi
         return metallic * metal + (1.0 - metallic) * (specular[..., None] + diffuse)

@@ -62,7 +62,8 @@ from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
 from .lobe import Lobe
-from .microfacet import DISTRIBUTIONS, smith_correlated
+from .lookup import multilinear
+from .microfacet import ggx_correlated
 from .sheen import charlie_distribution, charlie_visibility
 from .specs import base_color, metallic, perceptual_roughness
 
@@ -163,20 +164,9 @@ def sheen_albedo(mu, sheen_roughness):
     Returns:
         E, the broadcast shape.
     """
-    table = jnp.asarray(sheen_albedo_table())
-    n = SHEEN_TABLE_SIZE
-
-    def split(c):
-        c = jnp.clip(c, 0.0, 1.0) * (n - 1)
-        i = jnp.minimum(jnp.floor(c), n - 2).astype(jnp.int32)
-        return i, c - i
-
     # The first μ node holds E(1e-4) and is read as μ = 0 (Cycles' tables clamp their first node the same way).
-    i, t = split(mu)
-    j, u = split((sheen_roughness - MIN_SHEEN_ROUGHNESS) / (1.0 - MIN_SHEEN_ROUGHNESS))
-    low = table[j, i] + (table[j, i + 1] - table[j, i]) * t
-    high = table[j + 1, i] + (table[j + 1, i + 1] - table[j + 1, i]) * t
-    return low + (high - low) * u
+    return multilinear(sheen_albedo_table(),
+                       (sheen_roughness - MIN_SHEEN_ROUGHNESS) / (1.0 - MIN_SHEEN_ROUGHNESS), mu)
 
 
 def ior_to_f0(ior):
@@ -227,10 +217,7 @@ class GltfMaterial(Lobe):
         base = params["base_color"]
         metallic = params["metallic"]
         alpha = params["roughness"] ** 2
-        ggx = DISTRIBUTIONS["ggx"]
-        # V D with V = G2 / (4 ci co): Appendix B's specular_brdf.
-        specular_brdf = (ggx.D(pair.cos_h, alpha) * smith_correlated(pair, ggx, alpha)
-                         / (4.0 * pair.cos_i * pair.cos_o))[..., None]
+        specular_brdf = ggx_correlated(pair, alpha)[..., None]  # V D, Appendix B's specular_brdf
         weight = fr.schlick_weight(pair.cos_d)[..., None]
         f0 = jnp.minimum(ior_to_f0(params["ior"]) * params["specular_color"], 1.0)  # (C,)
         fresnel = f0 + (1.0 - f0) * weight  # (..., C)
@@ -250,7 +237,6 @@ class GltfMaterial(Lobe):
         material = sheen_color * sheen_brdf + material * scaling
         # KHR_materials_clearcoat: mix(material, clearcoat_brdf, clearcoat Fc), Fc at the viewing direction.
         alpha_c = params["clearcoat_roughness"] ** 2
-        coat_brdf = (ggx.D(pair.cos_h, alpha_c) * smith_correlated(pair, ggx, alpha_c)
-                     / (4.0 * pair.cos_i * pair.cos_o))[..., None]
+        coat_brdf = ggx_correlated(pair, alpha_c)[..., None]
         coat = params["clearcoat"] * (0.04 + 0.96 * fr.schlick_weight(pair.cos_o))[..., None]
         return (1.0 - coat) * material + coat * coat_brdf

@@ -390,6 +390,22 @@ def smith_correlated(pair: LocalPair, distribution: Distribution, m, tail=None):
                   + distribution.lambda_of(pair.wo, pair.cos_o, m, tail))
 
 
+def ggx_correlated(pair: LocalPair, alpha):
+    """D(h) G2(ωi, ωo) / (4 cosθi cosθo) of the isotropic GGX distribution with height-correlated Smith masking
+    (Heitz 2014, Eq. 99): the specular term V·D of the glTF 2.0 specification's Appendix B, and Cycles' and
+    pbrt-v4's Trowbridge-Reitz microfacet term without its Fresnel factor.
+
+    Arguments:
+        pair: the direction pair.
+        alpha: the GGX width α (the square of an artist's perceptual roughness).
+
+    Returns:
+        The term at the pair's leading shape, in 1/sr.
+    """
+    ggx = DISTRIBUTIONS["ggx"]
+    return ggx.D(pair.cos_h, alpha) * smith_correlated(pair, ggx, alpha) / (4.0 * pair.cos_i * pair.cos_o)
+
+
 def no_shadowing(pair: LocalPair, distribution: Distribution, m, tail=None):
     """No shadowing-masking: G = 1."""
     return jnp.ones_like(pair.cos_h)
