@@ -124,9 +124,6 @@ class BlenderPrincipled(Lobe):
             ParamSpec("ior", 1.5, 1.0, _MAX_IOR, doc="IOR: the dielectric specular layer's index of refraction"),
         )
 
-    def amplitude_partners(self, amplitude):
-        return ()  # base_color is no lobe's only amplitude: the specular layers do not vanish with it
-
     def __call__(self, params, pair: LocalPair):
         base = params["base_color"]
         metallic, roughness, eta = params["metallic"], params["roughness"], params["ior"]

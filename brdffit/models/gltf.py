@@ -210,9 +210,6 @@ class GltfMaterial(Lobe):
                                 name="clearcoat_roughness", default=0.1, fixed=True),
         )
 
-    def amplitude_partners(self, amplitude):
-        return ()  # base_color is no lobe's only amplitude: the specular layers do not vanish with it
-
     def __call__(self, params, pair: LocalPair):
         base = params["base_color"]
         metallic = params["metallic"]

@@ -89,7 +89,11 @@ class Lobe(abc.ABC):
 
     def amplitude_partners(self, amplitude: str) -> tuple[str, ...]:
         """Local names of the parameters that act only through the amplitude ``amplitude`` (its sub-lobe's shape):
-        when the amplitude is 0 they are undetermined. Default: every other parameter of the lobe."""
+        when the amplitude is 0 they are undetermined. Default: every other parameter of the lobe, or none for a
+        lobe with an ``offset`` (a part that does not vanish with its amplitudes still reads them: Ashikhmin-
+        Shirley's grazing Fresnel term, the specular layers over a renderer material's base colour)."""
+        if self.offset:
+            return ()
         return tuple(spec.name for spec in self.param_specs() if spec.name != amplitude)
 
     def canonical(self, params: dict) -> dict:

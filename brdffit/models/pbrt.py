@@ -78,9 +78,6 @@ class PbrtMaterial(Lobe):
                       doc='conductor "rgb k": extinction coefficient (0: a dielectric\'s Fresnel term)'),
         )
 
-    def amplitude_partners(self, amplitude):
-        return ()  # the reflectance is no lobe's only amplitude: the conductor does not vanish with it
-
     def __call__(self, params, pair: LocalPair):
         t = params["amount"]
         conductor = _CONDUCTOR({"ks": 1.0, "m": params["roughness"], "eta": params["eta"], "k": params["k"]}, pair)
