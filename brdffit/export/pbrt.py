@@ -137,22 +137,24 @@ def _statement(name: str, kind: str, params: list, number=tm.number) -> list[str
     return lines
 
 
-def _statements(parts: list[_Part], name: str) -> list[str]:
-    """Leaves first (pbrt needs a name defined before a mix uses it), then a chain of mixes ending in ``name``."""
+def _statements(parts: list[_Part], name: str, number=tm.number) -> list[str]:
+    """Leaves first (pbrt needs a name defined before a mix uses it), then a chain of mixes ending in ``name``;
+    ``number`` writes a float (`_statement`)."""
     if len(parts) == 1:
-        return _statement(name, parts[0].kind, parts[0].params)
+        return _statement(name, parts[0].kind, parts[0].params, number)
     lines, names = [], []
     for j, part in enumerate(parts):
         names.append(f"{name}:{part.kind}-{j + 1}")
-        lines += _statement(names[-1], part.kind, part.params)
-    # mix(t, a, rest) = (1 − t) a + t rest; built from the last pair up.
-    rest, remaining = names[-1], parts[-1].weight
+        lines += _statement(names[-1], part.kind, part.params, number)
+    # mix(t, a, rest) = (1 − t) a + t rest, built from the last pair up: t is the weight of the parts after a over
+    # that of a and them (MixMaterial::ChooseMaterial picks materials[1], the rest, with probability t); for two
+    # parts of weights 1 − t and t it is t itself.
+    rest, later = names[-1], parts[-1].weight
     for j in range(len(parts) - 2, -1, -1):
-        remaining += parts[j].weight
         mix = name if j == 0 else f"{name}:mix-{j + 1}"
         lines += _statement(mix, "mix", [("string", "materials", [names[j], rest]),
-                                         ("float", "amount", 1.0 - parts[j].weight / remaining)])
-        rest = mix
+                                         ("float", "amount", later / (later + parts[j].weight))], number)
+        rest, later = mix, later + parts[j].weight
     return lines
 
 
@@ -240,11 +242,7 @@ def _own_model(model, name: str):
     parts = [_Part("diffuse", [("rgb", "reflectance", v["reflectance"])], 1.0 - t),
              _Part("conductor", [("rgb", "eta", v["eta"]), ("rgb", "k", v["k"]),
                                  ("float", "roughness", float(v["roughness"])), ("bool", "remaproughness", False)], t)]
-    names = [f"{name}:{part.kind}-{j + 1}" for j, part in enumerate(parts)]
-    lines = [line for part, leaf in zip(parts, names) for line in _statement(leaf, part.kind, part.params, _round_trip)]
-    # MixMaterial::ChooseMaterial picks materials[1], the conductor, with probability amount.
-    lines += _statement(name, "mix", [("string", "materials", names), ("float", "amount", t)], _round_trip)
-    return parts, "\n".join(lines) + "\n"
+    return parts, "\n".join(_statements(parts, name, _round_trip)) + "\n"
 
 
 def _write_own(model, name: str, header: list[str], source=None):
