@@ -77,8 +77,10 @@ def test_measurements_from_code_are_written_in_radians(tmp_path):
      r"order.astm: line 1: VARS column 1 is 'phi_i'; the standard's angle columns are theta_i, phi_i"),
     ("cell.astm", "VARS theta_i,phi_i,theta_s,phi_s,R\n0,0,0.1,3.1,abc\n",
      r"cell.astm: line 2, column 5 \('R'\): cannot read 'abc' as a number"),
+    ("grouped.astm", "VARS theta_i,phi_i,theta_s,phi_s,R\n0,0,0.1,3.1,1_000\n",  # float() would read 1000
+     r"grouped.astm: line 2, column 5 \('R'\): cannot read '1_000' as a number"),
     ("angle.astm", "VARS theta_i,phi_i,theta_s,phi_s,R\n0,,0.1,3.1,0.2\n",
-     r"angle.astm: line 2, column 2 \('phi_i'\): cannot read '' as a number"),
+     r"angle.astm: line 2, column 2 \('phi_i'\): angle phi_i is '': the angles must be numbers"),
     ("range.astm", "VARS theta_i,phi_i,theta_s,phi_s,R\n120,0,10,180,0.2\n",
      r"range.astm: the angles fit neither radians"),
 ])

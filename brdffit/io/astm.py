@@ -17,8 +17,9 @@ What we read and write::
   ``phi_i``, ``theta_s`` or ``theta_r``, ``phi_s`` or ``phi_r``; s is the scattered direction, brdffit's ωo), then
   one column per channel: a wavelength band (``400nm``, or ``400``) keeps its wavelength (``meta["wavelengths_nm"]``,
   channels named ``400nm``), ``R, G, B`` or any other name are channels of that name. Values are f_r in 1/sr.
-- **Rows.** Numbers separated by commas or whitespace, as many as ``VARS`` names; an empty cell or ``NaN`` in a
-  band column is a missing value (NaN); the angles must be numbers.
+- **Rows.** Numbers separated by commas or whitespace, as many as ``VARS`` names; an empty cell or a missing
+  marker (``NaN``, ``NA``, as the CSV reader takes them) in a band column is a missing value (NaN); the angles must
+  be numbers. Only plain ASCII numbers are numbers (`brdffit.io.table`: not ``1_000``, not other scripts' digits).
 - **Angles.** The standard's files (and Cornell's) give radians, θ in [0, π/2]; files from some instruments give
   degrees. ``degrees=None`` decides from the data: radians when every |θ| ≤ π/2 and every |φ| ≤ 2π, degrees when
   some |θ| exceeds π/2 but none 90°, and says which it assumed in ``meta["read"]["angles"]``; ``degrees=True`` or
@@ -36,6 +37,7 @@ import numpy as np
 
 from ..measurements import MeasurementError, Measurements
 from ._common import FormatError, atomic_path, decode_text, memory_guarded, read_file_bytes
+from .table import _canonical_angles, _numeric_block, _parse_float
 
 __all__ = ["read_astm", "write_astm", "looks_like_astm", "ANGLE_COLUMNS"]
 
@@ -127,8 +129,8 @@ def read_astm(path, *, degrees: bool | None = None) -> Measurements:
         if expected != len(rows):
             raise FormatError(path, f"NUM_POINTS says {expected} rows but the file has {len(rows)}"
                                     + (" (truncated?)" if len(rows) < expected else ""))
-    angles, unit = _angles(path, data[:, :4], degrees)
-    theta_i, phi_i, theta_o, phi_o = _unsigned(*angles)
+    degrees, unit = _unit(path, data[:, :4], degrees)
+    theta_i, phi_i, theta_o, phi_o = _canonical_angles(*(np.array(data[:, k]) for k in range(4)), degrees)
     channels, wavelengths = zip(*(_channel(n) for n in names[4:]))
     meta = {"source": str(path), "format": "astm", "astm": {"header": header, "vars": list(names)},
             "read": {"rows": len(rows), "angles": unit}}
@@ -152,31 +154,35 @@ def _check_vars(path, names: list[str], line: int) -> None:
 
 
 def _numbers(path, rows: list[list[str]], lines: list[int], names: list[str]) -> np.ndarray:
-    """The rows as numbers: an empty cell or NaN in a value column is missing; anything else not a number is an
-    error naming the line and column."""
-    out = np.empty((len(rows), len(names)))
-    for i, (cells, line) in enumerate(zip(rows, lines)):
+    """The rows as numbers (`brdffit.io.table`'s rules: NumPy's reader where every cell is a plain number, else
+    cell by cell): a missing cell in a value column is NaN; a row of another width, or anything else not a number,
+    is an error naming the line and column."""
+    for cells, line in zip(rows, lines):
         if len(cells) != len(names):
             raise FormatError(path, f"{len(cells)} cells where VARS names {len(names)} ({', '.join(names)})"
                                     + (" (truncated?)" if len(cells) < len(names) else ""), line=line)
-        for k, cell in enumerate(cells):
-            if cell == "" and k >= 4:
-                out[i, k] = math.nan
-                continue
-            try:
-                value = float(cell)
-            except ValueError:
-                raise FormatError(path, f"cannot read {cell[:40]!r} as a number", line=line,
-                                  column=f"{k + 1} ({names[k]!r})") from None
-            if k < 4 and not math.isfinite(value):
-                raise FormatError(path, f"angle {names[k]} is {cell!r}: the angles must be numbers", line=line,
-                                  column=f"{k + 1} ({names[k]!r})")
-            out[i, k] = value
+    block = _numeric_block([",".join(cells) for cells in rows], ",", len(names))
+    if block is not None:
+        out = block
+    else:
+        out = np.empty((len(rows), len(names)))
+        for i, (cells, line) in enumerate(zip(rows, lines)):
+            for k, cell in enumerate(cells):
+                value = _parse_float(cell)
+                if value is None:
+                    raise FormatError(path, f"cannot read {cell[:40]!r} as a number", line=line,
+                                      column=f"{k + 1} ({names[k]!r})")
+                out[i, k] = value
+    bad = ~np.isfinite(out[:, :4])
+    if bad.any():
+        i, k = np.argwhere(bad)[0]
+        raise FormatError(path, f"angle {names[k]} is {rows[i][k]!r}: the angles must be numbers", line=lines[i],
+                          column=f"{k + 1} ({names[k]!r})")
     return out
 
 
-def _angles(path, angles: np.ndarray, degrees: bool | None):
-    """The angles in radians and the unit assumed, with why (module docstring)."""
+def _unit(path, angles: np.ndarray, degrees: bool | None) -> tuple[bool, str]:
+    """Whether the angles are degrees, and the unit assumed with why (module docstring)."""
     theta, phi = np.abs(angles[:, [0, 2]]), np.abs(angles[:, [1, 3]])
     fits_radians = theta.max() <= math.pi / 2 + _ANGLE_TOLERANCE and phi.max() <= 2 * math.pi + _ANGLE_TOLERANCE
     fits_degrees = theta.max() <= 90.0 + _ANGLE_TOLERANCE and phi.max() <= 360.0 + _ANGLE_TOLERANCE
@@ -196,16 +202,7 @@ def _angles(path, angles: np.ndarray, degrees: bool | None):
                                 f"largest |θ| {theta.max():.6g}, largest |φ| {phi.max():.6g}")
     else:
         unit = f"{'degrees' if degrees else 'radians'} (as given)"
-    return (np.radians(angles) if degrees else angles).T, unit
-
-
-def _unsigned(theta_i, phi_i, theta_o, phi_o):
-    """Signed polar angles (in-plane data) as brdffit's: θ < 0 is the direction at |θ| with φ + π."""
-    def fix(theta, phi):
-        flip = theta < 0
-        return np.abs(theta), np.where(flip, phi + math.pi, phi)
-
-    return (*fix(theta_i, phi_i), *fix(theta_o, phi_o))
+    return degrees, unit
 
 
 def write_astm(measurements: Measurements, path) -> None:
