@@ -509,12 +509,19 @@ def plot_albedo(path, fit_result, channels=None, n: int = 46, albedo: np.ndarray
 
 
 def spectral_axis(measurements, channels: int):
-    """The wavelengths (nm) of a spectral fit's channels, from ``meta["wavelengths_nm"]`` (ASTM E1392 bands), or
-    None where the data do not give one per channel."""
-    wavelengths = (measurements.meta or {}).get("wavelengths_nm")
-    if wavelengths is None or len(wavelengths) != channels:
+    """The wavelengths (nm) of a spectral fit's channels, from ``meta["wavelengths_nm"]`` (ASTM E1392 bands) as
+    `brdffit.colour.wavelengths_of` reads them, or None where the data have none or name another number of
+    channels than the fit's (their bands are not the fit's channels).
+
+    Raises:
+        ColourError: one wavelength per channel, but not each a positive number once (`brdffit.colour.wavelengths_of`).
+    """
+    from ..colour import wavelengths_of
+
+    found = (measurements.meta or {}).get("wavelengths_nm")
+    if found is None or not isinstance(found, (list, tuple)) or len(found) != channels:
         return None
-    return np.asarray(wavelengths, dtype=float)
+    return np.asarray(wavelengths_of(measurements.meta, channels), dtype=float)
 
 
 def spectral_parameters(fit_result) -> list:
