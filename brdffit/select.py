@@ -64,6 +64,12 @@ SELECT_THREADS = min(4, os.cpu_count() or 1)
 # times the full-data covariance); SCREEN_SLACK times k n/n_s bounds it for misspecified ones too
 # (docs/model-selection.md, and the measurement there).
 SCREEN_SAMPLES = 4096
+# A measurement with more channels than this (a spectrum: 31 bands) is compared on this many averages of
+# contiguous channels, and only the chosen model is then fitted to every channel. With the shape shared by the
+# channels (the default channel mode), an average of channels is the same sum of lobes with those channels'
+# amplitudes averaged (within the same bounds), so every candidate's family is the same on the averages; the
+# comparison then costs what it costs on RGB data instead of growing with the bands (docs/model-selection.md).
+SCREEN_BANDS = 3
 # A fit whose directional albedo stays within 1 where the data were measured but exceeds this beyond their largest
 # θi is not chosen while another converged candidate does not (``plausible``): a diffuse lobe and a specular one,
 # uncoupled and each within 1, could reach 2 towards grazing; more is a lobe the data never constrained.
@@ -95,6 +101,11 @@ class Selection:
             of the rows held out; heldout_scale: with the cosine loss, the RMS of the data's own cosine-weighted
             values f cosθi √w on the held-out rows (a held-out error over it is the relative error in reflected
             radiance), else None; target: the renderer the choice was made for, or None.
+        compared_on: where the candidates were compared on averages of the channels (`SCREEN_BANDS`), what they
+            were ("3 averages of 10-11 of the 31 channels"); the table's errors are then those of the averages,
+            and ``results[chosen]`` is the chosen model's fit to every channel. None: compared on the channels.
+        channel_heldout: with ``compared_on``, the chosen model's held-out error over every channel (fitted to
+            the same training rows) and the radiance scale of the held-out rows (as ``heldout_scale``, or None).
         best: the candidate with the best score.
         chosen_by_criterion: the criterion's choice (equals ``chosen`` without a scene).
         chosen_by_scene: the scene's choice, or None.
@@ -117,6 +128,8 @@ class Selection:
     holdout: float = 0.2
     heldout_scale: float | None = None
     target: str | None = None
+    compared_on: str | None = None
+    channel_heldout: tuple | None = None
 
     @property
     def result(self) -> FitResult:
@@ -133,10 +146,18 @@ class Selection:
         shown = self.chosen if self.target else self.chosen_by_criterion
         error = rows[shown]["heldout_error"]
         line = f"verdict: {self.chosen}" + (f" for {self.target}" if self.target else "")
-        line += f": error on unseen directions {error:.4g}"
-        if self.heldout_scale:
-            line += f" = {error / self.heldout_scale:.1%} of the reflected radiance"
-        line += f" (loss RMS on the {self.holdout:.0%} of rows held out from its fit)"
+        if self.compared_on:  # the error over every channel first, then the comparison's, on the averages
+            every, scale = self.channel_heldout
+            line += f": error on unseen directions {every:.4g}"
+            if scale:
+                line += f" = {every / scale:.1%} of the reflected radiance"
+            line += (f" (loss RMS over every channel on the {self.holdout:.0%} of rows held out from its fit); on "
+                     f"the {self.compared_on} the candidates were compared on, {error:.4g}")
+        else:
+            line += f": error on unseen directions {error:.4g}"
+            if self.heldout_scale:
+                line += f" = {error / self.heldout_scale:.1%} of the reflected radiance"
+            line += f" (loss RMS on the {self.holdout:.0%} of rows held out from its fit)"
         lambert = rows.get("lambert")
         if lambert is not None and shown != "lambert" and lambert["heldout_error"] > 0:
             line += f", {error / lambert['heldout_error']:.2f}x Lambert's {lambert['heldout_error']:.4g}"
@@ -171,6 +192,9 @@ class Selection:
         rule = {"aic": f"ΔAIC <= {self.margin:g}", "bic": f"ΔBIC <= {self.margin:g}",
                 "cv": "CV error within one standard error",
                 "heldout": f"held-out error within {self.margin:.0%} of the best, plausible first"}[self.criterion]
+        if self.compared_on:
+            lines.append(f"compared on {self.compared_on} (the errors above are theirs); {self.chosen} then fitted "
+                         "to every channel")
         lines.append(f"best by {self.criterion}: {self.best}; simplest with {rule}: {self.chosen_by_criterion}")
         if self.chosen_by_scene is not None:
             lines.append(f"cheapest within the scene tolerance: {self.chosen_by_scene}")
@@ -189,7 +213,7 @@ class Selection:
         return {"table": [{k: clean(v) for k, v in row.items()} for row in self.table], "chosen": self.chosen,
                 "criterion": self.criterion, "margin": self.margin, "best": self.best,
                 "chosen_by_criterion": self.chosen_by_criterion, "chosen_by_scene": self.chosen_by_scene,
-                "target": self.target, "warnings": list(self.warnings)}
+                "target": self.target, "compared_on": self.compared_on, "warnings": list(self.warnings)}
 
 
 def _loss_residuals(result: FitResult, measurements):
@@ -415,6 +439,13 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
     """
     measurements.check_informative()  # no information, no selection (named in the error)
     criterion = resolve_criterion(criterion, measurements)
+    averaged = _channel_averages(measurements, fit_options) if scene is None and target is None else None
+    if averaged is not None:
+        selection = select(averaged, candidates, criterion, loss=loss, margin=margin, folds=folds,
+                           holdout=holdout, seed=seed, screen=screen, plausible=plausible, progress=progress,
+                           **fit_options)
+        return _fitted_to_every_channel(selection, measurements, averaged, dict(loss=loss, seed=seed,
+                                                                                **fit_options), holdout, seed)
     candidates = list(candidates)
     renders = target_models(target, scene)
     candidates += [spec for spec in renders if spec not in candidates]
@@ -425,9 +456,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
     if reference not in ("data", "best"):
         raise ValueError(f"reference must be 'data' or 'best', got {reference!r}")
     margin = (HELDOUT_MARGIN if criterion == "heldout" else DEFAULT_MARGIN) if margin is None else float(margin)
-    rng = np.random.default_rng(seed)
-    valid_rows = np.flatnonzero(np.any(np.isfinite(measurements.values), axis=1))
-    order = rng.permutation(valid_rows)
+    rng, valid_rows, order = _shuffled_rows(measurements, seed)
     fold_rows = np.array_split(order, folds) if criterion == "cv" else [order[: int(round(holdout * len(order)))]]
     options = dict(loss=loss, seed=seed, **fit_options)
     train_rows = np.setdiff1d(valid_rows, fold_rows[0])
@@ -484,6 +513,71 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
                      results=done, warnings=warnings, scene_results=scene_results, holdout=holdout,
                      heldout_scale=_radiance_scale(measurements, fold_rows[0]) if loss == "cosine" else None,
                      target=target)
+
+
+def _channel_averages(measurements, fit_options: dict):
+    """The measurements averaged over `SCREEN_BANDS` groups of contiguous channels, where there are more channels
+    than that and their shape is shared (the default channel mode, with no per-channel fixed value); else None.
+
+    A group's value is the mean of its finite values (NaN where it has none), its σ that of the mean
+    (√Σσ² / count), the weights the rows'. ``meta["averaged"]`` names each average's channels.
+    """
+    from .measurements import Measurements
+
+    count = measurements.n_channels
+    fixed = fit_options.get("fixed") or {}
+    if count <= SCREEN_BANDS or fit_options.get("channel_mode", "shared-shape") != "shared-shape" \
+            or any(np.size(value) > 1 for value in fixed.values()):
+        return None
+    groups = np.array_split(np.arange(count), SCREEN_BANDS)
+    values = np.asarray(measurements.values, dtype=float)
+    finite = np.isfinite(values)
+    counts = np.stack([finite[:, g].sum(axis=1) for g in groups], axis=1)
+    sums = np.stack([np.where(finite[:, g], values[:, g], 0.0).sum(axis=1) for g in groups], axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        means = np.where(counts > 0, sums / counts, np.nan)
+        sigma = None
+        if measurements.sigma is not None:
+            s2 = np.asarray(measurements.sigma, dtype=float) ** 2
+            sigma = np.stack([np.sqrt(np.where(finite[:, g], s2[:, g], 0.0).sum(axis=1)) for g in groups], axis=1)
+            sigma = np.where(counts > 0, sigma / np.maximum(counts, 1), np.nan)
+    names = [str(measurements.channels[g[0]]) + (f"–{measurements.channels[g[-1]]}" if len(g) > 1 else "")
+             for g in groups]
+    meta = {k: v for k, v in (measurements.meta or {}).items() if k != "wavelengths_nm"}
+    meta["averaged"] = {name: [str(measurements.channels[k]) for k in g] for name, g in zip(names, groups)}
+    return Measurements(measurements.theta_i, measurements.phi_i, measurements.theta_o, measurements.phi_o, means,
+                        sigma=sigma, weights=measurements.weights, channels=names, meta=meta)
+
+
+def _shuffled_rows(measurements, seed: int):
+    """The selection's random order of the rows with a value: ``(rng, valid rows, their order)``; the held-out
+    rows are the order's first ``holdout`` fraction (and, for ``cv``, its folds)."""
+    rng = np.random.default_rng(seed)
+    valid_rows = np.flatnonzero(np.any(np.isfinite(measurements.values), axis=1))
+    return rng, valid_rows, rng.permutation(valid_rows)
+
+
+def _fitted_to_every_channel(selection: Selection, measurements, averaged, options: dict, holdout: float,
+                             seed: int) -> Selection:
+    """A selection made on channel averages (`_channel_averages`), with its chosen model fitted to every channel of
+    ``measurements`` from the shape the averages gave it (the amplitudes solved per channel): first to the rows
+    the comparison trained on, for its held-out error over every channel on the rows it held out, then from there
+    to all the rows (the same compiled programs: the held-out rows are masked, not removed)."""
+    _, _, order = _shuffled_rows(averaged, seed)
+    held = order[: int(round(holdout * len(order)))]
+    chosen = selection.results[selection.chosen]
+    specs = chosen.models[0].param_specs
+    shape = {name: value for name, value in chosen.params.items() if not specs[name].colour}
+    trained = fit(_masked(measurements, held), selection.chosen, init=shape, **options)
+    every = _rms(_loss_residuals(trained, measurements)[0][held])
+    scale = _radiance_scale(measurements, held) if trained.loss == "cosine" else None
+    results = dict(selection.results)
+    results[selection.chosen] = fit(measurements, selection.chosen, init=trained.model, **options)
+    sizes = sorted({len(g) for g in averaged.meta["averaged"].values()})
+    return dataclasses.replace(
+        selection, results=results, channel_heldout=(every, scale),
+        compared_on=f"{averaged.n_channels} averages of {'-'.join(str(k) for k in sizes)} of the "
+                    f"{measurements.n_channels} channels")
 
 
 def target_models(target: str | None, scene) -> tuple:
