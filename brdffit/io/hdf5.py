@@ -606,14 +606,11 @@ def read_measurements_group(group, path=None) -> Measurements:
     try:
         channels = (parse_meta_json(path, _attr_text(group.attrs["channels"]), f"attribute {where}.channels")
                     if "channels" in group.attrs else None)
-        meta = (parse_meta_json(path, _attr_text(group.attrs["meta"]), f"attribute {where}.meta")
-                if "meta" in group.attrs else {})
     except UnicodeDecodeError as err:
-        raise FormatError(path, f"attribute channels or meta of {where} is not UTF-8 text: {err}") from None
+        raise FormatError(path, f"attribute channels of {where} is not UTF-8 text: {err}") from None
     if channels is not None and (not isinstance(channels, list) or not all(isinstance(c, str) for c in channels)):
         raise FormatError(path, f"attribute {where}.channels must be a JSON list of strings")
-    if not isinstance(meta, dict):
-        raise FormatError(path, f"attribute {where}.meta must be a JSON object")
+    meta = _meta_object(path, group.attrs["meta"], where) if "meta" in group.attrs else {}
     try:
         return Measurements(**arrays, channels=channels, meta=meta).check_informative()
     except MeasurementError as err:
@@ -680,19 +677,20 @@ def read_meta(path, group: str = MEASUREMENTS_GROUP) -> dict:
             object).
     """
     def meta(g):
-        if "meta" not in g.attrs:
-            return {}
-        where = g.name
-        try:
-            text = _attr_text(_check_attribute(path, g, "meta", where))
-        except UnicodeDecodeError as err:
-            raise FormatError(path, f"attribute meta of {where} is not UTF-8 text: {err}") from None
-        value = parse_meta_json(path, text, f"attribute {where}.meta")
-        if not isinstance(value, dict):
-            raise FormatError(path, f"attribute {where}.meta must be a JSON object")
-        return value
+        return _meta_object(path, _check_attribute(path, g, "meta", g.name), g.name) if "meta" in g.attrs else {}
 
     return read_hdf5_group(path, group, meta)
+
+
+def _meta_object(path, raw, where: str) -> dict:
+    """A measurements group's ``meta`` attribute (its value as read) as the JSON object it must be."""
+    try:
+        value = parse_meta_json(path, _attr_text(raw), f"attribute {where}.meta")
+    except UnicodeDecodeError as err:
+        raise FormatError(path, f"attribute meta of {where} is not UTF-8 text: {err}") from None
+    if not isinstance(value, dict):
+        raise FormatError(path, f"attribute {where}.meta must be a JSON object")
+    return value
 
 
 @memory_guarded("reading the HDF5 file")
