@@ -7,6 +7,13 @@ there (`brdffit.compilation_cache.enable_compilation_cache`, as the CLI does). A
 by the other worker and by the tests' subprocesses without being traced again (`brdffit.programs`), and
 nothing is written into the user's own cache. Most of the suite's time is tracing and compiling (issue 15); the
 compiled programs change no result (`tests/test_programs.py`). The folder is removed when the session ends.
+
+BLAS: each test process (the controller without xdist, each xdist worker) runs NumPy's and SciPy's BLAS with one
+thread, as `brdffit.blas_threads.one_blas_thread` does for a fit and for the same reason: the suite runs two workers
+on a 2-core host, and an OpenBLAS thread team per call then spins waiting for a core (the tests' own quadratures,
+such as the eigen-decomposition behind an 800-node Gauss-Legendre rule, took tens of times longer). A test that
+needs more threads sets them itself (`tests/test_blas_threads.py`); the ``brdffit`` processes that tests start keep
+the user's default.
 """
 
 import os
@@ -27,6 +34,10 @@ def pytest_configure(config):
         os.environ["BRDFFIT_CACHE_DIR"] = tempfile.mkdtemp(prefix="brdffit-test-cache-")
         os.environ[_OWNER] = str(os.getpid())
     enable_compilation_cache()
+    import scipy.linalg  # noqa: F401 - loads SciPy's own BLAS, so that the limit reaches it too
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1, user_api="blas")  # for the whole process (module doc)
 
 
 def pytest_unconfigure(config):

@@ -59,8 +59,14 @@ def test_other_models_are_refused_or_fitted():
     assert details.deviation.rms < 0.2
 
 
-def test_fit_for_blender_then_export_renders_in_cycles(tmp_path):
-    """The artist's path: the README's plastic fitted for Blender, exported, built by bpy and rendered by Cycles."""
+def test_fit_for_blender_then_export_renders_in_cycles(tmp_path, monkeypatch):
+    """The artist's path: the README's plastic fitted for Blender, exported, built by bpy and rendered by Cycles.
+    The default candidates are cut to Lambert (as tests/test_fit_for_target.py does for pbrt): the model written is
+    the target's own, fitted to all the data whatever the free choice beside it, and the default selection on this
+    file is `tests/test_cli.py::test_quick_start_fit_recovers_the_shipped_plastic`'s."""
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module("brdffit.select"), "DEFAULT_CANDIDATES", ("lambert",))
     out = tmp_path / "fit"
     assert main(["fit", str(SYNTHETIC / "plastic.h5"), "--for", "blender", "--quiet", "--no-report", "--out",
                  str(out)]) == EXIT_OK

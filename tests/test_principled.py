@@ -6,14 +6,12 @@ Mitsuba runs in float32 (``scalar_rgb``), brdffit in float64: the comparison is 
 the angles), as the models issue states it.
 """
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
 import brdffit
 from brdffit import models
+from brdffit.cli import EXIT_OK, main
 from brdffit.export import export
 from brdffit.export.mitsuba import evaluate_in_mitsuba
 from brdffit.export.terms import random_pairs
@@ -64,25 +62,24 @@ def test_principled_evaluates_what_mitsuba_evaluates(mi, name):
 
 def test_synth_fit_export_round_trip(mi, tmp_path):
     """A principled material synthesised, fitted with the CLI, exported to Mitsuba: the parameters come back and
-    Mitsuba's plugin, read from the export, evaluates the fitted model."""
+    Mitsuba's plugin, read from the export, evaluates the fitted model. The commands run in this process
+    (`brdffit.cli.main`); each has a run as a process of its own in tests/test_memory_limits.py."""
     truth = dict(base_color=[0.6, 0.35, 0.2], roughness=0.35, metallic=0.2, specular=0.5, sheen=0.3,
                  clearcoat=0.4, clearcoat_gloss=0.7)
     data = tmp_path / "principled.h5"
-    cli = [sys.executable, "-m", "brdffit.cli"]
     params = [arg for k, v in truth.items()
               for arg in ("--param", f"{k}={','.join(map(str, v)) if isinstance(v, list) else v}")]
-    subprocess.run(cli + ["synth", "principled", *params, "--pattern", "half-diff", "--n", "4000",
-                          "--noise", "relative:0.005", "--seed", "4", "--out", str(data), "--quiet"], check=True)
-    subprocess.run(cli + ["fit", str(data), "--model", "principled", "--out", str(tmp_path / "fit"), "--no-report",
-                          "--quiet"], check=True)
+    assert main(["synth", "principled", *params, "--pattern", "half-diff", "--n", "4000", "--noise",
+                 "relative:0.005", "--seed", "4", "--out", str(data), "--quiet"]) == EXIT_OK
+    assert main(["fit", str(data), "--model", "principled", "--out", str(tmp_path / "fit"), "--no-report",
+                 "--quiet"]) == EXIT_OK
     result = brdffit.FitResult.load(tmp_path / "fit" / "result.h5")
     assert result.converged, result.summary()
     np.testing.assert_allclose(np.asarray(result.params["base_color"]), truth["base_color"], rtol=0.02)
     for name in ("roughness", "metallic", "sheen", "clearcoat"):
         assert float(result.params[name]) == pytest.approx(truth[name], rel=0.05, abs=0.01), name
     out = tmp_path / "material.xml"
-    subprocess.run(cli + ["export", str(tmp_path / "fit" / "result.h5"), "--to", "mitsuba", "--out", str(out)],
-                   check=True, capture_output=True)
+    assert main(["export", str(tmp_path / "fit" / "result.h5"), "--to", "mitsuba", "--out", str(out)]) == EXIT_OK
     text = out.read_text()
     assert 'type="principled"' in text and "exact" in text and "blendbsdf" not in text
     wi, wo = random_pairs(2000, seed=8)
