@@ -131,7 +131,7 @@ class BlenderPrincipled(Lobe):
         lobe = ggx_correlated(pair, alpha)
         metal = fr.schlick(pair.cos_d[..., None], base) * lobe[..., None]
         specular = fr.dielectric(pair.cos_d, 1.0, eta) * lobe
-        f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+        f0 = fr.normal_reflectance(eta)
         z = jnp.sqrt((eta - 1.0) / (eta + 1.0))
         s = multilinear(layering_table(), z, pair.cos_o, roughness)  # Cycles: x roughness (fastest), y μ, z
         albedo = f0 + (1.0 - f0) * s

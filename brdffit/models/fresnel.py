@@ -11,7 +11,7 @@ from ..geometry import TINY, safe_sqrt
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["schlick", "schlick_weight", "dielectric", "conductor", "CONDUCTORS", "DIELECTRICS"]
+__all__ = ["schlick", "schlick_weight", "normal_reflectance", "dielectric", "conductor", "CONDUCTORS", "DIELECTRICS"]
 
 # Complex refractive indices (eta, k) of conductors at about 550 nm, as used in the issue specification.
 CONDUCTORS = {
@@ -51,6 +51,12 @@ def schlick(cos_theta, f0):
         The reflectance, broadcast shape.
     """
     return f0 + (1.0 - f0) * schlick_weight(cos_theta)
+
+
+def normal_reflectance(eta):
+    """The dielectric term at normal incidence from air, ((η − 1)/(η + 1))² (Born & Wolf, Sec. 1.5.2): Schlick's f0
+    of an index of refraction (glTF's KHR_materials_ior, Cycles' and the principled BRDF's specular)."""
+    return ((eta - 1.0) / (eta + 1.0)) ** 2
 
 
 def dielectric(cos_theta_i, eta_i, eta_t):

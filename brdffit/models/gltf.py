@@ -69,7 +69,7 @@ from .specs import base_color, metallic, perceptual_roughness
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["GltfMaterial", "ior_to_f0", "sheen_albedo_table", "sheen_albedo", "SHEEN_TABLE_SIZE",
+__all__ = ["GltfMaterial", "sheen_albedo_table", "sheen_albedo", "SHEEN_TABLE_SIZE",
            "MIN_SHEEN_ROUGHNESS"]
 
 # KHR_materials_ior: ior ≥ 1 (or 0, which brdffit does not write); 3 is f0 = 0.25, beyond every common dielectric.
@@ -169,11 +169,6 @@ def sheen_albedo(mu, sheen_roughness):
                        (sheen_roughness - MIN_SHEEN_ROUGHNESS) / (1.0 - MIN_SHEEN_ROUGHNESS), mu)
 
 
-def ior_to_f0(ior):
-    """The normal-incidence reflectance of an index of refraction against air: ((ior − 1)/(ior + 1))²."""
-    return ((ior - 1.0) / (ior + 1.0)) ** 2
-
-
 @dataclasses.dataclass(frozen=True)
 class GltfMaterial(Lobe):
     """The glTF 2.0 metallic-roughness material with KHR_materials_ior, _specular, _sheen and _clearcoat (module
@@ -216,7 +211,7 @@ class GltfMaterial(Lobe):
         alpha = params["roughness"] ** 2
         specular_brdf = ggx_correlated(pair, alpha)[..., None]  # V D, Appendix B's specular_brdf
         weight = fr.schlick_weight(pair.cos_d)[..., None]
-        f0 = jnp.minimum(ior_to_f0(params["ior"]) * params["specular_color"], 1.0)  # (C,)
+        f0 = jnp.minimum(fr.normal_reflectance(params["ior"]) * params["specular_color"], 1.0)  # (C,)
         fresnel = f0 + (1.0 - f0) * weight  # (..., C)
         strength = params["specular"]
         dielectric = ((1.0 - strength * jnp.max(fresnel, axis=-1, keepdims=True)) * base / jnp.pi

@@ -118,7 +118,7 @@ class Principled(Lobe):
         eta = specular_to_eta(params["specular"])
         c = pair.cos_d[..., None]
         f_dielectric = fr.dielectric(c, 1.0, eta)
-        r0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+        r0 = fr.normal_reflectance(eta)
         spec_tint = params["spec_tint"]
         fresnel = (dielectric * (1.0 - spec_tint) * f_dielectric + metallic * fr.schlick(c, base)
                    + dielectric * spec_tint * fr.schlick(c, tint * r0))
