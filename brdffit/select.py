@@ -146,18 +146,15 @@ class Selection:
         shown = self.chosen if self.target else self.chosen_by_criterion
         error = rows[shown]["heldout_error"]
         line = f"verdict: {self.chosen}" + (f" for {self.target}" if self.target else "")
-        if self.compared_on:  # the error over every channel first, then the comparison's, on the averages
-            every, scale = self.channel_heldout
-            line += f": error on unseen directions {every:.4g}"
-            if scale:
-                line += f" = {every / scale:.1%} of the reflected radiance"
-            line += (f" (loss RMS over every channel on the {self.holdout:.0%} of rows held out from its fit); on "
-                     f"the {self.compared_on} the candidates were compared on, {error:.4g}")
-        else:
-            line += f": error on unseen directions {error:.4g}"
-            if self.heldout_scale:
-                line += f" = {error / self.heldout_scale:.1%} of the reflected radiance"
-            line += f" (loss RMS on the {self.holdout:.0%} of rows held out from its fit)"
+        # Compared on channel averages: the error over every channel first, then the comparison's.
+        every, scale = self.channel_heldout if self.compared_on else (error, self.heldout_scale)
+        line += f": error on unseen directions {every:.4g}"
+        if scale:
+            line += f" = {every / scale:.1%} of the reflected radiance"
+        line += (f" (loss RMS{' over every channel' if self.compared_on else ''} on the {self.holdout:.0%} of rows "
+                 "held out from its fit)")
+        if self.compared_on:
+            line += f"; on the {self.compared_on} the candidates were compared on, {error:.4g}"
         lambert = rows.get("lambert")
         if lambert is not None and shown != "lambert" and lambert["heldout_error"] > 0:
             line += f", {error / lambert['heldout_error']:.2f}x Lambert's {lambert['heldout_error']:.4g}"
