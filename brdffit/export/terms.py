@@ -263,9 +263,11 @@ def lobe_peaks(lobe, params: dict) -> list[Peak]:
         found = [Peak("half", max(0.001, value("roughness") ** 2))]
         if value("clearcoat") > 0:  # its GTR1 clearcoat, α = lerp(0.1, 0.001, clearcoat_gloss)
             found.append(Peak("half", 0.1 + value("clearcoat_gloss") * (0.001 - 0.1)))
-    elif name in ("gltf", "blender"):
+    elif name == "blender":
         found = [Peak("half", value("roughness") ** 2)]
-        if name == "gltf" and value("clearcoat") > 0:  # KHR_materials_clearcoat's GGX lobe
+    elif name == "gltf":
+        found = [Peak("half", value("roughness") ** 2)]
+        if value("clearcoat") > 0:  # KHR_materials_clearcoat's GGX lobe
             found.append(Peak("half", value("clearcoat_roughness") ** 2))
     elif name == "pbrt":
         found = [Peak("half", value("roughness"))]  # pbrt-v4's conductor roughness is α (remaproughness false)
