@@ -556,3 +556,25 @@ def test_an_implausible_fit_warns_and_its_renderer_export_is_refused(tmp_path, c
     assert main(["export", str(out / "result.h5"), "--to", "mitsuba", "--out", str(xml), "--force",
                  "--quiet"]) == EXIT_OK
     assert xml.is_file()
+
+
+@pytest.mark.parametrize("argv, code", [(["models"], EXIT_OK), (["fit", "no-such-file.h5"], EXIT_BAD_INPUT)])
+def test_the_console_script_flushes_its_output_runs_the_exit_handlers_and_keeps_the_exit_code(argv, code):
+    """`brdffit.cli.run` ends the process without Python's finalisation: what `main` printed to a pipe (block
+    buffered, so lost without the flush) reaches the reader, an exit handler registered before it still runs
+    (after the output), and the process exits with `main`'s code."""
+    import subprocess
+
+    program = ("import atexit, sys\n"
+               "from brdffit import cli\n"
+               "atexit.register(lambda: print('exit handler ran'))\n"
+               f"sys.argv = ['brdffit'] + {argv!r}\n"
+               "cli.run()\n"
+               "print('not reached')\n")
+    proc = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == code, proc.stderr
+    assert proc.stdout.rstrip().endswith("exit handler ran") and "not reached" not in proc.stdout
+    if code == EXIT_OK:
+        assert proc.stdout.startswith("lambert: Lambert")
+    else:
+        assert "no-such-file.h5" in proc.stderr
