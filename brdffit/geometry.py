@@ -50,12 +50,13 @@ def safe_div(num, den, fallback=0.0):
     return jnp.where(ok, num / jnp.where(ok, den, 1.0), fallback)
 
 
-def safe_normalize(v):
-    """v / |v| along the last axis; a zero vector maps to the normal (0, 0, 1) with a finite gradient."""
-    norm2 = jnp.sum(v * v, axis=-1, keepdims=True)
+def safe_normalize(v, xp=jnp):
+    """v / |v| along the last axis; a zero vector maps to the normal (0, 0, 1) with a finite gradient. ``xp``: the
+    array module (``jax.numpy``, or ``numpy`` on the host)."""
+    norm2 = xp.sum(v * v, axis=-1, keepdims=True)
     ok = norm2 > TINY * TINY
-    unit = v / jnp.sqrt(jnp.where(ok, norm2, 1.0))
-    return jnp.where(ok, unit, jnp.array([0.0, 0.0, 1.0], dtype=v.dtype))
+    unit = v / xp.sqrt(xp.where(ok, norm2, 1.0))
+    return xp.where(ok, unit, xp.array([0.0, 0.0, 1.0], dtype=v.dtype))
 
 
 def safe_pow(x, n):
@@ -85,24 +86,25 @@ def spherical_to_vector(theta, phi, xp=jnp):
     return xp.stack([s * xp.cos(phi), s * xp.sin(phi), xp.cos(theta)], axis=-1)
 
 
-def vector_to_spherical(w):
+def vector_to_spherical(w, xp=jnp):
     """Polar angle and azimuth of vector(s) ``w`` (last axis of size 3).
 
     Arguments:
         w: direction(s), not necessarily normalised.
+        xp: the array module (``jax.numpy``, or ``numpy`` on the host).
 
     Returns:
         ``(theta, phi)`` with θ in [0, π] and φ in [0, 2π); φ is 0 along the normal.
     """
-    w = safe_normalize(jnp.asarray(w, dtype=float))
-    theta = jnp.arccos(jnp.clip(w[..., 2], -1.0, 1.0))
-    phi = jnp.mod(jnp.arctan2(w[..., 1], w[..., 0]), 2 * jnp.pi)
+    w = safe_normalize(xp.asarray(w, dtype=float), xp)
+    theta = xp.arccos(xp.clip(w[..., 2], -1.0, 1.0))
+    phi = xp.mod(xp.arctan2(w[..., 1], w[..., 0]), 2 * xp.pi)
     return theta, phi
 
 
-def half_vector(wi, wo):
-    """The half vector h = normalize(ωi + ωo) (Cook & Torrance 1982)."""
-    return safe_normalize(wi + wo)
+def half_vector(wi, wo, xp=jnp):
+    """The half vector h = normalize(ωi + ωo) (Cook & Torrance 1982); ``xp`` as in `safe_normalize`."""
+    return safe_normalize(wi + wo, xp)
 
 
 def mirror(w):
@@ -110,17 +112,17 @@ def mirror(w):
     return w * jnp.array([-1.0, -1.0, 1.0], dtype=w.dtype)
 
 
-def _rotate_z(v, angle):
-    c, s = jnp.cos(angle), jnp.sin(angle)
-    return jnp.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1], v[..., 2]], axis=-1)
+def _rotate_z(v, angle, xp=jnp):
+    c, s = xp.cos(angle), xp.sin(angle)
+    return xp.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1], v[..., 2]], axis=-1)
 
 
-def _rotate_y(v, angle):
-    c, s = jnp.cos(angle), jnp.sin(angle)
-    return jnp.stack([c * v[..., 0] + s * v[..., 2], v[..., 1], -s * v[..., 0] + c * v[..., 2]], axis=-1)
+def _rotate_y(v, angle, xp=jnp):
+    c, s = xp.cos(angle), xp.sin(angle)
+    return xp.stack([c * v[..., 0] + s * v[..., 2], v[..., 1], -s * v[..., 0] + c * v[..., 2]], axis=-1)
 
 
-def to_half_diff(theta_i, phi_i, theta_o, phi_o):
+def to_half_diff(theta_i, phi_i, theta_o, phi_o, xp=jnp):
     """Rusinkiewicz (1998) half/difference angles of a pair of directions.
 
     The difference vector d is ωi expressed in a frame where the half vector h is the pole:
@@ -128,16 +130,18 @@ def to_half_diff(theta_i, phi_i, theta_o, phi_o):
 
     Arguments:
         theta_i, phi_i, theta_o, phi_o: spherical angles (radians), broadcastable.
+        xp: the array module (``jax.numpy``, or ``numpy`` on the host: no compiled program, for a report's few
+            thousand samples).
 
     Returns:
         ``(theta_h, phi_h, theta_d, phi_d)``, with φ values in [0, 2π).
     """
-    wi = spherical_to_vector(theta_i, phi_i)
-    wo = spherical_to_vector(theta_o, phi_o)
-    h = half_vector(wi, wo)
-    theta_h, phi_h = vector_to_spherical(h)
-    d = _rotate_y(_rotate_z(wi, -phi_h), -theta_h)
-    theta_d, phi_d = vector_to_spherical(d)
+    wi = spherical_to_vector(theta_i, phi_i, xp)
+    wo = spherical_to_vector(theta_o, phi_o, xp)
+    h = half_vector(wi, wo, xp)
+    theta_h, phi_h = vector_to_spherical(h, xp)
+    d = _rotate_y(_rotate_z(wi, -phi_h, xp), -theta_h, xp)
+    theta_d, phi_d = vector_to_spherical(d, xp)
     return theta_h, phi_h, theta_d, phi_d
 
 

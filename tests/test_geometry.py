@@ -134,9 +134,10 @@ def _random_pairs(rng, n):
             rng.uniform(0, 2 * np.pi, n))
 
 
-def test_to_half_diff_matches_definition(rng):
+@pytest.mark.parametrize("xp", [jnp, np], ids=["jax", "numpy"])
+def test_to_half_diff_matches_definition(rng, xp):
     angles = _random_pairs(rng, 100)
-    got = [np.asarray(a) for a in geo.to_half_diff(*angles)]
+    got = [np.asarray(a) for a in geo.to_half_diff(*angles, xp=xp)]
     want = _half_diff_reference(*angles)
     np.testing.assert_allclose(got[0], want[0], rtol=1e-10)
     np.testing.assert_allclose(_angle_diff(got[1], want[1]), 0.0, atol=1e-10)
