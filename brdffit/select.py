@@ -22,7 +22,7 @@ import numpy as np
 from .blas_threads import one_blas_thread
 from .defaults import FIT
 from .criteria import CRITERIA, DEFAULT_MARGIN, HELDOUT_MARGIN, resolve_criterion
-from .fitting.api import fit
+from .fitting.api import COARSE_ATOL, COARSE_RTOL, fit
 from .fitting.outcome import Status
 from .fitting.result import FitResult
 from .fitting.losses import loss_epsilon
@@ -75,12 +75,6 @@ SCREEN_BANDS = 3
 # uncoupled and each within 1, could reach 2 towards grazing; more is a lobe the data never constrained.
 EXTRAPOLATION_ALBEDO = 2.0
 SCREEN_SLACK = 10.0
-# The step test's tolerances of the screening fits (`brdffit.fitting.marquardt`: a point has converged when its
-# next step is below rtol·|x| + atol): the screen ranks candidates whose errors are compared within a margin of a
-# few percent, and the fit that is reported is refitted from it at the caller's tolerances. On a real RGL-EPFL
-# file's screen (paper_white, 4,096 samples) 1e-3 took 42 and 63 steps for two and three Lafortune lobes against
-# 76 and 97 at the coarse stage's 1e-5, ending within 5e-7 of their cost (docs/model-selection.md).
-SCREEN_RTOL, SCREEN_ATOL = 1e-3, 1e-6
 # What a user can do when no candidate is plausible (the verdict's advice).
 IMPLAUSIBLE_ADVICE = ("What to do: check the values' units (f_r in 1/sr without the cosine; a reflectance factor is "
                       "π f_r); for a material a renderer can take as plausible, fit the chosen model with its "
@@ -777,10 +771,10 @@ def _screened_rows(candidates, measurements, screen_data, seen, held, options, d
     rows = []
     n_values = int(np.isfinite(measurements.values).sum())
     training = int(np.any(np.isfinite(screen_data.values), axis=1).sum())
-    # The screen ranks the candidates (`SCREEN_RTOL`), and whatever is reported as a fit is refitted from it to all
-    # the data at the caller's tolerances.
-    loose = dict(options, rtol=max(SCREEN_RTOL, options.get("rtol", 0.0)),
-                 atol=max(SCREEN_ATOL, options.get("atol", 0.0)))
+    # The screen is the coarse stage of a two-stage fit (`brdffit.fitting.api`), with its tolerances: it ranks the
+    # candidates, and whatever is reported as a fit is refitted from it to all the data at the caller's.
+    loose = dict(options, rtol=max(COARSE_RTOL, options.get("rtol", 0.0)),
+                 atol=max(COARSE_ATOL, options.get("atol", 0.0)))
 
     def work(spec, init):
         result = fit(screen_data, spec, init=init, **loose)
