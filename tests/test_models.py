@@ -635,3 +635,31 @@ def test_bounded_option_caps_every_unbounded_amplitude_at_one():
             assert (capped.lower, capped.upper) == (spec.lower, spec.upper), name
     assert {n for n in free.param_specs.names
             if bounded.param_specs[n].upper == 1.0 and free.param_specs[n].upper != 1.0} == {"ks", "ks_1"}
+
+
+@pytest.mark.parametrize("name", [n for n in models.names() if models.get(n).lobes[0].peaks(
+    models.get(n).layout.local_params(models.get(n).params, 0))])
+def test_a_declared_peak_is_where_the_lobe_is_large(name):
+    """Every peak a lobe declares (`Lobe.peaks`, at its default values) points where the lobe is large: at θi = 40°,
+    the lobe at the peak's centre direction (the mirror direction for a half-vector peak, normalize(A ωi) for a
+    cone) is above the 90th percentile of its values over 4,096 outgoing directions uniform on the hemisphere, and
+    the declared width is a width (0 < α ≤ 1 after the export's clipping)."""
+    from brdffit.export.terms import lobe_peaks
+
+    model = models.get(name)
+    lobe = model.lobes[0]
+    theta = np.radians(40.0)
+    wi = np.array([np.sin(theta), 0.0, np.cos(theta)])
+    rng = np.random.default_rng(5)
+    z = rng.uniform(0.0, 1.0, 4096)
+    phi = rng.uniform(0.0, 2 * np.pi, 4096)
+    wo = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], axis=-1)
+    background = np.percentile(np.asarray(models.evaluate_dirs(model, wi, wo)).sum(axis=-1), 90)
+    peaks = lobe_peaks(lobe, model.layout.local_params(model.params, 0))
+    assert peaks
+    for peak in peaks:
+        axis = np.array([-1.0, -1.0, 1.0]) if peak.kind == "half" else np.asarray(peak.axis, dtype=float)
+        centre = axis * wi / np.linalg.norm(axis * wi)
+        at_peak = float(np.asarray(models.evaluate_dirs(model, wi, centre)).sum())
+        assert at_peak > background, (peak, at_peak, background)
+        assert 0.0 < peak.width <= 1.0 and peak.lobe == name

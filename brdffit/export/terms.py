@@ -21,6 +21,7 @@ from ..models.cook_torrance import CookTorrance
 from ..models.diffuse import Lambert
 from ..models.layout import layout
 from ..models.model import evaluate_dirs
+from ..models.peaks import Peak
 from .registry import ExportError
 
 __all__ = ["ExportError", "Term", "terms", "assemble", "evaluate_dirs", "reflects_nothing", "f0_to_eta",
@@ -209,90 +210,22 @@ def random_pairs(n: int = DEVIATION_PAIRS, seed: int = DEVIATION_SEED):
     return draw(), draw()
 
 
-@dataclasses.dataclass(frozen=True)
-class Peak:
-    """Where a lobe peaks, as a way of drawing ωo for a given ωi (a sampling strategy of `deviation_pairs`).
-
-    Attributes:
-        kind: ``"half"``: the half vector h is drawn about the normal from a GGX distribution of width ``width``
-            (density D(h) cosθh) and ωo = 2 (ωi·h) h − ωi, which puts ωo near the mirror direction for every
-            half-vector lobe (microfacet, Ward, Blinn-Phong, Ashikhmin-Shirley). ``"cone"``: ωo is drawn about the
-            axis d = normalize(A ωi) with the same GGX density in the angle from d: A = (−1, −1, 1) is the mirror
-            direction (Phong, toon highlight), (1, 1, 1) the back-scattering direction ωo = ωi (a retro-reflective
-            Lafortune lobe), Lafortune's (cx, cy, cz) the axis of its lobe in general.
-        width: the GGX width α of the draw (the lobe's own width: a microfacet m or α, Ward's α, or
-            √(2/(n + 2)) for a cosine power n, whose cosⁿ falls like exp(−nθ²/2), a Beckmann lobe of that width).
-        axis: A for ``"cone"`` (None for ``"half"``).
-        lobe: the lobe it belongs to (for descriptions).
-    """
-
-    kind: str
-    width: float
-    axis: tuple | None = None
-    lobe: str = ""
-
-
-_MIRROR = (-1.0, -1.0, 1.0)
 _MIN_WIDTH, _MAX_WIDTH = 1e-4, 1.0
 
 
-def _power_width(n) -> float:
-    # cosⁿθ ≈ exp(−nθ²/2) = exp(−θ²/m²) with m² = 2/n; (n + 2) keeps it finite for n -> 0.
-    return math.sqrt(2.0 / (float(n) + 2.0))
-
-
 def lobe_peaks(lobe, params: dict) -> list[Peak]:
-    """The peaks of one lobe, from its own width parameters.
+    """The peaks one lobe declares (`brdffit.models.lobe.Lobe.peaks`) at its parameter values, their widths
+    clipped to [1e-4, 1] and named by the lobe.
 
     Arguments:
         lobe: a brdffit lobe.
         params: its parameters under the lobe's own names.
 
     Returns:
-        A list of `Peak` (empty for diffuse lobes and for lobes not known here; the uniform pairs cover those).
+        A list of `Peak` (empty for a lobe that declares none, e.g. a diffuse one: the uniform pairs cover those).
     """
-    def value(name):
-        return float(np.mean(np.asarray(params[name], dtype=float)))
-
-    name = lobe.name
-    if name in MICROFACET_LOBES:
-        found = [Peak("half", value(width)) for width in lobe.roughness_names]
-    elif name in ("ward", "ward-duer"):
-        found = [Peak("half", value("alpha"))]
-    elif name == "principled":
-        found = [Peak("half", max(0.001, value("roughness") ** 2))]
-        if value("clearcoat") > 0:  # its GTR1 clearcoat, α = lerp(0.1, 0.001, clearcoat_gloss)
-            found.append(Peak("half", 0.1 + value("clearcoat_gloss") * (0.001 - 0.1)))
-    elif name == "blender":
-        found = [Peak("half", value("roughness") ** 2)]
-    elif name == "gltf":
-        found = [Peak("half", value("roughness") ** 2)]
-        if value("clearcoat") > 0:  # KHR_materials_clearcoat's GGX lobe
-            found.append(Peak("half", value("clearcoat_roughness") ** 2))
-    elif name == "pbrt":
-        found = [Peak("half", value("roughness"))]  # pbrt-v4's conductor roughness is α (remaproughness false)
-    elif name == "ward-aniso":
-        found = [Peak("half", value("alpha_x")), Peak("half", value("alpha_y"))]
-    elif name in ("blinn-phong", "ashikhmin-shirley"):
-        found = [Peak("half", _power_width(value("n")))]
-    elif name == "ashikhmin-shirley-aniso":
-        found = [Peak("half", _power_width(value("nu"))), Peak("half", _power_width(value("nv")))]
-    elif name == "phong":
-        # (r·ωo)ⁿ about the mirror direction r.
-        found = [Peak("cone", _power_width(value("n")), _MIRROR)]
-    elif name == "toon-specular":
-        # A disc r·ωo > threshold about the mirror direction: a cone as wide as the disc.
-        found = [Peak("cone", math.tan(math.acos(min(max(value("threshold"), 1e-6), 1.0 - 1e-12))), _MIRROR)]
-    elif name == "lafortune":
-        found = []
-        for j in range(1, lobe.lobes + 1):
-            cx = value(f"cx_{j}") if lobe.anisotropic else value(f"cxy_{j}")
-            cy = value(f"cy_{j}") if lobe.anisotropic else value(f"cxy_{j}")
-            found.append(Peak("cone", _power_width(value(f"n_{j}")), (cx, cy, value(f"cz_{j}"))))
-    else:
-        found = []
-    return [dataclasses.replace(p, width=float(np.clip(p.width, _MIN_WIDTH, _MAX_WIDTH)), lobe=name)
-            for p in found if math.isfinite(p.width)]
+    return [dataclasses.replace(p, width=float(np.clip(p.width, _MIN_WIDTH, _MAX_WIDTH)), lobe=lobe.name)
+            for p in lobe.peaks(params) if math.isfinite(p.width)]
 
 
 def peaks(*models, parts=(), extra=()) -> list[Peak]:

@@ -8,6 +8,7 @@ from .._lazy import module
 from ..geometry import LocalPair, safe_div
 from ..params import ParamSpec
 from .fresnel import schlick
+from .peaks import Peak, power_width, scalar
 from .lobe import Lobe
 from .specs import exponent
 
@@ -44,6 +45,9 @@ class AshikhminShirley(Lobe):
     def param_specs(self):
         return (RS, exponent("n", 100.0, doc="Phong-like exponent"))
 
+    def peaks(self, params):
+        return (Peak("half", power_width(scalar(params, "n"))),)
+
     def __call__(self, params, pair: LocalPair):
         return ashikhmin_shirley_lobe(pair, params["rs"], params["n"], params["n"])
 
@@ -59,6 +63,9 @@ class AshikhminShirleyAniso(Lobe):
     def param_specs(self):
         return (RS, exponent("nu", 100.0, doc="exponent along the tangent x"),
                 exponent("nv", 100.0, doc="exponent along the bitangent y"))
+
+    def peaks(self, params):
+        return (Peak("half", power_width(scalar(params, "nu"))), Peak("half", power_width(scalar(params, "nv"))))
 
     def __call__(self, params, pair: LocalPair):
         return ashikhmin_shirley_lobe(pair, params["rs"], params["nu"], params["nv"])

@@ -34,6 +34,7 @@ from .._lazy import module
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
+from .peaks import Peak, scalar
 from .lobe import Lobe
 from .lookup import multilinear
 from .microfacet import ggx_correlated
@@ -123,6 +124,9 @@ class BlenderPrincipled(Lobe):
             perceptual_roughness("Roughness: GGX α = roughness²"),
             ParamSpec("ior", 1.5, 1.0, _MAX_IOR, doc="IOR: the dielectric specular layer's index of refraction"),
         )
+
+    def peaks(self, params):
+        return (Peak("half", scalar(params, "roughness") ** 2),)
 
     def __call__(self, params, pair: LocalPair):
         base = params["base_color"]

@@ -8,6 +8,7 @@ from typing import ClassVar
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
+from .peaks import Peak, scalar
 from .lobe import Lobe
 from .microfacet import ANISOTROPIC, DISTRIBUTIONS, SHADOWING
 from .specs import KS, roughness
@@ -100,6 +101,10 @@ class CookTorrance(Lobe):
         if self.fresnel == "dielectric":
             return fr.dielectric(c, 1.0, params["eta"])
         return fr.conductor(c, params["eta"], params["k"])
+
+    def peaks(self, params):
+        """One half-vector peak per width (two for an anisotropic lobe)."""
+        return tuple(Peak("half", scalar(params, name)) for name in self.roughness_names)
 
     def __call__(self, params, pair: LocalPair):
         widths = tuple(params[name] for name in self.roughness_names)

@@ -61,6 +61,7 @@ from .._lazy import module
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
+from .peaks import Peak, scalar
 from .lobe import Lobe
 from .lookup import multilinear
 from .microfacet import ggx_correlated
@@ -204,6 +205,13 @@ class GltfMaterial(Lobe):
                                                      "GGX α = clearcoat_roughness²"),
                                 name="clearcoat_roughness", default=0.1, fixed=True),
         )
+
+    def peaks(self, params):
+        """The specular GGX lobe and, with a clearcoat, KHR_materials_clearcoat's GGX lobe (α = roughness²)."""
+        found = [Peak("half", scalar(params, "roughness") ** 2)]
+        if scalar(params, "clearcoat") > 0:
+            found.append(Peak("half", scalar(params, "clearcoat_roughness") ** 2))
+        return tuple(found)
 
     def __call__(self, params, pair: LocalPair):
         base = params["base_color"]

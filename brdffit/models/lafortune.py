@@ -8,6 +8,7 @@ import itertools
 from .._lazy import module
 from ..geometry import LocalPair, safe_pow
 from ..params import ParamSpec
+from .peaks import Peak, power_width, scalar
 from .lobe import Lobe
 from .specs import KS, exponent
 
@@ -106,6 +107,15 @@ class Lafortune(Lobe):
             for new_name, old_name in zip(self._lobe_names(new), self._lobe_names(old)):
                 out[new_name] = params[old_name]
         return out
+
+    def peaks(self, params):
+        """A cone about each sub-lobe's axis (cx, cy, cz), as wide as its cosine power."""
+        found = []
+        for j in range(1, self.lobes + 1):
+            cx = scalar(params, f"cx_{j}" if self.anisotropic else f"cxy_{j}")
+            cy = scalar(params, f"cy_{j}" if self.anisotropic else f"cxy_{j}")
+            found.append(Peak("cone", power_width(scalar(params, f"n_{j}")), (cx, cy, scalar(params, f"cz_{j}"))))
+        return tuple(found)
 
     def __call__(self, params, pair: LocalPair):
         wi, wo = pair.wi, pair.wo

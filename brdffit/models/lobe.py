@@ -1,8 +1,9 @@
 """The abstract lobe: one reflection term with declared parameters and a pure evaluation.
 
 A lobe is a small immutable value (its fields are options such as the microfacet distribution), hashable so that
-it can sit in a model's static structure. Concrete lobes fill `name`, declare their parameters in `param_specs`
-and evaluate in `__call__`; they never override anything else.
+it can sit in a model's static structure. Concrete lobes fill `name`, declare their parameters in `param_specs`,
+evaluate in `__call__`, and override the hooks declared here (start candidates, canonical order, amplitude
+partners, peaks) where they have them.
 """
 
 from __future__ import annotations
@@ -39,7 +40,9 @@ class Lobe(abc.ABC):
       the GGX lobe for a renderer's material with a diffuse base (glTF's, Blender's, the principled BRDF, pbrt-v4's
       mix);
     - ``param_specs()``: the parameter declarations, in order;
-    - ``__call__(params, pair)``: the BRDF value in 1/sr, without the cosine factor.
+    - ``__call__(params, pair)``: the BRDF value in 1/sr, without the cosine factor;
+    - ``peaks(params)``, where the lobe has highlights: where they are (`brdffit.models.peaks.Peak`); none for a
+      diffuse lobe.
 
     Every lobe has two options of its own, declared here once (`COMMON_OPTIONS`):
 
@@ -95,6 +98,12 @@ class Lobe(abc.ABC):
         if self.offset:
             return ()
         return tuple(spec.name for spec in self.param_specs() if spec.name != amplitude)
+
+    def peaks(self, params: dict) -> tuple:
+        """Where the lobe peaks at these parameter values (local names), as `brdffit.models.peaks.Peak` values
+        (their ``lobe`` left empty), for the export's deviation pairs to draw directions there. Default: none (a
+        diffuse lobe; uniform pairs cover it)."""
+        return ()
 
     def canonical(self, params: dict) -> dict:
         """The same lobe with its parameters in canonical order (e.g. sub-lobes sorted), so that equivalent

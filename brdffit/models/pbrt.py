@@ -35,6 +35,7 @@ from .._lazy import module
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from .cook_torrance import CookTorrance
+from .peaks import Peak, scalar
 from .lobe import Lobe
 from .specs import roughness
 
@@ -77,6 +78,9 @@ class PbrtMaterial(Lobe):
             ParamSpec("k", 0.0, 0.0, MAX_K, colour=True,
                       doc='conductor "rgb k": extinction coefficient (0: a dielectric\'s Fresnel term)'),
         )
+
+    def peaks(self, params):
+        return (Peak("half", scalar(params, "roughness")),)  # the conductor's α (remaproughness false)
 
     def __call__(self, params, pair: LocalPair):
         t = params["amount"]

@@ -6,6 +6,7 @@ import dataclasses
 
 from .._lazy import module
 from ..geometry import LocalPair, mirror, safe_pow
+from .peaks import MIRROR, Peak, power_width, scalar
 from .lobe import Lobe
 from .specs import KS, exponent
 
@@ -27,6 +28,9 @@ class Phong(Lobe):
     def param_specs(self):
         return (KS, exponent())
 
+    def peaks(self, params):
+        return (Peak("cone", power_width(scalar(params, "n")), MIRROR),)  # (r·ωo)ⁿ about the mirror direction r
+
     def __call__(self, params, pair: LocalPair):
         r_dot_o = jnp.sum(mirror(pair.wi) * pair.wo, axis=-1)
         n = params["n"]
@@ -44,6 +48,9 @@ class BlinnPhong(Lobe):
 
     def param_specs(self):
         return (KS, exponent())
+
+    def peaks(self, params):
+        return (Peak("half", power_width(scalar(params, "n"))),)
 
     def __call__(self, params, pair: LocalPair):
         n = params["n"]

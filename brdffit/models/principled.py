@@ -32,6 +32,7 @@ from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
 from .diffuse import burley_shape
+from .peaks import Peak, scalar
 from .lobe import Lobe
 from .microfacet import DISTRIBUTIONS, smith
 
@@ -94,6 +95,14 @@ class Principled(Lobe):
             _unit("clearcoat", 0.0, "clearcoat amplitude (a second, GTR1 specular lobe with f0 = 0.04)"),
             _unit("clearcoat_gloss", 0.0, "clearcoat glossiness: GTR1 width lerp(0.1, 0.001, gloss)"),
         )
+
+    def peaks(self, params):
+        """The specular lobe (α = roughness², at least 0.001) and, with a clearcoat, its GTR1 lobe
+        (α = lerp(0.1, 0.001, clearcoat_gloss))."""
+        found = [Peak("half", max(0.001, scalar(params, "roughness") ** 2))]
+        if scalar(params, "clearcoat") > 0:
+            found.append(Peak("half", 0.1 + scalar(params, "clearcoat_gloss") * (0.001 - 0.1)))
+        return tuple(found)
 
     def __call__(self, params, pair: LocalPair):
         base = params["base_color"]

@@ -9,10 +9,12 @@ and ωo, so it is reciprocal.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from .._lazy import module
 from ..geometry import LocalPair, logistic, mirror
 from ..params import ParamSpec
+from .peaks import MIRROR, Peak, scalar
 from .lobe import Lobe
 from .specs import KS, RHO_D
 
@@ -62,6 +64,11 @@ class ToonSpecular(Lobe):
             ParamSpec("threshold", 0.95, 0.0, 1.0, unit="1", doc="r·ωo above which the highlight is on"),
             _width(),
         )
+
+    def peaks(self, params):
+        """A disc r·ωo > threshold about the mirror direction: a cone as wide as the disc."""
+        threshold = min(max(scalar(params, "threshold"), 1e-6), 1.0 - 1e-12)
+        return (Peak("cone", math.tan(math.acos(threshold)), MIRROR),)
 
     def __call__(self, params, pair: LocalPair):
         r_dot_o = jnp.sum(mirror(pair.wi) * pair.wo, axis=-1)

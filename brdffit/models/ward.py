@@ -6,6 +6,7 @@ import dataclasses
 
 from .._lazy import module
 from ..geometry import LocalPair
+from .peaks import Peak, scalar
 from .lobe import Lobe
 from .specs import KS, roughness
 
@@ -38,6 +39,9 @@ class Ward(Lobe):
     def param_specs(self):
         return (KS, roughness("alpha", doc="RMS slope of the surface"))
 
+    def peaks(self, params):
+        return (Peak("half", scalar(params, "alpha")),)
+
     def __call__(self, params, pair: LocalPair):
         return ward_lobe(pair, params["ks"], params["alpha"], params["alpha"], duer=False)
 
@@ -56,6 +60,9 @@ class WardAniso(Lobe):
             roughness("alpha_y", doc="RMS slope along the bitangent y"),
         )
 
+    def peaks(self, params):
+        return (Peak("half", scalar(params, "alpha_x")), Peak("half", scalar(params, "alpha_y")))
+
     def __call__(self, params, pair: LocalPair):
         return ward_lobe(pair, params["ks"], params["alpha_x"], params["alpha_y"], duer=False)
 
@@ -71,6 +78,9 @@ class WardDuer(Lobe):
 
     def param_specs(self):
         return (KS, roughness("alpha", doc="RMS slope of the surface"))
+
+    def peaks(self, params):
+        return (Peak("half", scalar(params, "alpha")),)
 
     def __call__(self, params, pair: LocalPair):
         return ward_lobe(pair, params["ks"], params["alpha"], params["alpha"], duer=True)
