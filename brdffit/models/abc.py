@@ -15,6 +15,7 @@ from .._lazy import module
 from ..geometry import LocalPair, safe_sqrt
 from ..params import ParamSpec
 from . import fresnel as fr
+from .peaks import Peak, scalar
 from .lobe import Lobe
 from .microfacet import v_cavity
 
@@ -49,6 +50,12 @@ class ABCSmooth(Lobe):
     def param_specs(self):
         return PARAMETERS
 
+    def peaks(self, params):
+        """A half-vector peak: ωi + ωo = 2 cosθd h, so ‖ωi,xy + ωo,xy‖² = 4 cos²θd sin²θh, and S = (1 + B x)^−C ≈
+        exp(−BC x) for small x: a Beckmann fall-off exp(−θh²/m²) of width m = 1/(2 cosθd √(BC)), at least
+        1/(2√(BC))."""
+        return (Peak("half", 0.5 / math.sqrt(scalar(params, "B") * scalar(params, "C"))),)
+
     def __call__(self, params, pair: LocalPair):
         sx, sy = pair.wi[..., 0] + pair.wo[..., 0], pair.wi[..., 1] + pair.wo[..., 1]
         dx, dy = pair.wi[..., 0] - pair.wo[..., 0], pair.wi[..., 1] - pair.wo[..., 1]
@@ -70,6 +77,11 @@ class ABCMicrofacet(Lobe):
 
     def param_specs(self):
         return PARAMETERS
+
+    def peaks(self, params):
+        """A half-vector peak: 1 − cosθh ≈ θh²/2 and S ≈ exp(−BC x) for small x, a Beckmann fall-off
+        exp(−θh²/m²) with m = √(2/(BC))."""
+        return (Peak("half", math.sqrt(2.0 / (scalar(params, "B") * scalar(params, "C")))),)
 
     def __call__(self, params, pair: LocalPair):
         d = _abc(1.0 - pair.cos_h, params["B"], params["C"])

@@ -22,6 +22,7 @@ from .._lazy import module
 from ..geometry import TINY, LocalPair
 from ..params import ParamSpec
 from .fresnel import schlick
+from .peaks import Peak, scalar
 from .lobe import Lobe
 from .specs import KS
 
@@ -68,6 +69,11 @@ class SGD(Lobe):
             ParamSpec("shadow_theta0", math.pi / 2, 0.0, math.pi / 2, unit="rad",
                       doc="fitted shadowing: onset angle θ0 (π/2: no shadowing)", fixed=True),
         )
+
+    def peaks(self, params):
+        """A half-vector peak of width √α: P22's exp(−x/α) in x = tan²θh falls like Beckmann's exp(−tan²θh/m²)
+        with m² = α (the (α + x/α)^−p factor only lengthens the tail)."""
+        return (Peak("half", math.sqrt(scalar(params, "alpha"))),)
 
     def __call__(self, params, pair: LocalPair):
         alpha, p = params["alpha"], params["p"]
