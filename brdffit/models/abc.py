@@ -15,9 +15,9 @@ from .._lazy import module
 from ..geometry import LocalPair, safe_sqrt
 from ..params import ParamSpec
 from . import fresnel as fr
-from .peaks import Peak, scalar
 from .lobe import Lobe
 from .microfacet import v_cavity
+from .peaks import Peak, scalar
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 

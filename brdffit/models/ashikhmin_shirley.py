@@ -8,8 +8,8 @@ from .._lazy import module
 from ..geometry import LocalPair, safe_div
 from ..params import ParamSpec
 from .fresnel import schlick
-from .peaks import Peak, power_width, scalar
 from .lobe import Lobe
+from .peaks import Peak, power_width, scalar
 from .specs import exponent
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX

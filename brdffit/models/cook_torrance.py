@@ -8,9 +8,9 @@ from typing import ClassVar
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
-from .peaks import Peak, scalar
 from .lobe import Lobe
 from .microfacet import ANISOTROPIC, DISTRIBUTIONS, SHADOWING
+from .peaks import Peak, scalar
 from .specs import KS, roughness
 
 __all__ = ["CookTorrance", "GGX", "FRESNEL_MODES"]

@@ -61,10 +61,10 @@ from .._lazy import module
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
-from .peaks import Peak, scalar
 from .lobe import Lobe
 from .lookup import multilinear
 from .microfacet import ggx_correlated
+from .peaks import Peak, scalar
 from .sheen import charlie_distribution, charlie_visibility
 from .specs import base_color, metallic, perceptual_roughness
 

@@ -8,8 +8,8 @@ import itertools
 from .._lazy import module
 from ..geometry import LocalPair, safe_pow
 from ..params import ParamSpec
-from .peaks import Peak, power_width, scalar
 from .lobe import Lobe
+from .peaks import Peak, power_width, scalar
 from .specs import KS, exponent
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX

@@ -35,8 +35,8 @@ from .._lazy import module
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from .cook_torrance import CookTorrance
-from .peaks import Peak, scalar
 from .lobe import Lobe
+from .peaks import Peak, scalar
 from .specs import roughness
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX

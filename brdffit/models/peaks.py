@@ -11,7 +11,9 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import numpy as np
+from .._lazy import module
+
+np = module("numpy")  # loaded on first use: the registry (`brdffit models`) does not need NumPy
 
 __all__ = ["Peak", "MIRROR", "power_width", "scalar"]
 

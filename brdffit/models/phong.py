@@ -6,8 +6,8 @@ import dataclasses
 
 from .._lazy import module
 from ..geometry import LocalPair, mirror, safe_pow
-from .peaks import MIRROR, Peak, power_width, scalar
 from .lobe import Lobe
+from .peaks import MIRROR, Peak, power_width, scalar
 from .specs import KS, exponent
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX

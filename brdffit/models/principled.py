@@ -32,9 +32,9 @@ from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import fresnel as fr
 from .diffuse import burley_shape
-from .peaks import Peak, scalar
 from .lobe import Lobe
 from .microfacet import DISTRIBUTIONS, smith
+from .peaks import Peak, scalar
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 

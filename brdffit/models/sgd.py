@@ -22,8 +22,8 @@ from .._lazy import module
 from ..geometry import TINY, LocalPair
 from ..params import ParamSpec
 from .fresnel import schlick
-from .peaks import Peak, scalar
 from .lobe import Lobe
+from .peaks import Peak, scalar
 from .specs import KS
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX

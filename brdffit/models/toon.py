@@ -14,8 +14,8 @@ import math
 from .._lazy import module
 from ..geometry import LocalPair, logistic, mirror
 from ..params import ParamSpec
-from .peaks import MIRROR, Peak, scalar
 from .lobe import Lobe
+from .peaks import MIRROR, Peak, scalar
 from .specs import KS, RHO_D
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX

@@ -6,8 +6,8 @@ import dataclasses
 
 from .._lazy import module
 from ..geometry import LocalPair
-from .peaks import Peak, scalar
 from .lobe import Lobe
+from .peaks import Peak, scalar
 from .specs import KS, roughness
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
