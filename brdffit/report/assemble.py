@@ -455,10 +455,11 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
         jobs.append(("renderer", lambda p: F.plot_renderer_view(p, measurements, free, fit_result,
                                                                 selection.target, errors)))
     figure_paths = []
-    for name, draw in jobs:
-        path = out / f"{name}.png"
-        draw(path)
-        figure_paths.append((str(path), captions[name]))
+    with F.drawing_style():
+        for name, draw in jobs:
+            path = out / f"{name}.png"
+            draw(path)
+            figure_paths.append((str(path), captions[name]))
     exports = exports if exports is not None else ExportLog(None)
     problems = [exports.problem] if exports.problem else []
     blocks = _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+import matplotlib
 import numpy as np
 from matplotlib.colors import LogNorm, TwoSlopeNorm
 from matplotlib.figure import Figure
@@ -22,6 +23,7 @@ from ..colour import ColourError, spectral_colour
 from ..render import difference, render_sphere, tonemap
 
 __all__ = [
+    "drawing_style",
     "DPI",
     "FIGSIZE",
     "slice_angles",
@@ -48,9 +50,9 @@ FIGSIZE = {
     "spectra": (12.0, 4.4),
 }
 
-# The height of the panels' titles (Axes.set_title's y; 1 is the top of the axes), given so that matplotlib does
-# not place them itself: it measures every tick label of the axes to clear them, at each draw (about a third of
-# the in-plane slices figure's drawing), for figures that have no tick label above their axes.
+# The height of the panels' titles (matplotlib's axes.titley; 1 is the top of the axes), given so that matplotlib
+# does not place them itself: it measures every tick label of the axes to clear them, at each draw (about a third
+# of the in-plane slices figure's drawing), for figures that have no tick label above their axes (`drawing_style`).
 TITLE_Y = 1.0
 
 # zlib's level for the PNGs: 1 writes them several times faster than PIL's default (6), for files about a third
@@ -84,6 +86,11 @@ _RGB = {"r": "tab:red", "g": "tab:green", "b": "tab:blue", "red": "tab:red", "gr
 
 
 # ------------------------------------------------------------------------------------------------ helpers
+def drawing_style():
+    """The settings the report draws its figures under (a context manager): the panels' titles at `TITLE_Y`."""
+    return matplotlib.rc_context({"axes.titley": TITLE_Y})
+
+
 def _new_figure(name: str) -> Figure:
     fig = Figure(figsize=FIGSIZE[name], dpi=DPI)
     if name in LAYOUT:
@@ -244,7 +251,7 @@ def plot_slices(path, measurements, fit_result, posterior=None, theta_i=None) ->
         ax.set_xlim(-90, 90)
         ax.set_title(f"θi = {np.degrees(a):.0f}°  ({int(near.sum())} samples within "
                      f"±{math.degrees(THETA_I_WINDOW):.0f}° "
-                     f"of θi and {math.degrees(PLANE_WINDOW):.1f}° of the plane)", fontsize=9, y=TITLE_Y)
+                     f"of θi and {math.degrees(PLANE_WINDOW):.1f}° of the plane)", fontsize=9)
         ax.set_xlabel("signed θo (°): < 0 towards the light, > 0 mirror side")
         ax.set_ylabel("f_r (1/sr)")
         ax.grid(True, which="major", alpha=0.3)
@@ -303,7 +310,7 @@ def plot_hemisphere(path, fit_result, theta_i: float = math.radians(30.0), chann
                     fontsize=7, ha="center", va="center", bbox=dict(fc="0.2", alpha=0.6, lw=0, pad=1))
         ax.plot([-np.sin(theta_i)], [0.0], "c+", ms=10, mew=1.5, label="mirror direction")
         ax.plot([np.sin(theta_i)], [0.0], "wx", ms=7, mew=1.5, label="light (ωi)")
-        ax.set_title(f"channel {names[c]}", fontsize=10, y=TITLE_Y)
+        ax.set_title(f"channel {names[c]}", fontsize=10)
         ax.set_xlabel("sinθo cosφo")
         ax.set_ylabel("sinθo sinφo")
         ax.set_aspect("equal")
@@ -367,7 +374,7 @@ def plot_residual_map(path, measurements, fit_result, bins: int = 18) -> str:
         n = count[c].sum()
         rms = float(np.sqrt(np.nanmean(mean[c] ** 2))) if np.isfinite(mean[c]).any() else float("nan")
         ax.set_title(f"channel {measurements.channels[c]}: {int(n)} samples, RMS of bin means {rms:.2g}",
-                     fontsize=9, y=TITLE_Y)
+                     fontsize=9)
         ax.set_xlabel("θh, half-vector angle (°)")
         ax.set_ylabel("θd, difference angle (°)")
     fig.suptitle(f"Relative residual (model − data)/data of {fit_result.spec}, mean per {90 / bins:.0f}° bin "
@@ -506,7 +513,7 @@ def plot_albedo(path, fit_result, channels=None, n: int = 46, albedo: np.ndarray
     ax.set_xlim(0, 90)
     ax.set_xlabel("θi, incidence angle (°)")
     ax.set_ylabel("directional albedo a(θi) (1)")
-    ax.set_title(f"Directional albedo of the fitted {fit_result.spec}\nmax {float(np.nanmax(albedo)):.3f}", y=TITLE_Y)
+    ax.set_title(f"Directional albedo of the fitted {fit_result.spec}\nmax {float(np.nanmax(albedo)):.3f}")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
     return _save(fig, path)
@@ -593,7 +600,7 @@ def plot_renderer_view(path, measurements, free_result, target_result, target: s
     for ax, (img, title) in zip(fig.subplots(1, 3), images):
         shown = _display(img, 1.0)
         ax.imshow(shown, cmap="gray" if shown.ndim == 2 else None, vmin=0, vmax=1)
-        ax.set_title(title, fontsize=10, y=TITLE_Y)
+        ax.set_title(title, fontsize=10)
         ax.set_xticks([]), ax.set_yticks([])
     fig.suptitle(f"The renderer's view ({resolution}×{resolution} px, key/fill/rim lights, Reinhard tone map): "
                  f"the data, the best free model and the best model {target} represents", fontsize=11)
@@ -628,7 +635,7 @@ def plot_spheres(path, measurements, fit_result, resolution: int = 160) -> str:
     for ax, img, title in ((axes[0], data, "measurement (k-NN interpolated)"), (axes[1], fitted, "fit")):
         shown = _display(img, 1.0)
         ax.imshow(shown, cmap="gray" if shown.ndim == 2 else None, vmin=0, vmax=1)
-        ax.set_title(title, fontsize=10, y=TITLE_Y)
+        ax.set_title(title, fontsize=10)
         ax.set_xticks([]), ax.set_yticks([])
     lit = diff[np.asarray(data).sum(axis=-1) > 0] if np.ndim(data) == 3 else diff
     vmax = float(np.percentile(lit, 99)) if lit.size else 1.0
