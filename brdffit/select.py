@@ -454,7 +454,7 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
         raise ValueError(f"reference must be 'data' or 'best', got {reference!r}")
     margin = (HELDOUT_MARGIN if criterion == "heldout" else DEFAULT_MARGIN) if margin is None else float(margin)
     rng, valid_rows, order = _shuffled_rows(measurements, seed)
-    fold_rows = np.array_split(order, folds) if criterion == "cv" else [order[: int(round(holdout * len(order)))]]
+    fold_rows = np.array_split(order, folds) if criterion == "cv" else [_held_out(order, holdout)]
     options = dict(loss=loss, seed=seed, **fit_options)
     train_rows = np.setdiff1d(valid_rows, fold_rows[0])
     screen = (screen and criterion != "cv") or criterion == "heldout"  # heldout: the screening fits are its test
@@ -554,14 +554,19 @@ def _shuffled_rows(measurements, seed: int):
     return rng, valid_rows, rng.permutation(valid_rows)
 
 
+def _held_out(order: np.ndarray, holdout: float) -> np.ndarray:
+    """The rows a ``heldout`` (or screened AIC/BIC) selection holds out: the first ``holdout`` fraction of its
+    random order (`_shuffled_rows`)."""
+    return order[: int(round(holdout * len(order)))]
+
+
 def _fitted_to_every_channel(selection: Selection, measurements, averaged, options: dict, holdout: float,
                              seed: int) -> Selection:
     """A selection made on channel averages (`_channel_averages`), with its chosen model fitted to every channel of
     ``measurements`` from the shape the averages gave it (the amplitudes solved per channel): first to the rows
     the comparison trained on, for its held-out error over every channel on the rows it held out, then from there
     to all the rows (the same compiled programs: the held-out rows are masked, not removed)."""
-    _, _, order = _shuffled_rows(averaged, seed)
-    held = order[: int(round(holdout * len(order)))]
+    held = _held_out(_shuffled_rows(averaged, seed)[2], holdout)
     chosen = selection.results[selection.chosen]
     specs = chosen.models[0].param_specs
     shape = {name: value for name, value in chosen.params.items() if not specs[name].colour}
