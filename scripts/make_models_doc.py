@@ -120,6 +120,13 @@ EQUATIONS = {
         "D = 1/(π α² ch⁴ (1 + tan²θh/α²)²) (Trowbridge-Reitz = GGX),  G2 = 1/(1 + Λ(ωi) + Λ(ωo)),\n"
         "Λ(ω) = (√(1 + α² tan²θ) − 1)/2,  α = roughness (remaproughness false),  F: exact complex-index Fresnel"
     ),
+    "roughplastic": (
+        "f = specular_reflectance · F(cd; η) D G1(ωi) G1(ωo)/(4 ci co)\n"
+        "  + diffuse_reflectance/(1 − R) · T(ci) T(co)/(π η²),  η = int_ior\n"
+        "D = GGX of width alpha,  G1 = 2/(1 + √(1 + α² tan²θ)),  F: exact dielectric Fresnel\n"
+        "T: the interface's transmittance at 64 cosines (Mitsuba's 32 × 32 visible-normal quadrature), linear between\n"
+        "R: the interface's internal reflectance (42 × 73 table in √α and √(η − 1), cubic convolution)"
+    ),
     "gltf": (
         "f = (1 − metallic) [(1 − specular · max_c F) base_color/π + specular F · D V]\n"
         "  + metallic (base_color + (1 − base_color) w(cd)) · D V\n"
@@ -197,6 +204,14 @@ NOTES = {
             "pbrt-v4 takes (roughness from 1e-3: below it pbrt's conductor is a perfect mirror; k = 0 is a "
             "dielectric's Fresnel term), so a fit is written as it is (`brdffit fit --for pbrt`, `brdffit export "
             "--to pbrt`). reflectance is a linear amplitude. Reciprocal.",
+    "roughplastic": "Mitsuba 3's `roughplastic` plugin (GGX, nonlinear false): a rough dielectric interface over a "
+                    "diffuse base, whose light enters through the interface (T), bounces inside (1/(1 − R)) and "
+                    "leaves through it again. T is computed as the plugin computes it; R is a smooth counterpart of "
+                    "the plugin's, whose own value jumps by up to 6e-3 between neighbouring η, and the export "
+                    "corrects the written diffuse_reflectance for the difference, so that Mitsuba renders the fit "
+                    "exactly (docs/export.md, \"Mitsuba's roughplastic\"; tests/test_roughplastic.py). Every "
+                    "parameter is declared in the plugin's range (`brdffit fit --for mitsuba`). diffuse_reflectance "
+                    "and specular_reflectance are linear amplitudes. Reciprocal.",
     "gltf": "The BRDF a glTF 2.0 file describes: its metallic-roughness material as the specification's Appendix B "
             "writes it, with KHR_materials_ior (ior) and KHR_materials_specular (specular, specular_color). Every "
             "parameter is declared inside the range a glTF file accepts, so a fit is a material any glTF viewer "

@@ -45,6 +45,8 @@ __all__ = [
     "gltf_sheen_lookup",
     "blender",
     "pbrt",
+    "roughplastic",
+    "mitsuba_rough_transmittance",
     "sheen",
     "charlie_sheen",
     "charlie_lambda",
@@ -945,6 +947,130 @@ def pbrt(theta_i, phi_i, theta_o, phi_o, reflectance, amount, roughness, eta, k)
     return _masked(pair, (1.0 - amount) * _col(reflectance) / np.pi + amount * conductor)
 
 
+def _mitsuba_square_to_disk(u, v):
+    """Mitsuba 3 ``warp::square_to_uniform_disk_concentric`` (Shirley & Chiu 1997)."""
+    x, y = 2.0 * u - 1.0, 2.0 * v - 1.0
+    quadrant_1_or_3 = np.abs(x) < np.abs(y)
+    r = np.where(quadrant_1_or_3, y, x)
+    rp = np.where(quadrant_1_or_3, x, y)
+    phi = 0.25 * np.pi * rp / r
+    phi = np.where(quadrant_1_or_3, 0.5 * np.pi - phi, phi)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+def _mitsuba_ggx_visible_normal(wi, alpha, u, v):
+    """Mitsuba 3 ``MicrofacetDistribution::sample`` with visible normals, GGX (``sample_visible_11``; Heitz & d'Eon
+    2014), transcribed step by step: stretch ωi, sample the slope of the unit distribution, rotate back by ωi's
+    azimuth, unstretch, normalise (−slope, 1). ``wi`` (3,), ``u``, ``v`` arrays; returns m, shape u.shape + (3,)."""
+    wp = np.array([alpha * wi[0], alpha * wi[1], wi[2]])
+    wp = wp / np.linalg.norm(wp)
+    sin2 = wp[0] ** 2 + wp[1] ** 2
+    if sin2 <= 4.0 * np.finfo(float).eps:  # Frame3f::sincos_phi at the pole
+        sin_phi, cos_phi = 0.0, 1.0
+    else:
+        sin_phi, cos_phi = np.clip(wp[1] / np.sqrt(sin2), -1, 1), np.clip(wp[0] / np.sqrt(sin2), -1, 1)
+    cos_t = wp[2]
+    px, py = _mitsuba_square_to_disk(u, v)
+    s = 0.5 * (1.0 + cos_t)
+    py = np.sqrt(np.maximum(1.0 - px * px, 0.0)) * (1.0 - s) + py * s
+    pz = np.sqrt(np.maximum(1.0 - px * px - py * py, 0.0))
+    sin_t = np.sqrt(max(1.0 - cos_t * cos_t, 0.0))
+    norm = 1.0 / (sin_t * py + cos_t * pz)
+    sx, sy = (cos_t * py - sin_t * pz) * norm, px * norm
+    sx, sy = (cos_phi * sx - sin_phi * sy) * alpha, (sin_phi * sx + cos_phi * sy) * alpha
+    m = np.stack([-sx, -sy, np.ones_like(sx)], axis=-1)
+    return m / np.linalg.norm(m, axis=-1, keepdims=True)
+
+
+def _mitsuba_g1(w, m, alpha):
+    """Mitsuba 3 GGX ``smith_g1(v, m)``: 2/(1 + √(1 + α² tan²θv)), 0 where v·m and cosθv differ in sign."""
+    with np.errstate(all="ignore"):
+        g = 2.0 / (1.0 + np.sqrt(1.0 + alpha**2 * (w[..., 0] ** 2 + w[..., 1] ** 2) / w[..., 2] ** 2))
+    return np.where(np.sum(w * m, axis=-1) * w[..., 2] <= 0.0, 0.0, g)
+
+
+def mitsuba_rough_transmittance(alpha: float, eta: float) -> np.ndarray:
+    """Mitsuba 3's ``eval_transmittance`` (include/mitsuba/render/microfacet.h) at the 64 cosines
+    max(1e-6, j/63) that ``roughplastic`` tabulates: Σ over the 32 × 32 Gauss-Legendre nodes mapped to [0, 1]² of
+    w_x w_y/4 (1 − F(ωi·m)) G1(ωt, m), m the visible normal of the node, ωt = m (c/η − cosθt) − ωi/η the
+    refracted direction (c = ωi·m, cosθt = √(1 − (1 − c²)/η²)), 0 where ωt does not cross the surface."""
+    x, w = np.polynomial.legendre.leggauss(32)
+    nx, ny = np.meshgrid(x, x)
+    wx, wy = np.meshgrid(w, w)
+    u, v, weight = 0.5 * nx + 0.5, 0.5 * ny + 0.5, 0.25 * wx * wy
+    out = []
+    for mu in np.maximum(1e-6, np.linspace(0.0, 1.0, 64)):
+        wi = np.array([np.sqrt(1.0 - mu * mu), 0.0, mu])
+        m = _mitsuba_ggx_visible_normal(wi, alpha, u, v)
+        c = m @ wi
+        cos_t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) / eta**2, 0.0))
+        r_s = (c - eta * cos_t) / (c + eta * cos_t)
+        r_p = (cos_t - eta * c) / (cos_t + eta * c)
+        fresnel = 0.5 * (r_s**2 + r_p**2)
+        wt = (c / eta - cos_t)[..., None] * m - wi / eta
+        value = np.where(wt[..., 2] * wi[2] >= 0.0, 0.0, _mitsuba_g1(wt, m, alpha) * (1.0 - fresnel))
+        out.append(np.sum(value * weight))
+    return np.array(out)
+
+
+@functools.lru_cache(maxsize=None)
+def _roughplastic_table():
+    """The R_smooth table shipped with brdffit (data: brdffit/data/roughplastic_internal_reflectance.npz)."""
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "brdffit" / "data" / "roughplastic_internal_reflectance.npz"
+    data = np.load(path)
+    return data["sqrt_alpha"], data["sqrt_eta_minus_1"], data["values"]
+
+
+def _keys_cubic(table_x, table_y, values, x, y):
+    """Keys 1981 cubic convolution (a = −1/2) on a uniform grid, neighbours clamped at the edges: Σ over the 4 × 4
+    nodes around (x, y) of W(x − x_i) W(y − y_j) v_ij, W(s) = 1.5|s|³ − 2.5|s|² + 1 for |s| ≤ 1 and
+    −0.5|s|³ + 2.5|s|² − 4|s| + 2 for 1 < |s| < 2 (in node spacings)."""
+    def kernel(s):
+        s = abs(s)
+        return 1.5 * s**3 - 2.5 * s**2 + 1.0 if s <= 1.0 else (-0.5 * s**3 + 2.5 * s**2 - 4.0 * s + 2.0 if s < 2.0
+                                                                else 0.0)
+
+    def cell(nodes, t):
+        h = nodes[1] - nodes[0]
+        c = min(max((t - nodes[0]) / h, 0.0), len(nodes) - 1.0)
+        i = min(math.floor(c), len(nodes) - 2)
+        return i, c
+
+    i, cx = cell(table_x, x)
+    j, cy = cell(table_y, y)
+    total = 0.0
+    for a in range(i - 1, i + 3):
+        for b in range(j - 1, j + 3):
+            total += kernel(cx - a) * kernel(cy - b) * values[min(max(a, 0), len(table_x) - 1),
+                                                                  min(max(b, 0), len(table_y) - 1)]
+    return total
+
+
+@_quiet
+def roughplastic(theta_i, phi_i, theta_o, phi_o, diffuse_reflectance, specular_reflectance, alpha, int_ior):
+    """Mitsuba 3's ``roughplastic`` (GGX, ``nonlinear`` false, ext_ior 1), transcribed from
+    ``RoughPlastic::eval`` (src/bsdfs/roughplastic.cpp): ks F D G/(4 ci co) + ρ/(1 − R) π⁻¹ η⁻² T(ci) T(co), with
+    D, G the GGX distribution and separable Smith masking and F the dielectric Fresnel term at ωi·h (the
+    cook-torrance reference), T `mitsuba_rough_transmittance` read by ``lerp_gather`` (x = 63 c, index
+    min(⌊x⌋, 62), linear), and R brdffit's tabulated R_smooth (docs/export.md) read by Keys' cubic convolution in
+    √α and √(η − 1)."""
+    pair = Pair(theta_i, phi_i, theta_o, phi_o)
+    specular = cook_torrance(theta_i, phi_i, theta_o, phi_o, specular_reflectance, alpha,
+                             distribution="ggx", shadowing="smith", fresnel="dielectric", eta=int_ior)
+    table = mitsuba_rough_transmittance(alpha, int_ior)
+
+    def lerp_gather(c):
+        x = np.clip(c, 0.0, 1.0) * 63.0
+        j = np.minimum(np.floor(x), 62).astype(int)
+        return table[j] + (table[j + 1] - table[j]) * (x - j)
+
+    r = _keys_cubic(*_roughplastic_table(), math.sqrt(alpha), math.sqrt(int_ior - 1.0))
+    diffuse = (lerp_gather(pair.ci) * lerp_gather(pair.co) / (np.pi * int_ior**2 * (1.0 - r)))[:, None]
+    return _masked(pair, specular + _col(diffuse_reflectance) * diffuse)
+
+
 REFERENCES = {
     "lambert": lambda ti, pi_, to, po, p: lambert(ti, pi_, to, po, p["rho_d"]),
     "oren-nayar": lambda ti, pi_, to, po, p: oren_nayar(ti, pi_, to, po, p["rho_d"], p["sigma"]),
@@ -966,6 +1092,7 @@ REFERENCES = {
     "gltf": lambda ti, pi_, to, po, p: gltf(ti, pi_, to, po, **p),
     "blender": lambda ti, pi_, to, po, p: blender(ti, pi_, to, po, **p),
     "pbrt": lambda ti, pi_, to, po, p: pbrt(ti, pi_, to, po, **p),
+    "roughplastic": lambda ti, pi_, to, po, p: roughplastic(ti, pi_, to, po, **p),
     "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),
     "abc-microfacet": lambda ti, pi_, to, po, p: abc_microfacet(ti, pi_, to, po, **p),
     "sgd": lambda ti, pi_, to, po, p: sgd(ti, pi_, to, po, **p),

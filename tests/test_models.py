@@ -118,6 +118,8 @@ OTHER_CASES = [
                       "clearcoat_roughness": 0.25, "sheen_color": [0.6, 0.3, 0.45], "sheen_roughness": 0.4}),
     Case("pbrt", {}, {"reflectance": [0.7, 0.4, 0.15], "amount": 0.35, "roughness": 0.3, "eta": [0.2, 0.9, 1.45],
                       "k": [3.2, 0.6, 0.001]}),
+    Case("roughplastic", {}, {"diffuse_reflectance": [0.7, 0.4, 0.15], "specular_reflectance": [0.9, 0.8, 0.95],
+                              "alpha": 0.3, "int_ior": 1.7}),
     Case("ashikhmin-shirley", {}, {"rs": RS, "n": 35.0}),
     Case("ashikhmin-shirley-aniso", {}, {"rs": RS, "nu": 12.0, "nv": 150.0}),
     Case("lafortune", {}, {"ks_1": KS, "cxy_1": -0.8, "cz_1": 0.6, "n_1": 6.5}),
@@ -171,7 +173,8 @@ def _values(case_id):
 # The lobes and options of the modern microfacet, Burley and sheen models: against the reference at random
 # directions above the horizon to 1e-12 relative (the fixed configurations above hold every lobe to 1e-10).
 MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "gltf", "blender",
-                                                  "pbrt", "abc-smooth", "abc-microfacet", "sgd")
+                                                  "pbrt", "roughplastic", "abc-smooth", "abc-microfacet",
+                                                  "sgd")
           or case.options.get("distribution") in ("std", "gtr")
           or case.options.get("anisotropic") is True and case.spec != "lafortune"
           or case.options.get("shadowing") == "smith-correlated"]

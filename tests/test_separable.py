@@ -73,7 +73,8 @@ def test_a_lobe_without_a_declared_offset_is_zero_with_its_amplitudes_at_zero(na
 
 def test_the_amplitude_declarations_are_the_ones_the_engine_projects():
     declared = {s.name for lobe in models.names() for s in models.lobe_class(lobe)().param_specs() if s.linear}
-    assert declared == {"rho_d", "ks", "rs", "rho_shade", "A", "base_color", "reflectance"} | {f"ks_{j}" for j in (1,)}
+    assert declared == ({"rho_d", "ks", "rs", "rho_shade", "A", "base_color", "reflectance", "diffuse_reflectance",
+                         "specular_reflectance"} | {f"ks_{j}" for j in (1,)})
     conductor = models.get("cook-torrance(fresnel=conductor)").param_specs
     assert not conductor["eta"].linear and not conductor["k"].linear  # colour, but not affine
 

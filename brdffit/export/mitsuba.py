@@ -15,6 +15,9 @@ Plugins written (Mitsuba 3 ``src/bsdfs/``; parameters as its plugin tables docum
 - ``blendbsdf`` (``weight`` t): (1 − t) first + t second, for sums: each part scaled by 1/its weight.
 - ``principled`` with every parameter of brdffit's ``principled`` lobe, for a model that is that lobe alone: the
   lobe evaluates what the plugin evaluates (`brdffit.models.principled`), so the export is exact.
+- ``roughplastic`` (GGX, ``nonlinear`` false) with the parameters of brdffit's ``roughplastic`` lobe, for a model
+  that is that lobe alone, the diffuse reflectance corrected by the plugin's own internal reflectance
+  (`brdffit.models.roughplastic`): exact.
 
 A sum A + B is written exactly as a blend of 2A and 2B: ``blendbsdf`` takes convex combinations, and each part's
 amplitude (``reflectance``, ``specular_reflectance``) is scaled by the inverse of its weight. Values above 1 go
@@ -45,7 +48,7 @@ from .terms import check_channels
 __all__ = ["write", "evaluate_in_mitsuba", "check_channels", "EXPORTABLE"]
 
 EXPORTABLE = ("lambert (any number, summed) and isotropic cook-torrance or ggx lobes with any Fresnel mode, any number, "
-              "summed; or principled alone")
+              "summed; or principled or roughplastic alone")
 # Where a principled part shares a blend with other parts, their weight is at least this much.
 _MIN_OTHER_WEIGHT = 1e-3
 
@@ -170,18 +173,47 @@ def _schlick_leaves(schlick: list, channels: int, others: bool, notes: list) -> 
     return leaves
 
 
-def _principled_alone(model: tm.Model) -> bool:
-    return len(model.lobes) == 1 and model.lobes[0].name == "principled"
+def _principled_leaf(model: tm.Model, local: dict, notes: list) -> _Leaf:
+    """The ``principled`` plugin of brdffit's ``principled`` lobe, parameter for parameter (every one in [0, 1], as
+    the plugin takes them)."""
+    params = [("rgb", "base_color", local["base_color"])]
+    params += [("float", name, float(value)) for name, value in local.items() if name != "base_color"]
+    return _Leaf("principled", params, None, weight=1.0, parts=[(model.lobes[0], local)])
 
 
-def _principled_leaf(model: tm.Model) -> _Leaf:
-    """The ``principled`` plugin of a model that is brdffit's ``principled`` lobe alone, parameter for parameter
-    (every one in [0, 1], as the plugin takes them)."""
-    local = model.layout.local_params(model.params, 0)
-    params = [("rgb", "base_color", np.asarray(local["base_color"], dtype=float))]
-    params += [("float", name, float(np.asarray(value))) for name, value in local.items() if name != "base_color"]
-    return _Leaf("principled", params, None, weight=1.0,
-                 parts=[(model.lobes[0], {k: np.asarray(v, dtype=float) for k, v in local.items()})])
+def _roughplastic_leaf(model: tm.Model, local: dict, notes: list) -> _Leaf:
+    """The ``roughplastic`` plugin of brdffit's ``roughplastic`` lobe: its parameters, with the diffuse reflectance
+    ρ (1 − R_int)/(1 − R_table), R_int the plugin's own internal reflectance (`brdffit.models.roughplastic`), so
+    that the plugin's ρ/(1 − R_int) is the lobe's; clipped to the plugin's [0, 1] where that exceeds it (the
+    part evaluated is then the clipped one, and the deviation says so)."""
+    from ..models import roughplastic as rp
+
+    alpha, eta = float(local["alpha"]), float(local["int_ior"])
+    table = float(rp.internal_reflectance_table(alpha, eta, xp=np))
+    factor = (1.0 - rp.internal_reflectance(alpha, eta)) / (1.0 - table)
+    exact = local["diffuse_reflectance"] * factor
+    rho = np.clip(exact, 0.0, 1.0)
+    if np.any(exact > 1.0):
+        notes.append(f"the diffuse reflectance that reproduces the fit, {', '.join(tm.number(v) for v in exact)}, "
+                     f"exceeds the plugin's 1 (it is ρ (1 - R_int)/(1 - R_table) = ρ × {factor:.6g}, R_int the "
+                     "plugin's internal reflectance, R_table brdffit's): written clipped to 1")
+    params = [("string", "distribution", "ggx"), ("float", "alpha", alpha), ("float", "int_ior", eta),
+              ("float", "ext_ior", 1.0), ("boolean", "nonlinear", False), ("rgb", "diffuse_reflectance", rho),
+              ("rgb", "specular_reflectance", local["specular_reflectance"])]
+    return _Leaf("roughplastic", params, None, weight=1.0,
+                 parts=[(model.lobes[0], {**local, "diffuse_reflectance": rho / factor})])
+
+
+# Mitsuba plugins that are one brdffit lobe exactly: a model of that lobe alone is written as the plugin.
+_PLUGIN_LOBES = {"principled": _principled_leaf, "roughplastic": _roughplastic_leaf}
+
+
+def _plugin_alone(model: tm.Model, notes: list) -> _Leaf | None:
+    """The plugin of a model that is one of `_PLUGIN_LOBES` alone; None for any other model."""
+    if len(model.lobes) != 1 or model.lobes[0].name not in _PLUGIN_LOBES:
+        return None
+    local = {k: np.asarray(v, dtype=float) for k, v in model.layout.local_params(model.params, 0).items()}
+    return _PLUGIN_LOBES[model.lobes[0].name](model, local, notes)
 
 
 def _weigh(leaves: list[_Leaf]) -> list[_Leaf]:
@@ -317,7 +349,8 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     """
     check_channels(model, "Mitsuba 3")
     notes: list[str] = []
-    leaves = [_principled_leaf(model)] if _principled_alone(model) else _weigh(_leaves(model, notes))
+    alone = _plugin_alone(model, notes)
+    leaves = [alone] if alone is not None else _weigh(_leaves(model, notes))
     parts = [part for leaf in leaves for part in leaf.parts]
     written = _evaluator(parts, model.channels)
     reference = model if source is None else source

@@ -22,6 +22,7 @@ from .layout import layout
 from .pbrt import PbrtMaterial
 from .phong import BlinnPhong, Phong
 from .principled import Principled
+from .roughplastic import RoughPlastic
 from .sgd import SGD
 from .sheen import CharlieSheen, Sheen
 from .toon import ToonDiffuse, ToonSpecular
@@ -58,6 +59,7 @@ _LOBES: dict[str, type[Lobe]] = {
         GltfMaterial,
         BlenderPrincipled,
         PbrtMaterial,
+        RoughPlastic,
         ToonDiffuse,
         ToonSpecular,
     )
