@@ -47,8 +47,8 @@ from .terms import check_channels
 
 __all__ = ["write", "evaluate_in_mitsuba", "check_channels", "EXPORTABLE"]
 
-EXPORTABLE = ("lambert (any number, summed) and isotropic cook-torrance or ggx lobes with any Fresnel mode, any number, "
-              "summed; or principled or roughplastic alone")
+EXPORTABLE = ("lambert (any number, summed) and isotropic cook-torrance or ggx lobes with any Fresnel mode, any "
+              "number, summed; or principled or roughplastic alone")
 # Where a principled part shares a blend with other parts, their weight is at least this much.
 _MIN_OTHER_WEIGHT = 1e-3
 

@@ -296,7 +296,8 @@ class RoughPlastic(Lobe):
     def param_specs(self):
         return (
             ParamSpec("diffuse_reflectance", 0.5, 0.0, 1.0, colour=True, linear=True,
-                      doc="ρ, the diffuse base's albedo (the export writes ρ (1 − R_int)/(1 − R_table): module doc)"),
+                      doc="ρ, the diffuse base's albedo (the Mitsuba export corrects it for the plugin's internal "
+                          "reflectance: docs/export.md)"),
             ParamSpec("specular_reflectance", 1.0, 0.0, 1.0, colour=True, linear=True,
                       doc="ks, the factor on the interface's specular reflection (1 for a physical interface)"),
             roughness("alpha", default=0.1, doc="the GGX width α of the interface"),
