@@ -20,8 +20,8 @@ the plugin computes when it loads:
   2 mean_j(R(μ_j; 1/η) μ_j), R(μ; η) the same expectation of F(ωi·m; η) G1(ωr, m), ωr the reflected direction,
   on 128 × 128 nodes (η < 1 inside).
 
-`transmittance` and `internal_reflectance` compute both as the plugin does, in NumPy or JAX (``xp``). The lobe
-evaluates T exactly so. R_int is a mean over evenly spaced cosines of an integrand with a kink at the critical
+`transmittance` (NumPy or JAX) and `internal_reflectance` (NumPy) compute both as the plugin does. The lobe
+evaluates T exactly so, in JAX. R_int is a mean over evenly spaced cosines of an integrand with a kink at the critical
 angle: it jumps by up to 6e-3 between nearby α and η, and costs 26 ms per evaluation in JAX, so the lobe reads
 instead a smooth counterpart R_smooth (`smooth_internal_reflectance`: the same rule applied to the integrand
 without its kink) from a table (`internal_reflectance_table`), and the export writes ρ (1 − R_int)/(1 − R_table)
