@@ -186,3 +186,26 @@ def test_a_rough_plastic_is_recovered_by_a_fit():
     assert float(result.params["int_ior"]) == pytest.approx(truth["int_ior"], rel=0.03)
     np.testing.assert_allclose(np.asarray(result.params["diffuse_reflectance"]), truth["diffuse_reflectance"],
                                rtol=0.03)
+
+
+def test_synth_fit_export_round_trip_through_the_cli(mi, tmp_path):
+    """A rough plastic synthesised, fitted and exported with the CLI (in this process, `brdffit.cli.main`): the
+    parameters come back and Mitsuba's plugin, read from the export, evaluates the fitted model."""
+    from brdffit.cli import EXIT_OK, main
+
+    data, out = tmp_path / "plastic.h5", tmp_path / "material.xml"
+    assert main(["synth", "roughplastic", "--param", "diffuse_reflectance=0.5,0.35,0.2", "--param", "alpha=0.25",
+                 "--param", "int_ior=1.45", "--pattern", "half-diff", "--n", "3000", "--noise", "relative:0.005",
+                 "--seed", "4", "--out", str(data), "--quiet"]) == EXIT_OK
+    assert main(["fit", str(data), "--model", "roughplastic", "--out", str(tmp_path / "fit"), "--no-report",
+                 "--quiet"]) == EXIT_OK
+    result = brdffit.FitResult.load(tmp_path / "fit" / "result.h5")
+    assert result.converged, result.summary()
+    assert float(result.params["alpha"]) == pytest.approx(0.25, rel=0.03)
+    assert float(result.params["int_ior"]) == pytest.approx(1.45, rel=0.03)
+    assert main(["export", str(tmp_path / "fit" / "result.h5"), "--to", "mitsuba", "--out", str(out)]) == EXIT_OK
+    text = out.read_text()
+    assert 'type="roughplastic"' in text and "exact" in text and "blendbsdf" not in text
+    wi, wo = random_pairs(2000, seed=8)
+    f = np.asarray(evaluate_dirs(result.model, wi, wo))
+    assert np.percentile(_relative(f, evaluate_in_mitsuba(text, wi, wo)), 95) <= TOLERANCE
