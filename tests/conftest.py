@@ -61,3 +61,11 @@ def pytest_collection_modifyitems(config, items):
 def rng():
     """A seeded NumPy generator, so that random test inputs are the same on every run."""
     return np.random.default_rng(20240607)
+
+
+@pytest.fixture(scope="module")
+def mi():
+    """Mitsuba 3 in its ``scalar_rgb`` variant; the test skips where it is not installed."""
+    mitsuba = pytest.importorskip("mitsuba", reason="Mitsuba 3 (test extra) is not installed")
+    mitsuba.set_variant("scalar_rgb")
+    return mitsuba

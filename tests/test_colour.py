@@ -179,13 +179,6 @@ def test_measurements_to_rgb():
 
 
 # -------------------------------------------------------------------------------------------------- exports
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba", reason="Mitsuba 3 (test extra) is not installed")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
-
-
 def test_spectral_model_exports_to_mitsuba_as_its_rgb_model(mi):
     from brdffit.export.mitsuba import evaluate_in_mitsuba
 

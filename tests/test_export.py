@@ -26,13 +26,6 @@ N_PAIRS = 2000
 
 
 @pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba", reason="Mitsuba 3 (test extra) is not installed")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
-
-
-@pytest.fixture(scope="module")
 def pairs():
     return random_pairs(N_PAIRS, seed=7)
 

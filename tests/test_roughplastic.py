@@ -1,9 +1,7 @@
 """The ``roughplastic`` lobe against Mitsuba 3's ``roughplastic`` plugin, which its export claims to reproduce
 exactly; its transmittance against an independent quadrature of its definition; its table of the internal
-reflectance against the plugin's computation; gradients, reciprocity and recovery by a fit.
-
-Mitsuba runs in float32 (``scalar_rgb``), brdffit in float64: the comparison is relative, at the 95th percentile of
-2,000 direction pairs uniform in solid angle, as for the principled plugin (tests/test_principled.py).
+reflectance against the plugin's computation; gradients, reciprocity and recovery by a fit. The comparisons with
+Mitsuba are tests/mitsuba_plugins.py's.
 """
 
 import math
@@ -12,15 +10,12 @@ import numpy as np
 import pytest
 
 import brdffit
-from brdffit import models
+from brdffit import models, synth
 from brdffit.export import export
-from brdffit.export.mitsuba import evaluate_in_mitsuba
 from brdffit.export.terms import random_pairs
 from brdffit.models import roughplastic as rp
-from brdffit import synth
 from brdffit.models.model import Model, evaluate_dirs
-
-TOLERANCE = 1e-4  # relative, 95th percentile (float32 against float64)
+from mitsuba_plugins import TOLERANCE, both, deviations, relative, synth_fit_export
 
 PARAMETER_SETS = {
     "glossy plastic": dict(diffuse_reflectance=[0.8, 0.3, 0.1], alpha=0.05, int_ior=1.5),
@@ -31,15 +26,6 @@ PARAMETER_SETS = {
 }
 
 
-@pytest.fixture(scope="module")
-def mi():
-    mitsuba = pytest.importorskip("mitsuba", reason="Mitsuba 3 (test extra) is not installed")
-    mitsuba.set_variant("scalar_rgb")
-    return mitsuba
-
-
-def _relative(f, g):
-    return np.abs(f - g) / np.maximum(np.abs(g), 1e-30)
 
 
 @pytest.mark.parametrize("name", PARAMETER_SETS)
@@ -47,11 +33,9 @@ def test_the_export_evaluates_in_mitsuba_as_the_lobe(mi, name):
     model = models.get("roughplastic", **PARAMETER_SETS[name])
     text = export(model, "mitsuba")
     assert 'type="roughplastic"' in text and "blendbsdf" not in text and "unbounded" not in text, text
-    wi, wo = random_pairs(2000, seed=3)
-    f = np.asarray(evaluate_dirs(model, wi, wo))
-    g = evaluate_in_mitsuba(text, wi, wo)
+    f, g = both(model, text, seed=3)
     assert np.all(g >= 0) and np.mean(g > 0) > 0.99
-    rel = _relative(f, g)
+    rel = relative(f, g)
     assert np.percentile(rel, 95) <= TOLERANCE and np.median(rel) < 1e-5, (np.percentile(rel, 95), rel.max())
 
 
@@ -66,8 +50,7 @@ def test_a_white_base_at_the_bound_is_written_in_range_with_its_deviation(mi):
     model = models.get("roughplastic", diffuse_reflectance=1.0, alpha=alpha, int_ior=eta)
     text = export(model, "mitsuba")
     assert '<rgb name="diffuse_reflectance" value="1, 1, 1"/>' in text and "clipped to 1" in text
-    wi, wo = random_pairs(2000, seed=3)
-    rel = _relative(np.asarray(evaluate_dirs(model, wi, wo)), evaluate_in_mitsuba(text, wi, wo))
+    rel = deviations(model, text, seed=3)
     assert np.max(rel) <= (factor - 1.0) + 1e-5
     stated = float(text.split("largest relative error ")[1].split(" ")[0])
     assert 0.1 * (factor - 1.0) <= stated <= (factor - 1.0) + 1e-5
@@ -189,23 +172,12 @@ def test_a_rough_plastic_is_recovered_by_a_fit():
 
 
 def test_synth_fit_export_round_trip_through_the_cli(mi, tmp_path):
-    """A rough plastic synthesised, fitted and exported with the CLI (in this process, `brdffit.cli.main`): the
-    parameters come back and Mitsuba's plugin, read from the export, evaluates the fitted model."""
-    from brdffit.cli import EXIT_OK, main
-
-    data, out = tmp_path / "plastic.h5", tmp_path / "material.xml"
-    assert main(["synth", "roughplastic", "--param", "diffuse_reflectance=0.5,0.35,0.2", "--param", "alpha=0.25",
-                 "--param", "int_ior=1.45", "--pattern", "half-diff", "--n", "3000", "--noise", "relative:0.005",
-                 "--seed", "4", "--out", str(data), "--quiet"]) == EXIT_OK
-    assert main(["fit", str(data), "--model", "roughplastic", "--out", str(tmp_path / "fit"), "--no-report",
-                 "--quiet"]) == EXIT_OK
-    result = brdffit.FitResult.load(tmp_path / "fit" / "result.h5")
+    """A rough plastic synthesised, fitted and exported with the CLI: the parameters come back and Mitsuba's plugin,
+    read from the export, evaluates the fitted model."""
+    result, text = synth_fit_export(tmp_path, "roughplastic",
+                                    dict(diffuse_reflectance=[0.5, 0.35, 0.2], alpha=0.25, int_ior=1.45), n=3000)
     assert result.converged, result.summary()
     assert float(result.params["alpha"]) == pytest.approx(0.25, rel=0.03)
     assert float(result.params["int_ior"]) == pytest.approx(1.45, rel=0.03)
-    assert main(["export", str(tmp_path / "fit" / "result.h5"), "--to", "mitsuba", "--out", str(out)]) == EXIT_OK
-    text = out.read_text()
     assert 'type="roughplastic"' in text and "exact" in text and "blendbsdf" not in text
-    wi, wo = random_pairs(2000, seed=8)
-    f = np.asarray(evaluate_dirs(result.model, wi, wo))
-    assert np.percentile(_relative(f, evaluate_in_mitsuba(text, wi, wo)), 95) <= TOLERANCE
+    assert np.percentile(deviations(result.model, text, seed=8), 95) <= TOLERANCE
