@@ -73,25 +73,21 @@ def cosines():
     return np.maximum(1e-6, np.linspace(0.0, 1.0, TRANSMITTANCE_NODES))
 
 
-def _gauss_legendre(n: int):
-    """Nodes mapped to [0, 1] and weights (summing to 1) of the n-point Gauss-Legendre rule, on an n × n grid as
-    flat arrays: the plugin's ``quad::gauss_legendre`` nodes x ↦ x/2 + 1/2, weights w_x w_y / 4."""
+@functools.cache
+def _quadrature(n: int):
+    """The plugin's n × n Gauss-Legendre rule over the sampling's unit square (``quad::gauss_legendre``, nodes
+    x ↦ x/2 + 1/2, weights w_x w_y/4), as flat arrays: the nodes already mapped to the unit disk by Shirley &
+    Chiu's concentric map (Mitsuba's ``warp::square_to_uniform_disk_concentric``), the first step of GGX's
+    ``sample_visible_11``, and the weights (summing to 1). The same for every α and η: computed once."""
     x, w = np.polynomial.legendre.leggauss(n)
-    u1, u2 = np.meshgrid(0.5 * x + 0.5, 0.5 * x + 0.5, indexing="xy")
+    u1, u2 = np.meshgrid(x, x, indexing="xy")  # 2 (x/2 + 1/2) − 1 = x
     w1, w2 = np.meshgrid(w, w, indexing="xy")
-    return u1.ravel(), u2.ravel(), (0.25 * w1 * w2).ravel()
-
-
-def _concentric_disk(u1, u2, xp):
-    """Shirley & Chiu's concentric map of the unit square to the unit disk (Mitsuba's
-    ``warp::square_to_uniform_disk_concentric``)."""
-    x, y = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
-    steep = np.abs(x) < np.abs(y)
-    r = np.where(steep, y, x)
-    rp = np.where(steep, x, y)
-    phi = 0.25 * math.pi * rp / r
+    u1, u2 = u1.ravel(), u2.ravel()
+    steep = np.abs(u1) < np.abs(u2)
+    r = np.where(steep, u2, u1)
+    phi = 0.25 * math.pi * np.where(steep, u1, u2) / r
     phi = np.where(steep, 0.5 * math.pi - phi, phi)
-    return xp.asarray(r * np.cos(phi)), xp.asarray(r * np.sin(phi))
+    return r * np.cos(phi), r * np.sin(phi), (0.25 * w1 * w2).ravel()
 
 
 def _safe_sqrt(x, xp):
@@ -100,18 +96,18 @@ def _safe_sqrt(x, xp):
     return xp.where(positive, xp.sqrt(xp.where(positive, x, 1.0)), 0.0)
 
 
-def _visible_normals(mu, alpha, u1, u2, xp):
-    """The GGX visible normals of directions (√(1 − μ²), 0, μ) at the quadrature's samples: Mitsuba's
-    ``MicrofacetDistribution::sample`` with visible-normal sampling (Heitz & d'Eon 2014, GGX's
-    ``sample_visible_11``), for a direction in the x-z plane (its azimuth rotation is the identity).
+def _visible_normals(mu, alpha, px, py, xp):
+    """The GGX visible normals of directions (√(1 − μ²), 0, μ) at the quadrature's samples (on the unit disk,
+    `_quadrature`): Mitsuba's ``MicrofacetDistribution::sample`` with visible-normal sampling (Heitz & d'Eon 2014,
+    GGX's ``sample_visible_11``), for a direction in the x-z plane (its azimuth rotation is the identity).
 
     Returns:
-        (mx, my, mz), each of shape ``mu.shape + u1.shape`` (``mu`` on a leading axis).
+        (mx, my, mz), each of shape ``mu.shape + px.shape`` (``mu`` on a leading axis).
     """
     mu = mu[:, None]
     sx = alpha * _safe_sqrt(1.0 - mu * mu, xp)
     cos_theta = mu / xp.sqrt(sx * sx + mu * mu)  # the stretched direction's cosine
-    px, py = _concentric_disk(u1, u2, xp)
+    px, py = xp.asarray(px), xp.asarray(py)
     s = 0.5 * (1.0 + cos_theta)
     edge = _safe_sqrt(1.0 - px * px, xp)
     py = edge + (py - edge) * s
@@ -143,10 +139,12 @@ def _smith_g1(vx, vy, vz, m_dot_v, alpha, xp):
 
 
 def _expectation(mu, alpha, eta, refracted: bool, xp):
-    """The plugin's ``eval_transmittance`` (``refracted``) or ``eval_reflectance`` at cosines ``mu``: 32 × 32
-    nodes for η > 1, 128 × 128 otherwise."""
-    u1, u2, w = _gauss_legendre(32 if _outside(eta) else 128)
-    mx, my, mz = _visible_normals(xp.asarray(mu), alpha, u1, u2, xp)
+    """The plugin's ``eval_transmittance`` (``refracted``) or ``eval_reflectance`` at cosines ``mu``, on its rule
+    for η: 32 × 32 nodes for η > 1 (the transmittance from outside), 128 × 128 otherwise (the reflectance from
+    inside, η < 1). η is a Python float below 1 only in the NumPy reflectance; the lobe's traced η is declared
+    above 1."""
+    px, py, w = _quadrature(128 if isinstance(eta, float) and eta < 1.0 else 32)
+    mx, my, mz = _visible_normals(xp.asarray(mu), alpha, px, py, xp)
     mu_ = xp.asarray(mu)[:, None]
     sx = _safe_sqrt(1.0 - mu_ * mu_, xp)
     c = sx * mx + mu_ * mz  # ωi·m
@@ -168,21 +166,14 @@ def transmittance(alpha, eta, xp=np):
 
     Arguments:
         alpha: the GGX width (scalar; a traced one under ``xp`` = ``jax.numpy``).
-        eta: int_ior / ext_ior, above 1 (a Python float chooses the quadrature's size as the plugin does; the lobe
-            passes a traced η, for which the 32 × 32 rule of η > 1 holds by its bounds).
+        eta: int_ior / ext_ior, above 1 (the plugin's 32 × 32 rule; the lobe passes a traced η, declared from
+            1.01).
         xp: ``numpy`` or ``jax.numpy``.
 
     Returns:
         ``(64,)`` transmittances in [0, 1].
     """
     return _expectation(cosines(), alpha, eta, True, xp)
-
-
-def _outside(eta) -> bool:
-    try:
-        return float(eta) > 1.0
-    except TypeError:  # a traced value: the lobe's η is declared above 1
-        return True
 
 
 def internal_reflectance(alpha: float, eta: float) -> float:
