@@ -37,7 +37,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from importlib import resources
 
 from .._lazy import module
 from ..geometry import LocalPair
@@ -226,6 +225,8 @@ def smooth_internal_reflectance(alpha: float, eta: float, nodes: int = 48) -> fl
 @functools.cache
 def _table():
     """(√α nodes, √(η − 1) nodes, R_smooth values) of the table `scripts/roughplastic_table.py` writes."""
+    from importlib import resources  # here, not at import: the registry (`brdffit models`) does not read the table
+
     with resources.files("brdffit").joinpath(TABLE_FILE).open("rb") as handle:
         data = np.load(handle)
         return data["sqrt_alpha"], data["sqrt_eta_minus_1"], data["values"]
