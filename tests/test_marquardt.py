@@ -102,3 +102,25 @@ def test_a_compact_batch_marks_one_answer_a_material_and_the_pipeline_keeps_it(m
     assert api._best(tied) is tied[0]
     unmarked = [dataclasses.replace(o, answer=False) for o in tied]
     assert api._best(unmarked) is unmarked[1]  # without the mark, the rounding decides
+
+
+def test_a_scalar_whose_optimum_lies_on_a_bound_is_put_on_it_in_one_solve():
+    """GGX data with α = 1.6 fitted by GGX, whose α is bounded by 1: the optimum lies on the bound. The solver's
+    ε-active set puts α exactly on it within the one solve (the transform alone only approaches it), the descent
+    direction there points out of the box (Karush-Kuhn-Tucker), and no point of a dense grid over (α, f0) with
+    the amplitudes solved is lower."""
+    truth = models.get("lambert+ggx", rho_d=[0.3, 0.2, 0.1], ks=[0.6, 0.5, 0.4], alpha=1.6, f0=0.05)
+    data = synth.generate(truth, pattern="uniform", n=800, noise="relative:0.01", seed=21)
+    problem, base, fit_data = _problem_and_data(data, "lambert+ggx")
+    upper = problem.specs["alpha"].upper
+    out = marquardt.solve(problem, [[dict(base, alpha=np.asarray(0.5), f0=np.asarray(0.1))]], [fit_data],
+                          rtol=1e-10, atol=1e-14, max_steps=200)[0][0]
+    assert float(out.params["alpha"]) == upper and not out.max_steps and not out.nonfinite
+    alpha_column = problem.layout.offsets(problem.free)["alpha"]
+    assert float(np.ravel(out.normal.jtr[alpha_column])[0]) < 0.0  # -∂cost/∂α > 0: out of the box
+    from brdffit.fitting.search import score
+
+    grid = [dict(out.params, alpha=np.asarray(a), f0=np.asarray(f))
+            for a in np.linspace(0.8, upper, 41) for f in np.linspace(0.02, 0.1, 41)]
+    costs, _ = score(problem.structure, grid, fit_data)
+    assert out.cost <= costs.min() * (1 + 1e-9)

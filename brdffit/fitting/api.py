@@ -57,9 +57,6 @@ CHANNEL_MODES = ("shared-shape", "independent")
 COARSE_RESIDUALS = 150_000
 COARSE_SAMPLES = 10_000
 COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
-# An outer scalar closer than this fraction of its range to a bound, at the end of a polish that did not
-# converge, is held on the bound (step 4 of the pipeline).
-HOLD_FRACTION = 1e-3
 # The step limit of a revived lobe's polish (`_revive`): the polishes it follows converge in 20-60 steps from the
 # search's starts, and a revival that does not converge is discarded (its steps are lost time).
 REVIVE_STEPS = 64
@@ -256,15 +253,15 @@ def _best(outcomes: list[SolveOutcome]) -> SolveOutcome:
 
 # ---------------------------------------------------------------------------------------------------------- hold
 def _to_hold(problem: Problem, params: dict) -> dict:
-    """Outer parameters to hold for a re-solve: scalars within `HOLD_FRACTION` of a bound (snapped onto it), an
-    exponent below its search range (held on its bound 0), and the shape of lobes whose amplitudes are all 0 (held
-    where they are). NaN marks a scalar left free."""
+    """Outer parameters to hold for a re-solve: scalars within `brdffit.fitting.marquardt.BOUND_FRACTION` of a
+    bound (snapped onto it), an exponent below its search range (held on its bound 0), and the shape of lobes whose
+    amplitudes are all 0 (held where they are). NaN marks a scalar left free."""
     layout = problem.layout
     held = {}
     for name in problem.outer:
         spec = layout[name].spec
         value = np.array(params[name], dtype=float)
-        near = np.asarray(at_bound(value, spec, HOLD_FRACTION))
+        near = np.asarray(at_bound(value, spec, marquardt.BOUND_FRACTION))
         if spec.scale and spec.lower == 0.0:
             # A cosine power max(0, d)^n with n below its search range (1/100 of its default) is, for the data, a
             # step function of its half-space: its direction (Lafortune's cxy) has a tangent n·d^(n−1) only on the

@@ -27,13 +27,15 @@ cost: a kink, or the optimum itself); the pipeline's Karush-Kuhn-Tucker test (`b
 tells a stall from an optimum. A problem without outer parameters (Lambert) converges after one projection.
 Parameters the pipeline holds (on a bound, or where a dead lobe left them) simply do not move.
 
-Why the engine has its own solver: its only compiled program is the pass, one per model structure and data
-shape (a straight-line program of the residuals and Q tangents), which the polish, the full-data refinement and
-the covariance share. An optimistix solve compiles the whole iteration (the solver's loop, its linear solves and
-the transposed tangents of the projection) for each model and option, a far larger program than the pass
-(docs/benchmarks.md). The optimistix solvers stay available by name
-(`brdffit.fitting.solvers.SOLVERS`) and as objects, and `tests/test_marquardt.py` checks that both reach the
-same optimum.
+The transforms of `brdffit.params` reach a bound only where their slope is 0, so an outer scalar whose optimum lies
+on a bound walks towards it in ever shorter steps, and its flat direction then keeps λ climbing to `MAX_DAMPING`
+(Lambert + two Lafortune lobes on a real paper: 20 steps to reach cxy = −2, 25 more to stop). The solver therefore
+keeps an ε-active set (Bertsekas 1982, SIAM J. Control Optim. 20(2), §3): a scalar within `BOUND_FRACTION` of a
+bound whose descent direction −∂cost/∂p points out of the box is put on the bound in the next trial (a point that
+would stop there tries the bound first) and held there once a trial with it is accepted. At convergence, a scalar
+so held whose descent direction points into the box (Karush-Kuhn-Tucker) is released and the point goes on; a
+released scalar, or one whose move onto the bound a trial rejected with λ ≥ 1, is left to the transforms for the
+rest of the solve (no cycling).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ import dataclasses
 import numpy as np
 
 from ..defaults import FIT
+from ..params import bound_margin
 from .moments import applies, moment_sums
 from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of, noise_grams_of, timed
 from .outcome import SolveOutcome
@@ -50,7 +53,8 @@ from .problem import FitData, Problem
 from .search import POLISH_STARTS
 from .separable import solve_box
 
-__all__ = ["Marquardt", "solve", "answer", "MAX_DAMPING", "RELATIVE_OFFSET", "EXACT_MOVE", "BEST_TIE", "GAIN_RATIO"]
+__all__ = ["Marquardt", "solve", "answer", "MAX_DAMPING", "RELATIVE_OFFSET", "EXACT_MOVE", "BEST_TIE", "GAIN_RATIO",
+           "BOUND_FRACTION"]
 
 # A start that converged within this fraction of the lowest cost of its material's polish is as good an answer
 # as the lowest (the pipeline keeps it rather than one that ran out of steps, `brdffit.fitting.api._best`).
@@ -65,6 +69,10 @@ _MIN_DAMPING = 1e-12
 # shrinking λ after every step that does not raise the cost made the steps alternate in sign for a thousand
 # steps.
 GAIN_RATIO = 0.25
+# An outer scalar within this fraction of its scale (`brdffit.params.bound_margin`) of a bound, with its descent
+# direction pointing out of the box, is put on the bound (the module doc's ε-active set; the pipeline's hold stage
+# uses the same margin).
+BOUND_FRACTION = 1e-3
 # A projection that jumps an amplitude (off a bound, or by more than its value) by more than this fraction of the
 # new value is followed by a pass at the moved point (`_Batch.refresh`).
 _REPASS = 1e-3
@@ -244,8 +252,10 @@ class _Batch:
         self.upper = np.concatenate([np.full(layout[n].size, layout[n].spec.upper) for n in free])
         self.size = self.lower.size
         self.is_outer = np.zeros(self.size, bool)
+        self.margin = np.zeros(self.size)  # the outer scalars' `BOUND_FRACTION` margins
         for name in problem.outer:
             self.is_outer[self.offsets[name]] = True
+            self.margin[self.offsets[name]] = bound_margin(layout[name].spec, BOUND_FRACTION)
         linear = problem.linear
         # (C, K): the flat index of amplitude k in channel c.
         self.amplitudes = np.array([[self.offsets[n].start + c for n in linear] for c in range(problem.channels)],
@@ -377,6 +387,24 @@ class _Batch:
                                     noise_grams=sums.noise_grams)
         return _State(x, moved, delta, sums.cost, values, spread)
 
+    def onto_bounds(self, state: _State, excluded):
+        """The outer scalars to put on a bound (the module doc's ε-active set): within `margin` of a finite bound
+        with −Jᵀr pointing out of the box, not in ``excluded`` ``(M, S, P)``.
+
+        Returns:
+            ``(snap, bound)``: ``(M, S, P)`` where to snap, and the bound each would go to.
+        """
+        x, gradient = state.x, state.sums.jtr
+        with np.errstate(invalid="ignore"):
+            low = (x - self.lower <= self.margin) & (gradient > 0)
+            high = (self.upper - x <= self.margin) & (gradient < 0)
+        return self.is_outer & (low | high) & ~excluded, np.where(low, self.lower, self.upper)
+
+    def inward(self, state: _State):
+        """``(M, S, P)``: scalars on a bound whose descent direction −Jᵀr points into the box."""
+        x, gradient = state.x, state.sums.jtr
+        return ((x <= self.lower) & (gradient < 0)) | ((x >= self.upper) & (gradient > 0))
+
     def unconstrained(self, x):
         """The outer scalars' unconstrained variables ``(M, S, P)`` (amplitude entries: the physical values)."""
         u = x.copy()
@@ -479,6 +507,8 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
             hold[m, :, batch.offsets[name]] = mask
             x[m, :, batch.offsets[name]] = np.where(mask, value, x[m, :, batch.offsets[name]])
     state = batch.evaluate(x)
+    on_bound = np.zeros(x.shape, bool)  # put on a bound by this solve (the module doc's ε-active set)
+    barred = hold.copy()  # never put on a bound: held by the caller, released, or a rejected move
     lam = np.full(x.shape[:2], float(damping))
     steps = np.zeros(x.shape[:2], int)
     done = ~np.isfinite(state.sums.cost)
@@ -488,7 +518,9 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         active = ~done & (steps < max_steps)
         if not active.any():
             break
-        step, u, relative_offset, predicted = _step(batch, state, lam, hold)
+        snap, bound = batch.onto_bounds(state, barred | on_bound)
+        snap &= active[..., None]
+        step, u, relative_offset, predicted = _step(batch, state, lam, hold | on_bound | snap)
         outer = batch.is_outer
         small = (np.linalg.norm(np.where(outer, step, 0.0), axis=-1)
                  <= rtol * np.linalg.norm(np.where(outer, u, 0.0), axis=-1) + atol)
@@ -497,13 +529,25 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         # tolerance (at the optimum rounding rejects every trial and λ grows).
         finished = active & ((small & ((lam <= 1.0) | (change <= rtol * np.abs(state.sums.cost) + atol)))
                              | (relative_offset <= offset))
+        # A point that would stop next to a bound its descent direction points at first tries the bound.
+        finished &= ~snap.any(axis=-1)
+        # Karush-Kuhn-Tucker at a converged point: a scalar this solve put on a bound that the descent direction
+        # would take back into the box is released, and the point steps on (from the next round, with it free).
+        release = finished[..., None] & on_bound & batch.inward(state)
+        resumed = release.any(axis=-1)
+        on_bound &= ~release
+        barred |= release
+        lam = np.where(resumed, damping, lam)
+        finished &= ~resumed
         converged |= finished
         done |= finished
-        active &= ~finished
-        if not active.any():
+        active &= ~(finished | resumed)
+        if not (active | resumed).any():
             break
+        snap &= active[..., None]
         trial = batch.physical(u + step, state.x)
         trial = np.where(outer, trial, np.clip(state.x + step, batch.lower, batch.upper))
+        trial = np.where(snap, bound, np.where(hold | on_bound, state.x, trial))
         trial = np.where(active[..., None], trial, state.x)
         candidate = batch.evaluate(trial, state, active, refresh=False)
         change = np.where(active, np.abs(candidate.sums.cost - state.sums.cost), change)
@@ -512,6 +556,8 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         with np.errstate(invalid="ignore", divide="ignore"):
             poor = (candidate.sums.cost - state.sums.cost) / predicted < GAIN_RATIO
         state = batch.refresh(candidate, better).where(better, state)
+        on_bound |= snap & better[..., None]
+        barred |= snap & (active & ~better & (lam >= 1.0))[..., None]
         lam = np.where(better, np.where(poor, lam, np.maximum(lam / 10.0, _MIN_DAMPING)),
                        np.where(active, lam * 10.0, lam))
         done |= active & (lam > MAX_DAMPING)
