@@ -25,6 +25,7 @@ from .criteria import CRITERIA, DEFAULT_MARGIN, HELDOUT_MARGIN, resolve_criterio
 from .fitting.api import COARSE_ATOL, COARSE_RTOL, fit
 from .fitting.outcome import Status
 from .fitting.result import FitResult
+from .fitting.solvers import coarse_solver
 from .fitting.losses import loss_epsilon
 from .models.model import evaluate_dirs
 from .fitting.progressive import new_lobe_candidates
@@ -776,10 +777,13 @@ def _screened_rows(candidates, measurements, screen_data, seen, held, options, d
     rows = []
     n_values = int(np.isfinite(measurements.values).sum())
     training = int(np.any(np.isfinite(screen_data.values), axis=1).sum())
-    # The screen is the coarse stage of a two-stage fit (`brdffit.fitting.api`), with its tolerances: it ranks the
-    # candidates, and whatever is reported as a fit is refitted from it to all the data at the caller's.
+    # The screen is the coarse stage of a two-stage fit (`brdffit.fitting.api`), with its tolerances and solver: it
+    # ranks the candidates, and whatever is reported as a fit is refitted from it to all the data at the caller's.
     loose = dict(options, rtol=max(COARSE_RTOL, options.get("rtol", 0.0)),
                  atol=max(COARSE_ATOL, options.get("atol", 0.0)))
+    solver = options.get("solver", FIT.solver)
+    if isinstance(solver, str):
+        loose["solver"] = coarse_solver(solver, loose["rtol"], loose["atol"])
 
     def work(spec, init):
         result = fit(screen_data, spec, init=init, **loose)
