@@ -177,3 +177,30 @@ def test_report_states_the_direct_mappings_measured_deviation(spec, params, verd
         assert f"relative RMS error {row[3]}, largest relative error {row[4]} " in details.text
         assert row[5] == ("; ".join(details.notes) or "–")
         assert (row[2] == "exact") == details.exact == (details.deviation.rms <= 1e-6 and not details.notes)
+
+
+def test_log_axes_are_labelled_in_plain_text():
+    """The report's log axes carry "%g" labels ("0.001", "10"), not mathtext: no label holds a "$" (matplotlib's
+    TeX parser, built on first use, is never needed), and the decades over three orders read as numbers."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure()
+    FigureCanvasAgg(fig)  # draws for real, setting the tick labels
+    ax = fig.subplots()
+    ax.plot([1e-3, 10.0], [1e-3, 10.0])
+    ax.set_yscale("log")
+    ax.set_ylim(1e-3, 10.0)
+    F._plain_log_labels(ax.yaxis)
+
+    def shown(minor):  # the labels of the ticks inside the view
+        fig.canvas.draw()
+        low, high = ax.get_ylim()
+        ticks = [t for t in (ax.yaxis.get_minor_ticks() if minor else ax.yaxis.get_major_ticks())
+                 if low <= t.get_loc() <= high]
+        return [t.label1.get_text() for t in ticks if t.label1.get_text()]
+
+    assert shown(minor=False) == ["0.001", "0.01", "0.1", "1", "10"]
+    ax.set_ylim(0.2, 0.9)  # less than a decade: the minor ticks are labelled instead
+    minor = shown(minor=True)
+    assert minor == ["0.2", "0.3", "0.4", "0.6"], minor  # matplotlib's choice of minor labels, in plain text
