@@ -36,6 +36,14 @@ would stop there tries the bound first) and held there once a trial with it is a
 so held whose descent direction points into the box (Karush-Kuhn-Tucker) is released and the point goes on; a
 released scalar, or one whose move onto the bound a trial rejected with λ ≥ 1, is left to the transforms for the
 rest of the solve (no cycling).
+
+Why the engine has its own solver: its only compiled program is the pass, one per model structure and data
+shape (a straight-line program of the residuals and Q tangents), which the polish, the full-data refinement and
+the covariance share. An optimistix solve compiles the whole iteration (the solver's loop, its linear solves and
+the transposed tangents of the projection) for each model and option, a far larger program than the pass
+(docs/benchmarks.md). The optimistix solvers stay available by name
+(`brdffit.fitting.solvers.SOLVERS`) and as objects, and `tests/test_marquardt.py` checks that both reach the
+same optimum.
 """
 
 from __future__ import annotations
