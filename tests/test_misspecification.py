@@ -102,9 +102,9 @@ def test_reference_at_or_below_truth(truth_spec):
 # Pairs where the engine's fit is known to stop above the brute-force optimum (strict: an xpass fails, so a fix is
 # noticed). On the anisotropic-GGX truth the reference finds Lafortune sums with one lobe of exponent 1e5-4e5
 # that catches the few samples at the mirror peak; the engine's search does not start such a lobe. Measured:
-# 0.72 % and 0.57 % above the optimum. (On the sharp STD truth, two Lafortune lobes, the reference's spike of ks 2e6
-# at cxy = −2, n = 3e3 is now passed: the solver puts cxy on its bound −2 itself (`brdffit.fitting.marquardt`'s
-# ε-active set), and the lobe then sharpens to n = 5.4e3, 9.9 % below the reference.)
+# 0.72 % and 0.57 % above the optimum. (The sharp STD truth against two Lafortune lobes is not among them: the
+# solver puts cxy on its bound −2 itself (`brdffit.fitting.marquardt`'s ε-active set) and the lobe sharpens to
+# n = 5.4e3, 9.9 % below the reference's spike of ks 2e6 at n = 3e3.)
 KNOWN_MISSES = {
     ("lambert+ggx(anisotropic=true)", "lambert+lafortune(lobes=2)"): "0.72 % above",
     ("lambert+ggx(anisotropic=true)", "lambert+lafortune(lobes=3)"): "0.57 % above",
