@@ -38,10 +38,11 @@ __all__ = [
 TINY = 1e-12
 
 
-def safe_sqrt(x):
-    """√x for x > TINY and 0 otherwise; the gradient is finite everywhere (0 where x <= TINY)."""
-    positive = x > TINY
-    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
+def safe_sqrt(x, xp=jnp, tiny: float = TINY):
+    """√x for x > ``tiny`` and 0 otherwise; the gradient is finite everywhere (0 where x <= ``tiny``). ``xp``: the
+    array module (``jax.numpy``, or ``numpy`` on the host); ``tiny`` = 0 is Mitsuba's ``safe_sqrt``, √max(x, 0)."""
+    positive = x > tiny
+    return xp.where(positive, xp.sqrt(xp.where(positive, x, 1.0)), 0.0)
 
 
 def safe_div(num, den, fallback=0.0):

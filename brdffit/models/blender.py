@@ -50,16 +50,6 @@ _U_NODES, _PHI_NODES = 96, 64
 _MAX_IOR = 3.0
 
 
-def _fresnel_dielectric_np(c, eta):
-    """The exact dielectric Fresnel reflectance (NumPy, for the table)."""
-    s2 = (1.0 - c * c) / (eta * eta)
-    total = s2 >= 1.0
-    t = np.sqrt(np.where(total, 0.0, 1.0 - s2))
-    rs = (c - eta * t) / (c + eta * t)
-    rp = (eta * c - t) / (eta * c + t)
-    return np.where(total, 1.0, 0.5 * (rs * rs + rp * rp))
-
-
 @functools.lru_cache(maxsize=1)
 def layering_table() -> np.ndarray:
     """Cycles' ``ggx_gen_schlick_ior_s`` by quadrature, shape ``(z, co, roughness)`` = (16, 16, 16) (module doc).
@@ -99,7 +89,7 @@ def layering_table() -> np.ndarray:
             base = np.where(visible, weight * vh / hz, 0.0) * g1 / m
             for k, e in enumerate(eta):
                 f0 = ((e - 1.0) / (e + 1.0)) ** 2
-                blend = np.clip((_fresnel_dielectric_np(np.clip(vh, 0.0, 1.0), e) - f0) / (1.0 - f0), 0.0, 1.0)
+                blend = np.clip((fr.dielectric(vh, 1.0, e, np) - f0) / (1.0 - f0), 0.0, 1.0)
                 table[k, j, i] = np.clip(np.sum(base * blend), 0.0, 1.0)
     return table
 

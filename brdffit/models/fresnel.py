@@ -59,7 +59,7 @@ def normal_reflectance(eta):
     return ((eta - 1.0) / (eta + 1.0)) ** 2
 
 
-def dielectric(cos_theta_i, eta_i, eta_t):
+def dielectric(cos_theta_i, eta_i, eta_t, xp=None):
     r"""Exact unpolarised Fresnel reflectance of a dielectric interface (Born & Wolf, Sec. 1.5.2).
 
     Snell: η_i sinθi = η_t sinθt; r_s = (η_i cosθi − η_t cosθt)/(η_i cosθi + η_t cosθt),
@@ -70,17 +70,19 @@ def dielectric(cos_theta_i, eta_i, eta_t):
         cos_theta_i: cosine of the incidence angle, in [0, 1].
         eta_i: refractive index of the incident medium.
         eta_t: refractive index of the transmitting medium.
+        xp: the array module: ``jax.numpy`` (default) or ``numpy`` (host tables).
 
     Returns:
         The reflectance in [0, 1].
     """
-    ci = jnp.clip(cos_theta_i, 0.0, 1.0)
+    xp = jnp if xp is None else xp
+    ci = xp.clip(cos_theta_i, 0.0, 1.0)
     sin_t2 = (eta_i / eta_t) ** 2 * (1.0 - ci * ci)
     total = sin_t2 >= 1.0
-    ct = safe_sqrt(1.0 - jnp.where(total, 0.0, sin_t2))
-    rs = (eta_i * ci - eta_t * ct) / jnp.maximum(eta_i * ci + eta_t * ct, TINY)
-    rp = (eta_t * ci - eta_i * ct) / jnp.maximum(eta_t * ci + eta_i * ct, TINY)
-    return jnp.where(total, 1.0, 0.5 * (rs * rs + rp * rp))
+    ct = safe_sqrt(1.0 - xp.where(total, 0.0, sin_t2), xp)
+    rs = (eta_i * ci - eta_t * ct) / xp.maximum(eta_i * ci + eta_t * ct, TINY)
+    rp = (eta_t * ci - eta_i * ct) / xp.maximum(eta_t * ci + eta_i * ct, TINY)
+    return xp.where(total, 1.0, 0.5 * (rs * rs + rp * rp))
 
 
 def conductor(cos_theta_i, eta, k):

@@ -39,9 +39,10 @@ import functools
 import math
 
 from .._lazy import module
-from ..geometry import LocalPair
+from ..geometry import LocalPair, safe_sqrt
 from ..params import ParamSpec
 from .cook_torrance import CookTorrance
+from .fresnel import dielectric
 from .lobe import Lobe
 from .peaks import Peak, scalar
 from .specs import roughness
@@ -89,10 +90,9 @@ def _quadrature(n: int):
     return r * np.cos(phi), r * np.sin(phi), (0.25 * w1 * w2).ravel()
 
 
-def _safe_sqrt(x, xp):
-    """√x for x > 0, else 0 (Mitsuba's ``safe_sqrt``), with a finite gradient (0) where x ≤ 0."""
-    positive = x > 0.0
-    return xp.where(positive, xp.sqrt(xp.where(positive, x, 1.0)), 0.0)
+def _sqrt(x, xp):
+    """Mitsuba's ``safe_sqrt``, √max(x, 0) (`brdffit.geometry.safe_sqrt` with no threshold)."""
+    return safe_sqrt(x, xp, tiny=0.0)
 
 
 def _visible_normals(mu, alpha, px, py, xp):
@@ -104,30 +104,19 @@ def _visible_normals(mu, alpha, px, py, xp):
         (mx, my, mz), each of shape ``mu.shape + px.shape`` (``mu`` on a leading axis).
     """
     mu = mu[:, None]
-    sx = alpha * _safe_sqrt(1.0 - mu * mu, xp)
+    sx = alpha * _sqrt(1.0 - mu * mu, xp)
     cos_theta = mu / xp.sqrt(sx * sx + mu * mu)  # the stretched direction's cosine
     px, py = xp.asarray(px), xp.asarray(py)
     s = 0.5 * (1.0 + cos_theta)
-    edge = _safe_sqrt(1.0 - px * px, xp)
+    edge = _sqrt(1.0 - px * px, xp)
     py = edge + (py - edge) * s
-    pz = _safe_sqrt(1.0 - px * px - py * py, xp)
-    sin_theta = _safe_sqrt(1.0 - cos_theta * cos_theta, xp)
+    pz = _sqrt(1.0 - px * px - py * py, xp)
+    sin_theta = _sqrt(1.0 - cos_theta * cos_theta, xp)
     norm = 1.0 / (sin_theta * py + cos_theta * pz)
     slope_x = (cos_theta * py - sin_theta * pz) * norm * alpha
     slope_y = px * norm * alpha
     length = xp.sqrt(slope_x * slope_x + slope_y * slope_y + 1.0)
     return -slope_x / length, -slope_y / length, 1.0 / length
-
-
-def _fresnel(cos_i, eta, xp):
-    """Mitsuba's ``fresnel(cos_theta_i, eta)`` for cos_i ≥ 0: (F, cos θt ≤ 0, η_ti = 1/η); F = 1 under total
-    internal reflection (Born & Wolf, Sec. 1.5.2)."""
-    eta_ti = 1.0 / eta
-    cos_t2 = 1.0 - (1.0 - cos_i * cos_i) * eta_ti * eta_ti
-    cos_t = _safe_sqrt(cos_t2, xp)
-    a_s = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
-    a_p = (cos_t - eta * cos_i) / (cos_t + eta * cos_i)
-    return 0.5 * (a_s * a_s + a_p * a_p), -cos_t, eta_ti
 
 
 def _smith_g1(vx, vy, vz, m_dot_v, alpha, xp):
@@ -145,10 +134,12 @@ def _expectation(mu, alpha, eta, refracted: bool, xp):
     px, py, w = _quadrature(128 if isinstance(eta, float) and eta < 1.0 else 32)
     mx, my, mz = _visible_normals(xp.asarray(mu), alpha, px, py, xp)
     mu_ = xp.asarray(mu)[:, None]
-    sx = _safe_sqrt(1.0 - mu_ * mu_, xp)
+    sx = _sqrt(1.0 - mu_ * mu_, xp)
     c = sx * mx + mu_ * mz  # ωi·m
-    f, cos_t, eta_ti = _fresnel(c, eta, xp)
+    f = dielectric(c, 1.0, eta, xp)  # Mitsuba's fresnel(c, η) for c >= 0 (the visible normals face ωi)
     if refracted:
+        eta_ti = 1.0 / eta
+        cos_t = -_sqrt(1.0 - (1.0 - c * c) * eta_ti * eta_ti, xp)  # the refracted cosine, below m
         scale = c * eta_ti + cos_t  # Mitsuba's refract: m (c η_ti + cos θt) − ωi η_ti
         ox, oy, oz = mx * scale - sx * eta_ti, my * scale, mz * scale - mu_ * eta_ti
         value = _smith_g1(ox, oy, oz, mx * ox + my * oy + mz * oz, alpha, xp) * (1.0 - f)
