@@ -190,16 +190,6 @@ def test_warp_jacobian_agrees_with_ndf_and_sigma(tables):
 
 
 # ----------------------------------------------------------------------------------------- Mitsuba 3 (client)
-@pytest.fixture(scope="module")
-def mitsuba():
-    mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (pip install mitsuba: the test extra)")
-    try:
-        mi.set_variant("scalar_rgb")
-    except (AttributeError, ImportError, ValueError) as err:
-        pytest.skip(f"Mitsuba's scalar_rgb variant is not available: {err}")
-    return mi
-
-
 def _mitsuba_values(mi, bsdf, theta_i, phi_i, theta_o, phi_o):
     """Mitsuba's ``eval`` with ``si.wi`` = ωi and ``wo`` = ωo, divided by its cosine of ``wo``: f_r.
 
@@ -235,13 +225,13 @@ def _random_pairs(rng, n):
 
 @needs_data
 @pytest.mark.parametrize("name", RGL_FILES)
-def test_lookup_agrees_with_mitsuba(mitsuba, tables, name):
+def test_lookup_agrees_with_mitsuba(mi, tables, name):
     """Mitsuba keeps negative values, so the comparison uses negative="keep"."""
     table = tables[name]
-    bsdf = mitsuba.load_dict({"type": "measured", "filename": str(DATA / "rgl-epfl" / name)})
+    bsdf = mi.load_dict({"type": "measured", "filename": str(DATA / "rgl-epfl" / name)})
     angles = _random_pairs(np.random.default_rng(11), 1500)
     ours = table.lookup(*angles, negative="keep")
-    theirs = _mitsuba_values(mitsuba, bsdf, *angles)
+    theirs = _mitsuba_values(mi, bsdf, *angles)
     relative = _relative(ours, theirs)
     assert np.percentile(relative, 95) < 1e-4, name
     assert np.median(relative) < 1e-5, name
@@ -249,18 +239,18 @@ def test_lookup_agrees_with_mitsuba(mitsuba, tables, name):
     # Mitsuba's si.wi is the table's incidence: the swapped order is another BRDF value (measured data are not
     # exactly reciprocal), far outside the agreement above
     theta_i, phi_i, theta_o, phi_o = angles
-    swapped = _mitsuba_values(mitsuba, bsdf, theta_o, phi_o, theta_i, phi_i)
+    swapped = _mitsuba_values(mi, bsdf, theta_o, phi_o, theta_i, phi_i)
     assert np.median(_relative(ours, swapped)) > 1e-2, name
     # reciprocity-insensitive pairs: retro-reflection, ωo = ωi, is its own swap (m = ωi). (The mirror direction
     # is not: there m = n and the azimuth of m, hence the value, is that of a rounding error.)
     theta = np.linspace(0.05, 1.4, 30)
     phi = np.linspace(0.0, 6.2, 30)
     retro = _relative(table.lookup(theta, phi, theta, phi, negative="keep"),
-                      _mitsuba_values(mitsuba, bsdf, theta, phi, theta, phi))
+                      _mitsuba_values(mi, bsdf, theta, phi, theta, phi))
     assert np.percentile(retro, 95) < 1e-4, name
 
 
-def test_lookup_agrees_with_mitsuba_on_an_anisotropic_file(mitsuba, tmp_path):
+def test_lookup_agrees_with_mitsuba_on_an_anisotropic_file(mi, tmp_path):
     """A synthetic anisotropic file (azimuths over a quadrant: Mitsuba folds ωi by mirrors in x and y) checks the
     azimuth interpolation and the folding, which the five isotropic files do not reach."""
     fields = small_rgl_fields(3, phi_i=np.linspace(-math.pi, -math.pi / 2, 3), grid=5)
@@ -268,10 +258,10 @@ def test_lookup_agrees_with_mitsuba_on_an_anisotropic_file(mitsuba, tmp_path):
     path.write_bytes(tensor_file_bytes(fields))
     table = read_rgl(path)
     assert not table.isotropic
-    bsdf = mitsuba.load_dict({"type": "measured", "filename": str(path)})
+    bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
     theta_i, phi_i, theta_o, phi_o = _random_pairs(np.random.default_rng(4), 600)
     relative = _relative(table.lookup(theta_i, phi_i, theta_o, phi_o, negative="keep"),
-                         _mitsuba_values(mitsuba, bsdf, theta_i, phi_i, theta_o, phi_o))
+                         _mitsuba_values(mi, bsdf, theta_i, phi_i, theta_o, phi_o))
     assert np.percentile(relative, 95) < 1e-4
     # the samples of an anisotropic file (ωi at each tabulated (θi, φi), m's azimuth absolute) look up to their
     # values as well, at the middle azimuth and θi > 0. At the ends of the range (−π, −π/2 in float32, just outside
