@@ -94,8 +94,11 @@ def traced(tree) -> bool:
 
 @functools.lru_cache(maxsize=None)
 def jitted(fn):
-    """``jax.jit(fn)``, made once per function so that its compilations are reused across calls."""
-    return jax.jit(fn)
+    """``jax.jit(fn)`` with brdffit's compiler options (`brdffit.programs.compiler_options`), made once per function
+    so that its compilations are reused across calls."""
+    from .programs import compiler_options  # here: brdffit.programs imports this module
+
+    return jax.jit(fn, compiler_options=compiler_options())
 
 
 def padded_columns(fn, *columns, chunk: int = COLUMN_CHUNK) -> tuple:

@@ -33,6 +33,7 @@ from .io.hdf5 import is_lock_conflict, open_h5_waiting
 from .io.locking import LockTimeout, locked
 from .models.model import evaluate
 from .params import ParamSpec
+from .programs import compiler_options
 from .fitting.problem import FitData, Problem, flatten_free, make_fit_data, physical_params, residual_fn
 from .progress import Progress
 
@@ -479,7 +480,7 @@ def _log_prob_fn(problem: Problem, estimate: bool, likelihood: str, nu: float, p
         total = lp + ll
         return jnp.where(inside & jnp.isfinite(total), total, -jnp.inf)
 
-    return jax.jit(jax.vmap(one, in_axes=(0, None)))
+    return jax.jit(jax.vmap(one, in_axes=(0, None)), compiler_options=compiler_options())
 
 
 def _noise_scale(noise, measurements, data: FitData, problem: Problem):

@@ -35,9 +35,20 @@ from jax._src import config as _jax_config  # its options as thread-local contex
 
 from .arrays import traced
 
-__all__ = ["Program", "program_directory"]
+__all__ = ["Program", "program_directory", "compiler_options"]
 
 _FOLDER = "brdffit-programs"
+# XLA's options for brdffit's programs on the CPU: the loop emitters that preceded XLA's MLIR fusion emitters. They
+# compile a selection's programs (passes, searches, residuals, a report's evaluations) in about 0.6 of the time,
+# and the programs run as fast (docs/benchmarks.md); a default fit of a real file spends most of an empty-cache run
+# compiling.
+_CPU_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+
+
+def compiler_options() -> dict | None:
+    """The XLA compiler options of brdffit's programs on the default backend (`_CPU_OPTIONS` on the CPU, XLA's
+    defaults, None, elsewhere), for ``jax.jit(..., compiler_options=...)`` or ``Lowered.compile``."""
+    return dict(_CPU_OPTIONS) if jax.default_backend() == "cpu" else None
 
 
 def program_directory() -> Path | None:
@@ -65,14 +76,14 @@ def _source_stamp() -> str:
 
 
 def _stamp() -> str:
-    """What besides the key's own parts decides a compiled program: the source, JAX, the device, float64 mode and
-    XLA's flags."""
+    """What besides the key's own parts decides a compiled program: the source, JAX, the device, float64 mode, XLA's
+    flags and the compiler options."""
     import jaxlib
 
     device = jax.devices()[0]
     return "|".join([_source_stamp(), jax.__version__, jaxlib.__version__, device.platform,
                      getattr(device, "device_kind", ""), str(jax.config.jax_enable_x64),
-                     os.environ.get("XLA_FLAGS", "")])
+                     os.environ.get("XLA_FLAGS", ""), repr(compiler_options())])
 
 
 class Program:
@@ -154,10 +165,10 @@ class Program:
         """
         program = self._of_leaves(static, tree)
         if path is None:
-            compiled = program.lower(*leaves).compile()
+            compiled = program.lower(*leaves).compile(compiler_options=compiler_options())
             return compiled, compiled(*leaves)
         with _jax_config.enable_compilation_cache(False):  # in this thread only
-            compiled = program.lower(*leaves).compile()
+            compiled = program.lower(*leaves).compile(compiler_options=compiler_options())
         out = _keep(path, text, compiled, leaves)
         return compiled, (compiled(*leaves) if out is None else out)
 

@@ -23,6 +23,7 @@ separable = module("brdffit.fitting.separable")
 model_module = module("brdffit.models.model")
 
 arrays = module("brdffit.arrays")
+programs = module("brdffit.programs")
 outcome = module("brdffit.fitting.outcome")
 np = module("numpy")
 
@@ -228,7 +229,7 @@ def compiled_solve(problem: Problem, y0: dict, data: FitData):
     start = time.perf_counter()
     per_material = jax.vmap(lambda y, d, p: _solve_one(y, d, p, problem), in_axes=(0, None, 0))
     batched = jax.vmap(per_material, in_axes=(0, 0, 0))
-    executable = jax.jit(batched).lower(y0, data, no_pins(problem, y0)).compile()
+    executable = jax.jit(batched).lower(y0, data, no_pins(problem, y0)).compile(compiler_options=programs.compiler_options())
     _COMPILED[key] = executable
     return executable, time.perf_counter() - start
 
