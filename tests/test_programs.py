@@ -150,3 +150,29 @@ def test_the_source_stamp_reads_the_package_only():
     assert all(package in path.parents for path in files)
     assert package / "programs.py" in files and package / "fitting" / "api.py" in files
     assert len(files) == len(list(package.rglob("*.py")))
+
+
+def test_programs_compile_with_the_declared_options_and_the_options_key_the_kept_files(kept_in, monkeypatch):
+    """On the CPU every program is compiled with `compiler_options` (XLA's loop emitters), a program compiled with
+    other options is never loaded in their place (the options are part of the key), and the option leaves a
+    program's values unchanged."""
+    assert jax.default_backend() == "cpu"
+    assert programs.compiler_options() == {"xla_cpu_use_fusion_emitters": False}
+    seen = []
+    compile_lowered = jax.stages.Lowered.compile
+
+    def recording(self, compiler_options=None):
+        seen.append(compiler_options)
+        return compile_lowered(self, compiler_options=compiler_options)
+
+    monkeypatch.setattr(jax.stages.Lowered, "compile", recording)
+    x, data = arguments(40)
+    emitted = np.asarray(Program(polynomial(), name="poly")(x, data))
+    assert seen == [{"xla_cpu_use_fusion_emitters": False}]
+    stamp = programs._stamp()
+    monkeypatch.setattr(programs, "_CPU_OPTIONS", {"xla_cpu_use_fusion_emitters": True})
+    assert programs._stamp() != stamp
+    fused = np.asarray(Program(polynomial(), name="poly")(x, data))
+    assert seen[-1] == {"xla_cpu_use_fusion_emitters": True}  # compiled anew, not loaded
+    assert len(list(kept_in.glob("*.bin"))) == 2
+    np.testing.assert_allclose(emitted, fused, rtol=1e-14, atol=0.0)
