@@ -525,13 +525,18 @@ PLAUSIBILITY_RESOLUTION = 64
 
 
 def scan_albedo(model: Model, theta_i=PLAUSIBILITY_THETA_I, phi_i=PLAUSIBILITY_PHI_I,
-                resolution: int = PLAUSIBILITY_RESOLUTION) -> np.ndarray:
+                resolution: int = PLAUSIBILITY_RESOLUTION, view: bool = False) -> np.ndarray:
     """The directional albedo on a grid of incidence directions, quickly: ``(len(theta_i), len(phi_i), C)``.
 
     The quadrature of `directional_albedo`, with its nodes computed on the host in NumPy (compiled, they would add
     a compilation to a first fit's summary) and the model evaluated by `brdffit.evaluate_dirs` (compiled once per
     model structure: a far smaller program than the whole quadrature compiled per model). Summaries and reports use
     it (`brdffit.plausibility.plausibility`).
+
+    With ``view``, the grid's directions are the viewer's and the integral runs over the light's:
+    ∫ f_r(ωi, ωo) cosθi dωi at each ωo, the albedo that a renderer's layering keeps at or below 1 in a model that is
+    not reciprocal (MaterialX's and Cycles' weight the layer beneath by the layer's albedo at the view); for a
+    reciprocal model the two are the same.
     """
     theta, phi = (np.asarray(x, dtype=float).reshape(-1) for x in np.meshgrid(theta_i, phi_i, indexing="ij"))
     t, wt = _gauss_legendre(resolution, 0.0, 1.0)
@@ -539,7 +544,8 @@ def scan_albedo(model: Model, theta_i=PLAUSIBILITY_THETA_I, phi_i=PLAUSIBILITY_P
     u, wu = np.concatenate([u_half, u_half]), np.concatenate([wu_half, wu_half])
     centre = np.repeat([0.5 * math.pi, 1.5 * math.pi], resolution)
     wi, wo, weight = _albedo_nodes(theta, phi, t, wt, u, wu, centre, xp=np)
-    f = np.asarray(evaluate_dirs(model, np.broadcast_to(wi, wo.shape), wo))
+    fixed = np.broadcast_to(wi, wo.shape)
+    f = np.asarray(evaluate_dirs(model, wo, fixed) if view else evaluate_dirs(model, fixed, wo))
     albedo = np.einsum("bst,bstc->bc", weight, f)
     albedo[np.cos(theta) <= 1e-12] = 0.0
     return albedo.reshape(np.size(theta_i), np.size(phi_i), model.channels)

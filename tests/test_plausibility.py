@@ -95,3 +95,19 @@ def test_report_shows_noise_model_and_plausibility(implausible, tmp_path):
     assert "## Noise model" in md and "**relative (chosen)**" in md and "stderr noise-model" in md
     assert "## Plausibility" in md and "| energy | **IMPLAUSIBLE** | max albedo" in md
     assert "± stderr (noise-model)" in md and "± sandwich" in md
+
+
+def test_a_layered_renderer_model_is_judged_by_its_albedo_at_each_view():
+    """Cycles' Principled BSDF (brdffit's `blender` model) weights its diffuse by 1 − E(view): a white base reflects
+    more than 1 of grazing light (1.33 at θi = 89°) while its albedo at every view stays within 1 (1.000), the
+    energy that a renderer tracing from the camera carries. The check reads the view's, and names θo."""
+    model = brdffit.models.get("blender", base_color=1.0, roughness=0.3)
+    assert not model.reciprocal
+    assert P.scan_albedo(model).max() > 1.3
+    assert P.scan_albedo(model, view=True).max() <= 1.0 + 1e-3
+    (energy,) = [c for c in plausibility([model]).checks if c.name == "energy"]
+    assert energy.level == "ok" and "θo = " in energy.message, energy.message
+    # Brighter than 1 at some view: implausible, at that view.
+    brighter = brdffit.models.get("openpbr", base_color=1.0, base_diffuse_roughness=1.0)
+    (energy,) = [c for c in plausibility([brighter]).checks if c.name == "energy"]
+    assert energy.level == "implausible" and "θo = " in energy.message, energy.message
