@@ -115,6 +115,17 @@ EQUATIONS = {
         "S(c; f0) = f0 + (1 − f0)(1 − c)⁵,  D = GGX,  G2 = 1/(1 + Λ(ωi) + Λ(ωo)),  α = roughness²\n"
         "s: Cycles' table ggx_gen_schlick_ior_s (16³ nodes, trilinear), computed by quadrature"
     ),
+    "openpbr": (
+        "f = (1 − base_metalness) [specular_color F(cd; η') D G2/(4 ci co) K(F) + (1 − E(co; F0') K(F)) f_on]\n"
+        "  + base_metalness · specular_weight · F82(cd) D G2/(4 ci co) K(F82)\n"
+        "η': the graph's index modulated by specular_weight: ε = √(clamp(specular_weight F0(specular_ior), 0, "
+        "0.99999)), η' = (1 + ε)/(1 − ε)\n"
+        "E(μ; F0) = F0 A(μ, α) + B(μ, α): MaterialX's rational fit of the GGX albedo,  K(F) = 1 + F (1 − E₁)/E₁,  "
+        "E₁ = A + B\n"
+        "f_on: OpenPBR's energy-preserving Oren-Nayar diffuse of base_color, roughness base_diffuse_roughness\n"
+        "F82: Hoffman's F82-tinted Schlick term, F0 = base_color, F82 = specular_color,  D = GGX,  "
+        "G2 height-correlated,  α = specular_roughness²"
+    ),
     "pbrt": (
         "f = (1 − amount) reflectance/π + amount · F(cd; eta + i k) · D G2/(4 ci co)\n"
         "D = 1/(π α² ch⁴ (1 + tan²θh/α²)²) (Trowbridge-Reitz = GGX),  G2 = 1/(1 + Λ(ωi) + Λ(ωo)),\n"
@@ -198,6 +209,14 @@ NOTES = {
                "viewing direction, so the model is not reciprocal, as Cycles' is not; its table is computed again by "
                "quadrature and agrees with Cycles' to 1e-4. `brdffit fit --for blender`, `brdffit export --to "
                "blender`; tests/test_export_blender.py renders the export in Cycles against brdffit's render.",
+    "openpbr": "OpenPBR Surface as MaterialX 1.39 evaluates an opaque one (its graph `open_pbr_surface.mtlx` and "
+               "the GLSL of its BSDF nodes), uncoated, without fuzz, thin film, transmission, subsurface or emission, "
+               "isotropic, base_weight 1: a dielectric specular layered over an energy-preserving Oren-Nayar "
+               "diffuse by the layer's albedo at the view (MaterialX's rational fit), mixed by base_metalness with "
+               "an F82-tinted metal. specular_weight and specular_color are held at 1 unless freed (with no metal, "
+               "the graph's weight and index are one degree of freedom). Not reciprocal, as MaterialX's layering "
+               "is not; tests/test_models.py holds it to a transcription of the GLSL. `brdffit fit --for openpbr`, "
+               "`brdffit export --to openpbr` (a MaterialX document that MaterialX validates).",
     "pbrt": "What pbrt-v4 renders for a `mix` (amount) of a `diffuse` (reflectance) and a `conductor` (eta, k, "
             "roughness with remaproughness false): pbrt picks the conductor at a shading point with probability "
             "amount, so the expected BRDF is the convex combination. Every parameter is declared inside the range "

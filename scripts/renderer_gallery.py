@@ -7,7 +7,8 @@ RGL-EPFL materials, CEA's retro-reflective tape) and each target of `brdffit.exp
 - `brdffit.select(m, DEFAULT_CANDIDATES, target=TARGET)`: the target's choice and the unconstrained choice, with
   their held-out errors on the selection's own held-out rows (the 20% it holds out, seed 0), and their ratio;
 - every parameter of the target's fit inside its declared bounds (the target's ranges);
-- its export to the target (glTF: the Khronos glTF-Validator, no error; MaterialX: `Document.validate()`; Mitsuba:
+- its export to the target (glTF: the Khronos glTF-Validator, no error; MaterialX and OpenPBR:
+  `Document.validate()`; Mitsuba:
   `mitsuba.load_string` and no ``unbounded`` texture or ``blendbsdf``; pbrt-v4, which cannot be installed here: the
   statements read back and every value in the ranges its scene parser takes), and whether the export states it
   exact.
@@ -71,7 +72,7 @@ def _loads(text: str, target: str, model=None) -> str:
                                            check=True, timeout=120).stdout)
         issues = report["issues"]
         return "ok" if issues["numErrors"] == 0 and issues["numWarnings"] == 0 else json.dumps(issues["messages"])
-    if target == "materialx":
+    if target in ("materialx", "openpbr"):  # both write a MaterialX document
         import MaterialX as mx
 
         doc = mx.createDocument()

@@ -44,6 +44,7 @@ __all__ = [
     "gltf_sheen_table",
     "gltf_sheen_lookup",
     "blender",
+    "openpbr",
     "pbrt",
     "roughplastic",
     "mitsuba_rough_transmittance",
@@ -918,6 +919,94 @@ def blender(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, ior
     return _masked(pair, metallic * schlick * spec + (1.0 - metallic) * (dielectric * spec + diffuse))
 
 
+# MaterialX's rational fit of the GGX directional albedo (libraries/pbrlib/genglsl/lib/mx_microfacet_specular.glsl,
+# mx_ggx_dir_albedo_analytic), its vec4 coefficients per monomial, in the order the GLSL adds them.
+_MX_ALBEDO = [
+    ((0.1003, 0.9345, 1.0, 1.0), lambda x, y: 1.0),
+    ((-0.6303, -2.323, -1.765, 0.2281), lambda x, y: x),
+    ((9.748, 2.229, 8.263, 15.94), lambda x, y: y),
+    ((-2.038, -3.748, 11.53, -55.83), lambda x, y: x * y),
+    ((29.34, 1.424, 28.96, 13.08), lambda x, y: x * x),
+    ((-8.245, -0.7684, -7.507, 41.26), lambda x, y: y * y),
+    ((-26.44, 1.436, -36.11, 54.9), lambda x, y: x * x * y),
+    ((19.99, 0.2913, 15.86, 300.2), lambda x, y: x * y * y),
+    ((-5.448, 0.6286, 33.37, -285.1), lambda x, y: x * x * y * y),
+]
+
+
+@_quiet
+def openpbr(theta_i, phi_i, theta_o, phi_o, base_color, base_metalness, base_diffuse_roughness, specular_weight,
+            specular_color, specular_roughness, specular_ior):
+    """OpenPBR Surface (opaque, uncoated, isotropic, base_weight 1) as MaterialX 1.39 evaluates it, transcribed
+    from MaterialX's GLSL (libraries/pbrlib/genglsl: mx_dielectric_bsdf, mx_generalized_schlick_bsdf,
+    mx_oren_nayar_diffuse_bsdf, mx_layer_bsdf, mx_mix_bsdf, lib/mx_microfacet_specular.glsl,
+    lib/mx_microfacet_diffuse.glsl) and the graph NG_open_pbr_surface_surfaceshader (libraries/bxdf): each BSDF's
+    ``response`` is f cosθi, so f = response / (N·L); L = ωi, V = ωo, EPS = M_FLOAT_EPS = 1e-8."""
+    eps = 1e-8
+    pair = Pair(theta_i, phi_i, theta_o, phi_o)
+    base, tint = _col(base_color), _col(specular_color)
+    n_l, n_v = np.clip(pair.ci, eps, 1.0), np.clip(pair.co, eps, 1.0)
+    v_h = np.clip(pair.cos_d, eps, 1.0)
+    # open_pbr_anisotropy at anisotropy 0: alpha = roughness^2 * sqrt(2 / (1 + 1)); safeAlpha, avgAlpha.
+    alpha = min(max(specular_roughness ** 2, eps), 1.0)
+    he2 = (pair.hx ** 2 + pair.hy ** 2) / alpha ** 2
+    d = 1.0 / (np.pi * alpha * alpha * (he2 + pair.hz ** 2) ** 2)  # mx_ggx_NDF
+    lam_l = np.sqrt(alpha ** 2 + (1.0 - alpha ** 2) * n_l ** 2)
+    lam_v = np.sqrt(alpha ** 2 + (1.0 - alpha ** 2) * n_v ** 2)
+    g = 2.0 * n_l * n_v / (lam_l * n_v + lam_v * n_l)  # mx_ggx_smith_G2
+
+    def dir_albedo(f0, f90):  # mx_ggx_dir_albedo_analytic at (N.V, alpha)
+        r = [sum(c[k] * m(n_v, alpha) for c, m in _MX_ALBEDO) for k in range(4)]
+        return f0 * np.clip(r[0] / r[2], 0.0, 1.0) + f90 * np.clip(r[1] / r[3], 0.0, 1.0)
+
+    e_ss = dir_albedo(1.0, 1.0)[:, None]
+
+    def comp(f):  # mx_ggx_energy_compensation
+        return 1.0 + f * (1.0 - e_ss) / e_ss
+
+    # The graph's modulated_eta_s (coat_weight 0: eta_s = specular_ior).
+    f0 = ((specular_ior - 1.0) / (specular_ior + 1.0)) ** 2
+    epsilon = np.sign(specular_ior - 1.0) * np.sqrt(np.clip(specular_weight * f0, 0.0, 0.99999))
+    eta = (1.0 + epsilon) / (1.0 - epsilon)
+    # mx_fresnel_dielectric (Lagarde's form).
+    g2 = eta * eta + v_h * v_h - 1.0
+    gg = np.sqrt(g2)
+    fresnel = 0.5 * ((gg - v_h) / (gg + v_h)) ** 2 * (1.0 + (((gg + v_h) * v_h - 1.0) / ((gg - v_h) * v_h + 1.0)) ** 2)
+    fresnel = np.where(g2 < 0.0, 1.0, fresnel)[:, None]
+    k_d = comp(fresnel)
+    spec_response = (d * g / (4.0 * n_v))[:, None] * fresnel * k_d * tint
+    throughput = 1.0 - dir_albedo(((eta - 1.0) / (eta + 1.0)) ** 2, 1.0)[:, None] * k_d
+    # mx_oren_nayar_compensated_diffuse, energy_compensation true, weight base_weight = 1.
+    r = base_diffuse_roughness
+    l_v = np.clip(pair.cos_io, eps, 1.0)
+    s = l_v - n_l * n_v
+    stinv = np.where(s > 0.0, s / np.maximum(n_l, n_v), s)
+    c1, c2 = 0.5 - 2.0 / (3.0 * np.pi), 2.0 / 3.0 - 28.0 / (15.0 * np.pi)
+    a = 1.0 / (1.0 + c1 * r)
+
+    def fujii(cos_t):
+        si = np.sqrt(np.maximum(0.0, 1.0 - cos_t ** 2))
+        gf = si * (np.arccos(np.clip(cos_t, -1.0, 1.0)) - si * cos_t) + 2.0 * ((si / cos_t) * (1.0 - si ** 3) - si) / 3.0
+        return a + r * a * gf / np.pi
+
+    single = base * (a * (1.0 + r * stinv))[:, None]
+    avg = a * (1.0 + c2 * r)
+    colour_ms = base ** 2 * avg / (1.0 - base * max(0.0, 1.0 - avg))
+    multi = colour_ms * (np.maximum(eps, 1.0 - fujii(n_v)) * np.maximum(eps, 1.0 - fujii(n_l))
+                         / max(eps, 1.0 - avg))[:, None]
+    diffuse_response = (single + multi) * n_l[:, None] / np.pi
+    dielectric = spec_response + throughput * diffuse_response  # mx_layer_bsdf
+    # mx_generalized_schlick_bsdf: color0 = base_color, color82 = specular_color, color90 = 1, exponent 5.
+    x = np.clip(v_h, 0.0, 1.0)[:, None]
+    cos_max = 1.0 / 7.0
+    factor = 1.0 / (cos_max * (1.0 - cos_max) ** 6)
+    a82 = (base + (1.0 - base) * (1.0 - cos_max) ** 5) * (1.0 - tint) * factor
+    f82 = base + (1.0 - base) * (1.0 - x) ** 5 - a82 * x * (1.0 - x) ** 6  # mx_fresnel_hoffman_schlick
+    metal = (d * g / (4.0 * n_v))[:, None] * f82 * comp(f82) * specular_weight
+    response = (1.0 - base_metalness) * dielectric + base_metalness * metal  # mx_mix_bsdf
+    return _masked(pair, response / n_l[:, None])
+
+
 @_quiet
 def pbrt(theta_i, phi_i, theta_o, phi_o, reflectance, amount, roughness, eta, k):
     """pbrt-v4's ``mix`` (amount t) of a ``diffuse`` (R) and a ``conductor`` (η, k, roughness α, remaproughness
@@ -1091,6 +1180,7 @@ REFERENCES = {
     "principled": lambda ti, pi_, to, po, p: principled(ti, pi_, to, po, **p),
     "gltf": lambda ti, pi_, to, po, p: gltf(ti, pi_, to, po, **p),
     "blender": lambda ti, pi_, to, po, p: blender(ti, pi_, to, po, **p),
+    "openpbr": lambda ti, pi_, to, po, p: openpbr(ti, pi_, to, po, **p),
     "pbrt": lambda ti, pi_, to, po, p: pbrt(ti, pi_, to, po, **p),
     "roughplastic": lambda ti, pi_, to, po, p: roughplastic(ti, pi_, to, po, **p),
     "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),

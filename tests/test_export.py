@@ -368,7 +368,8 @@ def test_schlick_to_conductor_fits_the_curve():
 
 
 def test_registry_and_cli_choices():
-    assert EXPORT_FORMATS == tuple(TARGETS) == ("json", "mitsuba", "pbrt", "gltf", "blender", "materialx")
+    assert EXPORT_FORMATS == tuple(TARGETS) == ("json", "mitsuba", "pbrt", "gltf", "blender", "materialx",
+                                                  "openpbr")
     with pytest.raises(ValueError, match="unknown export format"):
         export(get("lambert"), to="unity")
     from brdffit.cli import build_parser
@@ -387,7 +388,7 @@ def test_registry_loads_no_jax():
               "build_parser(); print(sorted(TARGETS), 'jax' in sys.modules)")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "['blender', 'gltf', 'json', 'materialx', 'mitsuba', 'pbrt'] False"
+    assert done.stdout.strip() == "['blender', 'gltf', 'json', 'materialx', 'mitsuba', 'openpbr', 'pbrt'] False"
 
 
 def test_json_round_trips():

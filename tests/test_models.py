@@ -113,6 +113,9 @@ OTHER_CASES = [
                             "spec_tint": 0.25, "anisotropic": 0.6, "sheen": 0.4, "sheen_tint": 0.3, "clearcoat": 0.7,
                             "clearcoat_gloss": 0.55}),
     Case("blender", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.35, "roughness": 0.45, "ior": 1.7}),
+    Case("openpbr", {}, {"base_color": [0.7, 0.4, 0.15], "base_metalness": 0.35, "base_diffuse_roughness": 0.6,
+                         "specular_weight": 0.8, "specular_color": [0.95, 0.6, 0.9], "specular_roughness": 0.45,
+                         "specular_ior": 1.7}),
     Case("gltf", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.35, "roughness": 0.4, "specular": 0.8,
                       "ior": 1.7, "specular_color": [0.95, 0.6, 0.9], "clearcoat": 0.6,
                       "clearcoat_roughness": 0.25, "sheen_color": [0.6, 0.3, 0.45], "sheen_roughness": 0.4}),
@@ -173,7 +176,7 @@ def _values(case_id):
 # The lobes and options of the modern microfacet, Burley and sheen models: against the reference at random
 # directions above the horizon to 1e-12 relative (the fixed configurations above hold every lobe to 1e-10).
 MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "gltf", "blender",
-                                                  "pbrt", "roughplastic", "abc-smooth", "abc-microfacet",
+                                                  "openpbr", "pbrt", "roughplastic", "abc-smooth", "abc-microfacet",
                                                   "sgd")
           or case.options.get("distribution") in ("std", "gtr")
           or case.options.get("anisotropic") is True and case.spec != "lafortune"
@@ -580,10 +583,11 @@ def test_cli_models_lists_every_lobe_with_its_parameters(capsys):
 
 
 def test_reciprocal_flags():
-    """Every lobe but toon-diffuse, blender (Cycles' diffuse weight depends on the view alone) and gltf (the
-    clearcoat's Fresnel weight does) is reciprocal by construction, and the flag says so."""
+    """Every lobe but toon-diffuse, blender (Cycles' diffuse weight depends on the view alone), openpbr
+    (MaterialX's layer weight does) and gltf (the clearcoat's Fresnel weight does) is reciprocal by construction,
+    and the flag says so."""
     flags = {name: models.lobe_class(name).reciprocal for name in models.names()}
-    assert [flags.pop(name) for name in ("toon-diffuse", "blender", "gltf")] == [False] * 3
+    assert [flags.pop(name) for name in ("toon-diffuse", "blender", "openpbr", "gltf")] == [False] * 4
     assert all(flags.values())
     assert not models.get("lambert+toon-diffuse").reciprocal
     assert models.get("lambert+toon-specular").reciprocal

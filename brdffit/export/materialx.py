@@ -41,10 +41,12 @@ from __future__ import annotations
 
 from xml.sax.saxutils import escape, quoteattr
 
+import numpy as np
+
 from . import gltf
 from . import terms as tm
 
-__all__ = ["write", "OPENPBR_NAMES", "STANDARD_SURFACE_NAMES", "EXPORTABLE"]
+__all__ = ["write", "document", "identifier", "OPENPBR_NAMES", "STANDARD_SURFACE_NAMES", "EXPORTABLE"]
 
 EXPORTABLE = gltf.EXPORTABLE
 # The gltf model's parameters -> OpenPBR Surface's inputs (its metallic-roughness subset).
@@ -69,6 +71,21 @@ def _openpbr(values: dict) -> dict:
     if strength > 0:
         inputs.update(fuzz_weight=strength, fuzz_color=colour, fuzz_roughness=values["sheen_roughness"])
     return inputs
+
+
+def _openpbr_deviation(values: dict, reference: tm.Model):
+    """The measured deviation from ``reference`` of the OpenPBR counterpart of the glTF values (`_openpbr`), read as
+    brdffit's ``openpbr`` model (`brdffit.models.openpbr`, OpenPBR Surface as MaterialX evaluates it), or None
+    where that model does not represent it (a coat or a sheen: it has neither)."""
+    if values["clearcoat"] > 0 or max(values["sheen_color"]) > 0:
+        return None
+    from ..models import lobe_class
+
+    inputs = {k: v for k, v in _openpbr(values).items() if k not in ("coat_weight", "coat_roughness")}
+    inputs["base_diffuse_roughness"] = 0.0
+    counterpart = tm.assemble([(lobe_class("openpbr")(), {k: np.asarray(v, dtype=float) for k, v in inputs.items()})],
+                              3)
+    return tm.measure(reference, counterpart, pairs=tm.deviation_pairs(tm.peaks(reference, counterpart)))
 
 
 def _split_sheen(values: dict) -> tuple:
@@ -106,10 +123,22 @@ def _shader(node: str, shader: str, material: str, inputs: dict) -> list[str]:
     return lines
 
 
-def _identifier(name: str) -> str:
+def identifier(name: str) -> str:
     """A valid MaterialX element name (letters, digits and underscores, not starting with a digit)."""
     cleaned = "".join(c if c.isalnum() or c == "_" else "_" for c in name) or "material"
     return cleaned if not cleaned[0].isdigit() else "M_" + cleaned
+
+
+def document(comments: list[str], materials: list[tuple]) -> str:
+    """A MaterialX 1.39 document (colour space lin_rec709): the comment lines, then for each ``(node, material,
+    inputs)`` a shader node ``SR_<material>`` of that node with those inputs (floats, or RGB lists as color3) and
+    its ``<surfacematerial name=material>``."""
+    lines = ['<?xml version="1.0"?>', '<materialx version="1.39" colorspace="lin_rec709">']
+    lines += [f"  <!-- {escape(line).replace('--', '- -')} -->" for line in comments]
+    for node, material, inputs in materials:
+        lines += _shader(node, f"SR_{material}", material, inputs)
+    lines.append("</materialx>")
+    return "\n".join(lines) + "\n"
 
 
 def write(model: tm.Model, name: str, header: list[str], source=None):
@@ -131,11 +160,14 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
         ExportError: a model other than the ``gltf`` lobe alone, or a channel count other than 1 or 3.
     """
     values, written, deviation = gltf.measured(model, source)
-    material = _identifier(name)
+    material = identifier(name)
+    counterpart = _openpbr_deviation(values, model if source is None else source)
+    measured = ("brdffit's openpbr model measures its deviation from the source: " + counterpart.describe()
+                if counterpart is not None else "its deviation is not measured (brdffit's openpbr model has no "
+                "coat or fuzz)")
     notes = [f"{material}_openpbr (open_pbr_surface) takes the glTF values under OpenPBR's names; OpenPBR layers the "
              "specular over the diffuse by albedo and tints its conductor by F82, where glTF mixes by Schlick's "
-             "Fresnel per direction: its deviation is not measured (the deviation below is the glTF material's, "
-             f"{material})",
+             f"Fresnel per direction: {measured} (the deviation below is the glTF material's, {material})",
              f"{material}_standard (standard_surface) takes the values that MaterialX's translation graph "
              "standard_surface_to_gltf_pbr carries back to the glTF ones; Standard Surface layers its lobes by "
              "albedo and has its own sheen: its deviation is not measured"]
@@ -145,12 +177,7 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
                      "visibility of KHR_materials_sheen, and scales the base by 1 - max(sheen_color) E(n.v) at the "
                      "view alone: its sheen is not measured (the deviation below is brdffit's glTF material's); "
                      f"{material}_openpbr writes the sheen as OpenPBR's fuzz (Zeltner et al.'s LTC sheen)")
-    lines = ['<?xml version="1.0"?>', '<materialx version="1.39" colorspace="lin_rec709">']
-    lines += [f"  <!-- {escape(line).replace('--', '- -')} -->" for line in tm.stated(header, notes, deviation)]
-    lines += _shader("gltf_pbr", f"SR_{material}", material, values)
-    lines += _shader("open_pbr_surface", f"SR_{material}_openpbr", f"{material}_openpbr",
-                     _openpbr(values))
-    lines += _shader("standard_surface", f"SR_{material}_standard", f"{material}_standard",
-                     _standard_surface(values))
-    lines.append("</materialx>")
-    return "\n".join(lines) + "\n", written, notes, deviation
+    text = document(tm.stated(header, notes, deviation),
+                    [("gltf_pbr", material, values), ("open_pbr_surface", f"{material}_openpbr", _openpbr(values)),
+                     ("standard_surface", f"{material}_standard", _standard_surface(values))])
+    return text, written, notes, deviation

@@ -18,6 +18,7 @@ from .diffuse import Burley, Lambert, OrenNayar
 from .gltf import GltfMaterial
 from .lafortune import Lafortune
 from .lobe import Lobe
+from .openpbr import OpenPBR
 from .layout import layout
 from .pbrt import PbrtMaterial
 from .phong import BlinnPhong, Phong
@@ -58,6 +59,7 @@ _LOBES: dict[str, type[Lobe]] = {
         Principled,
         GltfMaterial,
         BlenderPrincipled,
+        OpenPBR,
         PbrtMaterial,
         RoughPlastic,
         ToonDiffuse,

@@ -1,0 +1,171 @@
+"""The openpbr model (OpenPBR Surface as MaterialX 1.39 evaluates it) and its target: the MaterialX document that
+`brdffit export --to openpbr` writes validates against MaterialX's own libraries (the `materialx` package, the test
+extra) and its GLSL and OSL generators produce code for it; a fit for the target recovers a synthetic material and
+exports exactly. The model itself is held to an independent transcription of MaterialX's GLSL at random directions
+(tests/test_models.py, `reference_brdfs.openpbr`)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit import FitResult, models, synth
+from brdffit.cli import EXIT_OK, main
+from brdffit.export import ExportError, export, export_details
+from brdffit.export.openpbr import HELD
+from brdffit.models.openpbr import ggx_albedo_fit
+from brdffit.properties import directional_albedo, scan_albedo
+
+SYNTHETIC = Path(__file__).resolve().parents[1] / "data" / "synthetic"
+MATERIAL = dict(base_color=[0.7, 0.4, 0.15], base_metalness=0.25, base_diffuse_roughness=0.5,
+                specular_roughness=0.45, specular_ior=1.7)
+
+
+def _materialx():
+    return pytest.importorskip("MaterialX", reason="MaterialX (PyPI package materialx, test extra) is not installed")
+
+
+def _document(text: str):
+    """The document with MaterialX's standard libraries imported (what validation and generation need)."""
+    mx = _materialx()
+    doc = mx.createDocument()
+    mx.readFromXmlString(doc, text)
+    libraries = mx.createDocument()
+    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), libraries)
+    doc.importLibrary(libraries)
+    return doc
+
+
+def test_materialx_albedo_fit_is_the_ggx_albedo():
+    """The rational fit the model reads (MaterialX's mx_ggx_dir_albedo_analytic, its 36 coefficients written again
+    here) against brdffit's quadrature of GGX with height-correlated masking and F = 1: within MaterialX's own fit
+    error, 0.03 (measured at most 0.027, at α = 0.1 and cosθ = 0.2); a wrong coefficient moves it by far more."""
+    for alpha in (0.1, 0.3, 0.6, 1.0):
+        lobe = models.get("ggx(shadowing=smith-correlated, fresnel=schlick)", ks=1.0, alpha=alpha, f0=1.0,
+                          channels=1)
+        mu = np.array([0.2, 0.5, 0.9])
+        quadrature = np.asarray(directional_albedo(lobe, np.arccos(mu))).ravel()
+        a, b = ggx_albedo_fit(mu, alpha, xp=np)
+        np.testing.assert_allclose(a + b, quadrature, atol=0.03, err_msg=f"alpha {alpha}")
+
+
+def test_view_albedo_of_a_layered_model_is_the_light_integral():
+    """`scan_albedo(view=True)` at a viewing direction is ∫ f_r(ωi, ωo) cosθi dωi, here by a plain product rule
+    over the light's hemisphere (Gauss-Legendre in cosθi, 256 × 512 nodes); openpbr's layering keeps it at or
+    below 1 for a bright plastic where the albedo at grazing light passes 1."""
+    model = models.get("openpbr", base_color=[0.9, 0.9, 0.9], specular_roughness=0.5, specular_ior=1.5,
+                       channels=3)
+    theta_o = np.radians([10.0, 60.0, 85.0])
+    view = scan_albedo(model, theta_o, np.zeros(1), view=True)[:, 0, :]
+    x, w = np.polynomial.legendre.leggauss(256)
+    mu, wmu = 0.5 * (x + 1.0), 0.5 * w
+    phi = (np.arange(512) + 0.5) * 2 * np.pi / 512
+    ti, pi_ = np.meshgrid(np.arccos(mu), phi, indexing="ij")
+    weight = np.broadcast_to((wmu * mu)[:, None] * (2 * np.pi / 512), ti.shape)
+    for k, to in enumerate(theta_o):
+        f = np.asarray(brdffit.evaluate(model, ti.ravel(), pi_.ravel(), np.full(ti.size, to), np.zeros(ti.size)))
+        integral = np.einsum("n,nc->c", weight.ravel(), f)
+        np.testing.assert_allclose(view[k], integral, rtol=3e-3, err_msg=f"theta_o {np.degrees(to)}")
+    assert view.max() <= 1.0
+    assert scan_albedo(model).max() > 1.05  # grazing light: the layer's weight is the view's, not the light's
+
+
+def test_a_lambert_plus_ggx_fit_is_judged_by_the_same_albedo_either_way():
+    model = models.get("lambert+ggx", rho_d=[0.5, 0.3, 0.2], ks=[0.3] * 3, alpha=0.2)
+    np.testing.assert_allclose(scan_albedo(model, view=True), scan_albedo(model), rtol=1e-12)
+
+
+def test_fit_recovers_a_synthetic_openpbr_material():
+    truth = models.get("openpbr", **MATERIAL)
+    data = synth.generate(truth, pattern="half-diff", n=3000, noise="relative:0.01", seed=5)
+    result = brdffit.fit(data, "openpbr")
+    assert result.status in ("converged", "converged-at-bound"), result.summary()
+    for name, value in MATERIAL.items():
+        np.testing.assert_allclose(np.asarray(result.params[name]), value, rtol=0.05, atol=0.02, err_msg=name)
+
+
+def test_export_is_exact_and_validates_in_materialx():
+    _materialx()
+    model = models.get("openpbr", **MATERIAL)
+    details = export_details(model, "openpbr", name="brdffit material")
+    assert details.exact and details.deviation.rms < 1e-12
+    doc = _document(details.text)
+    valid, message = doc.validate()
+    assert valid, message
+    shader = doc.getChild("SR_brdffit_material")
+    assert shader.getNodeDef().getName() == "ND_open_pbr_surface_surfaceshader"
+    inputs = {i.getName(): i.getValue() for i in shader.getInputs()}
+    for name, value in dict(model.layout.local_params(model.params, 0), **HELD).items():
+        got = inputs[name].asTuple() if hasattr(inputs[name], "asTuple") else inputs[name]
+        np.testing.assert_allclose(np.asarray(got, dtype=float), np.asarray(value, dtype=float), rtol=1e-7,
+                                   err_msg=name)
+    assert [m.getName() for m in doc.getMaterialNodes()] == ["brdffit_material"]
+
+
+@pytest.mark.parametrize("generator", ["glsl", "osl"])
+def test_shader_generators_produce_code(generator):
+    mx = _materialx()
+    from MaterialX import PyMaterialXGenGlsl as genglsl
+    from MaterialX import PyMaterialXGenOsl as genosl
+    from MaterialX import PyMaterialXGenShader as genshader
+
+    doc = _document(export(models.get("openpbr", **MATERIAL), "openpbr"))
+    gen = (genglsl.GlslShaderGenerator if generator == "glsl" else genosl.OslShaderGenerator).create()
+    context = genshader.GenContext(gen)
+    context.registerSourceCodeSearchPath(mx.getDefaultDataSearchPath())
+    (element,) = genshader.findRenderableElements(doc)
+    code = gen.generate(element.getNamePath(), element, context).getSourceCode(genshader.PIXEL_STAGE)
+    assert "open_pbr" in code.lower() and ("void main" in code or "shader " in code)
+
+
+def test_other_models_are_refused_or_fitted():
+    source = models.get("lambert+ggx", rho_d=[0.5, 0.3, 0.2], ks=[0.3] * 3, alpha=0.2)
+    with pytest.raises(ExportError, match="--for openpbr"):
+        export(source, "openpbr")
+    details = export_details(source, "openpbr", fit=True)
+    assert details.mapped.spec == "openpbr" and not details.exact
+    assert "<!-- measured deviation from the source model: " in details.text
+
+
+def test_fit_for_openpbr_then_export(tmp_path, monkeypatch):
+    """The artist's path on the README's plastic: `brdffit fit --for openpbr`, then `brdffit export --to openpbr`.
+    The default candidates are cut to Lambert, as tests/test_export_blender.py does: the model written is the
+    target's own fitted to all the data. The plastic's Schlick f0 = 0.04 is a dielectric of index 1.5, which the
+    fit finds (1.509 measured)."""
+    import importlib
+    import importlib.util
+
+    monkeypatch.setattr(importlib.import_module("brdffit.select"), "DEFAULT_CANDIDATES", ("lambert",))
+    out = tmp_path / "fit"
+    assert main(["fit", str(SYNTHETIC / "plastic.h5"), "--for", "openpbr", "--quiet", "--no-report", "--out",
+                 str(out)]) == EXIT_OK
+    fitted = FitResult.load(out / "result.h5").model
+    assert fitted.spec == "openpbr"
+    np.testing.assert_allclose(float(fitted.params["specular_ior"]), 1.5, atol=0.03)
+    target = tmp_path / "plastic.mtlx"
+    assert main(["export", str(out / "result.h5"), "--to", "openpbr", "--quiet", "--out", str(target)]) == EXIT_OK
+    text = target.read_text()
+    assert "<!-- exact: " in text and "<open_pbr_surface " in text
+    if importlib.util.find_spec("MaterialX") is not None:
+        valid, message = _document(text).validate()
+        assert valid, message
+
+
+def test_materialx_export_states_the_measured_deviation_of_its_openpbr_counterpart():
+    """`--to materialx` writes the glTF values under OpenPBR's names beside the glTF material; without a coat or a
+    sheen, brdffit's openpbr model reads that counterpart and its comment states its deviation from the source, the
+    deviation of the model built here from the same values by OpenPBR's names (a wrong mapping would differ)."""
+    from brdffit.export import terms as tm
+    from brdffit.export.materialx import OPENPBR_NAMES
+
+    values = dict(base_color=[0.7, 0.4, 0.15], metallic=0.2, roughness=0.4, specular=0.8, ior=1.6)
+    source = models.get("gltf", **values)
+    counterpart = models.get("openpbr", **{OPENPBR_NAMES[k]: v for k, v in values.items()})
+    expected = tm.measure(source, counterpart, pairs=tm.deviation_pairs(tm.peaks(source, counterpart)))
+    assert 0.01 < expected.rms < 0.5  # an approximation, and a measurable one
+    text = export(source, "materialx")
+    line = next(line for line in text.splitlines() if "material_openpbr (open_pbr_surface)" in line)
+    assert f"measures its deviation from the source: cosine-weighted relative RMS error {expected.rms:.3g}," in line
+    coated = export(models.get("gltf", **values, clearcoat=0.5), "materialx")
+    assert "its deviation is not measured (brdffit's openpbr model has no coat or fuzz)" in coated
