@@ -73,14 +73,10 @@ def _loads(text: str, target: str, model=None) -> str:
         issues = report["issues"]
         return "ok" if issues["numErrors"] == 0 and issues["numWarnings"] == 0 else json.dumps(issues["messages"])
     if target in ("materialx", "openpbr"):  # both write a MaterialX document
-        import MaterialX as mx
+        sys.path.insert(0, str(ROOT / "tests"))
+        from clients.materialx_document import load
 
-        doc = mx.createDocument()
-        mx.readFromXmlString(doc, text)
-        libraries = mx.createDocument()
-        mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), libraries)
-        doc.importLibrary(libraries)
-        valid, message = doc.validate()
+        valid, message = load(text).validate()
         return "ok" if valid else message
     if target == "blender":
         return _cycles_difference(text, model)

@@ -11,6 +11,7 @@ from brdffit import models
 from brdffit.cli import EXIT_OK, main
 from brdffit.export import ExportError, export, export_details
 from brdffit.export.materialx import OPENPBR_NAMES, STANDARD_SURFACE_NAMES
+from clients import materialx_document
 
 mx = pytest.importorskip("MaterialX", reason="MaterialX (PyPI package materialx, test extra) is not installed")
 
@@ -20,14 +21,7 @@ GLTF = dict(base_color=[0.7, 0.4, 0.15], metallic=0.2, roughness=0.4, specular=0
 SHEENED = dict(GLTF, sheen_color=[0.8, 0.5, 0.4], sheen_roughness=0.37)
 
 
-def _document(text: str):
-    """The document, with MaterialX's standard libraries imported (what validation and generation need)."""
-    doc = mx.createDocument()
-    mx.readFromXmlString(doc, text)
-    libraries = mx.createDocument()
-    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), libraries)
-    doc.importLibrary(libraries)
-    return doc
+_document = materialx_document.load
 
 
 def _inputs(doc, node: str) -> dict:

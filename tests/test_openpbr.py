@@ -16,6 +16,7 @@ from brdffit.export import ExportError, export, export_details
 from brdffit.export.openpbr import HELD
 from brdffit.models.openpbr import ggx_albedo_fit
 from brdffit.properties import directional_albedo, scan_albedo
+from clients import materialx_document
 
 SYNTHETIC = Path(__file__).resolve().parents[1] / "data" / "synthetic"
 MATERIAL = dict(base_color=[0.7, 0.4, 0.15], base_metalness=0.25, base_diffuse_roughness=0.5,
@@ -27,14 +28,8 @@ def _materialx():
 
 
 def _document(text: str):
-    """The document with MaterialX's standard libraries imported (what validation and generation need)."""
-    mx = _materialx()
-    doc = mx.createDocument()
-    mx.readFromXmlString(doc, text)
-    libraries = mx.createDocument()
-    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), libraries)
-    doc.importLibrary(libraries)
-    return doc
+    _materialx()
+    return materialx_document.load(text)
 
 
 def test_materialx_albedo_fit_is_the_ggx_albedo():
