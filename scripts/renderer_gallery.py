@@ -9,7 +9,7 @@ RGL-EPFL materials, CEA's retro-reflective tape) and each target of `brdffit.exp
 - every parameter of the target's fit inside its declared bounds (the target's ranges);
 - its export to the target (glTF: the Khronos glTF-Validator, no error; MaterialX and OpenPBR:
   `Document.validate()`; Mitsuba:
-  `mitsuba.load_string` and no ``unbounded`` texture or ``blendbsdf``; pbrt-v4, which cannot be installed here: the
+  `mitsuba.load_string`, no ``blendbsdf`` and no ``unbounded`` texture but a conductor's η and k; pbrt-v4, which cannot be installed here: the
   statements read back and every value in the ranges its scene parser takes), and whether the export states it
   exact.
 
@@ -29,6 +29,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 
@@ -85,7 +86,15 @@ def _loads(text: str, target: str, model=None) -> str:
 
         mi.set_variant("scalar_rgb")
         mi.load_string(text)
-        return "ok" if "unbounded" not in text and "blendbsdf" not in text else "unbounded values or a blend"
+        # Unbounded textures only where the declared ranges allow them: a conductor's η and k (indices, not
+        # reflectances; docs/export.md's --for table).
+        root = ElementTree.fromstring(text)
+        unbounded = {t.get("name") for t in root.iter("texture")
+                     if any(b.get("name") == "unbounded" and b.get("value") == "true" for b in t.iter("boolean"))}
+        if unbounded - {"eta", "k"} or root.find(".//bsdf[@type='blendbsdf']") is not None or \
+                root.get("type") == "blendbsdf":
+            return "unbounded values or a blend"
+        return "ok" if not unbounded else "ok (η and k unbounded: indices)"
     if target == "pbrt":
         # No pbrt-v4 binary installs here: the statements are read back and held to what pbrt-v4's scene parser
         # and materials take (paramdict.cpp: an RGB albedo in [0, 1], no negative RGB; FrComplex needs η > 0).
