@@ -141,10 +141,11 @@ def test_report_says_which_renderers_have_no_equivalent(full_report):
     # lambert+ward: neither renderer has a Ward lobe; the report says so with the export's own reason.
     _, paths = full_report
     rows = _section_rows(open(paths["md"], encoding="utf-8").read())
-    # Every registered renderer has a row: none has a Ward lobe (glTF, Blender and MaterialX write one model of
-    # their own, which `--for` fits).
+    # Every registered renderer has a row: none has a Ward lobe (glTF, Blender, MaterialX and OpenPBR write one
+    # model of their own, which `--for` fits).
     assert [(r[0], r[1], r[2], r[3], r[4]) for r in rows] == [
-        (to, "direct", "no equivalent", "–", "–") for to in ("mitsuba", "pbrt", "gltf", "blender", "materialx")]
+        (to, "direct", "no equivalent", "–", "–")
+        for to in ("mitsuba", "pbrt", "gltf", "blender", "materialx", "openpbr")]
     assert all("lobe 'ward'" in r[5] and "fit=True (--fit)" in r[5] for r in rows[:2])
     assert all("lambert+ward" in r[5] and "--for" in r[5] and "(--fit)" in r[5] for r in rows[2:])
     html = open(paths["html"], encoding="utf-8").read()
