@@ -205,3 +205,19 @@ def test_log_axes_are_labelled_in_plain_text():
     ax.set_ylim(0.2, 0.9)  # less than a decade: the minor ticks are labelled instead
     minor = shown(minor=True)
     assert minor == ["0.2", "0.3", "0.4", "0.6"], minor  # matplotlib's choice of minor labels, in plain text
+
+
+def test_albedo_of_a_layered_renderer_model_is_its_albedo_at_each_view():
+    """A report's albedo curve and its warnings use the albedo the plausibility check judges: for the openpbr model
+    (not reciprocal) the albedo at each view, which its layering keeps within 1 for a bright plastic, where the
+    albedo of grazing light passes 1 (1.2 at 89°)."""
+    from brdffit import models, synth
+    from brdffit.properties import directional_albedo
+    from brdffit.report import figures
+    from brdffit.report.assemble import _albedo_warnings
+
+    truth = models.get("openpbr", base_color=[0.9, 0.85, 0.8], specular_roughness=0.4, specular_ior=1.5)
+    result = brdffit.fit(synth.generate(truth, pattern="half-diff", n=600, seed=2), "openpbr")
+    curve = figures.albedo_curve(result)
+    assert curve.max() <= 1.0 and not _albedo_warnings(curve, ["R", "G", "B"])
+    assert np.asarray(directional_albedo(result.model, np.radians([89.0]))).max() > 1.1

@@ -294,8 +294,9 @@ _CAPTIONS = {
     "residuals": "Relative residual (model − data)/data averaged in bins of the half and difference angles.",
     "corner": "Corner plot of the posterior samples.",
     "traces": "Walker traces with the integrated autocorrelation time of each parameter.",
-    "albedo": "Directional albedo of the fitted model against the incidence angle; a passive surface stays at or "
-              "below 1 (dashed line).",
+    "albedo": "Directional albedo of the fitted model against the incidence angle (for a model that is not "
+              "reciprocal, a renderer's layered material, its albedo at each view against the viewing angle, as its "
+              "plausibility check judges it); a passive surface stays at or below 1 (dashed line).",
     "spheres": "Sphere previews: the measurement (interpolated), the fit and their relative difference. Rings and "
                "speckle in the difference come from interpolating scattered samples (k nearest neighbours), not "
                "necessarily from the fit. Spectral data are rendered band by band and shown in sRGB (CIE 1931 XYZ "

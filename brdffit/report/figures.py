@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 
 from ..geometry import to_half_diff
 from ..io._common import atomic_path
-from ..properties import directional_albedo
+from ..properties import directional_albedo, scan_albedo
 from ..colour import ColourError, spectral_colour
 from ..render import difference, render_sphere, tonemap
 
@@ -156,16 +156,29 @@ def param_axis_label(fit_result, label: str) -> str:
         return label
 
 
-def _fit_albedo(fit_result, theta_i) -> np.ndarray:
-    """Directional albedo ``(len(theta_i), C)`` of the fitted model(s) (one model per channel when independent)."""
-    models = [fit_result.model] if fit_result.model is not None else fit_result.models
-    parts = [np.asarray(directional_albedo(m, theta_i)).reshape(len(theta_i), -1) for m in models]
+def _fit_models(fit_result) -> list:
+    return [fit_result.model] if fit_result.model is not None else fit_result.models
+
+
+def _at_the_view(fit_result) -> bool:
+    """Whether the fit's albedo is the one at each view (a model that is not reciprocal, as the plausibility check
+    judges it: `brdffit.plausibility`) rather than at each incidence."""
+    return not all(m.reciprocal for m in _fit_models(fit_result))
+
+
+def _fit_albedo(fit_result, theta) -> np.ndarray:
+    """Directional albedo ``(len(theta), C)`` of the fitted model(s) (one model per channel when independent): at
+    each incidence θi (`brdffit.properties.directional_albedo`), or for a model that is not reciprocal at each view
+    θo (`brdffit.properties.scan_albedo` with ``view``)."""
+    if _at_the_view(fit_result):
+        parts = [scan_albedo(m, theta, np.zeros(1), view=True)[:, 0, :] for m in _fit_models(fit_result)]
+    else:
+        parts = [np.asarray(directional_albedo(m, theta)).reshape(len(theta), -1) for m in _fit_models(fit_result)]
     return np.concatenate(parts, axis=-1)
 
 
 def _render_fit(fit_result, resolution: int) -> np.ndarray:
-    models = [fit_result.model] if fit_result.model is not None else fit_result.models
-    return np.concatenate([render_sphere(m, resolution=resolution) for m in models], axis=-1)
+    return np.concatenate([render_sphere(m, resolution=resolution) for m in _fit_models(fit_result)], axis=-1)
 
 
 def _as_srgb(hdr: np.ndarray, measurements) -> np.ndarray:
@@ -505,12 +518,14 @@ def plot_traces(path, posterior, fit_result=None) -> str:
 # ------------------------------------------------------------------------------------------- 6. albedo
 def albedo_curve(fit_result, n: int = 46) -> np.ndarray:
     r"""Directional albedo a(θi) = ∫ f_r cosθo dωo of the fitted model(s), shape ``(n, C)``, at ``n`` angles θi
-    from 0° to 89° (`brdffit.properties.directional_albedo`)."""
+    from 0° to 89° (`brdffit.properties.directional_albedo`); for a model that is not reciprocal, its albedo at each
+    view a(θo) = ∫ f_r cosθi dωi at ``n`` angles θo (`_fit_albedo`)."""
     return _fit_albedo(fit_result, np.radians(np.linspace(0.0, 89.0, n)))
 
 
 def plot_albedo(path, fit_result, channels=None, n: int = 46, albedo: np.ndarray | None = None) -> str:
-    r"""Directional albedo a(θi) = ∫ f_r cosθo dωo of the fitted model against θi, per channel.
+    r"""Directional albedo a(θi) = ∫ f_r cosθo dωo of the fitted model against θi, per channel (for a model that is
+    not reciprocal, its albedo at each view against θo, the one its plausibility check judges).
 
     Computed with `albedo_curve` at ``n`` angles from 0° to 89°; the dashed line at 1 is the energy-conservation
     limit (a passive surface stays below it).
@@ -533,8 +548,12 @@ def plot_albedo(path, fit_result, channels=None, n: int = 46, albedo: np.ndarray
     top = max(1.1, float(np.nanmax(albedo)) * 1.05)
     ax.set_ylim(0.0, top)
     ax.set_xlim(0, 90)
-    ax.set_xlabel("θi, incidence angle (°)")
-    ax.set_ylabel("directional albedo a(θi) (1)")
+    if _at_the_view(fit_result):  # the albedo the plausibility check judges (`_fit_albedo`)
+        ax.set_xlabel("θo, viewing angle (°)")
+        ax.set_ylabel("albedo at the view a(θo) = ∫ f_r cosθi dωi (1)")
+    else:
+        ax.set_xlabel("θi, incidence angle (°)")
+        ax.set_ylabel("directional albedo a(θi) (1)")
     ax.set_title(f"Directional albedo of the fitted {fit_result.spec}\nmax {float(np.nanmax(albedo)):.3f}")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
