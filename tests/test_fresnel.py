@@ -202,3 +202,16 @@ def test_conductor_gradient_matches_finite_differences():
           (f(c, eta + h, k) - f(c, eta - h, k)) / (2 * h),
           (f(c, eta, k + h) - f(c, eta, k - h)) / (2 * h)]
     np.testing.assert_allclose(grads, fd, rtol=1e-6)
+
+
+def test_f82_tint_meets_its_defining_values():
+    """Hoffman's F82-tinted Schlick term: F(1) = f0, F(0) = 1, at cosθ = 1/7 the tint times Schlick's term, and with
+    a white tint (f82 = 1) Schlick's term itself."""
+    from brdffit.models.fresnel import f82_tint, schlick
+
+    f0, f82 = np.array([0.9, 0.6, 0.3]), np.array([0.8, 1.0, 0.5])
+    np.testing.assert_allclose(f82_tint(1.0, f0, f82), f0, rtol=1e-15)
+    np.testing.assert_allclose(f82_tint(0.0, f0, f82), 1.0, rtol=1e-15)
+    np.testing.assert_allclose(f82_tint(1.0 / 7.0, f0, f82), f82 * np.asarray(schlick(1.0 / 7.0, f0)), rtol=1e-13)
+    c = np.linspace(0.0, 1.0, 11)[:, None]
+    np.testing.assert_allclose(f82_tint(c, f0, 1.0), schlick(c, f0), rtol=1e-15)

@@ -11,7 +11,8 @@ from ..geometry import TINY, safe_sqrt
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["schlick", "schlick_weight", "normal_reflectance", "dielectric", "conductor", "CONDUCTORS", "DIELECTRICS"]
+__all__ = ["schlick", "schlick_weight", "f82_tint", "normal_reflectance", "dielectric", "conductor", "CONDUCTORS",
+           "DIELECTRICS"]
 
 # Complex refractive indices (eta, k) of conductors at about 550 nm, as used in the issue specification.
 CONDUCTORS = {
@@ -51,6 +52,27 @@ def schlick(cos_theta, f0):
         The reflectance, broadcast shape.
     """
     return f0 + (1.0 - f0) * schlick_weight(cos_theta)
+
+
+# The angle of Hoffman's F82 tint: cos θ = 1/7 (θ ≈ 82°).
+_COS_82 = 1.0 / 7.0
+
+
+def f82_tint(cos_theta, f0, f82):
+    r"""Schlick's term with Hoffman's F82 tint (Hoffman 2023, "Generalization of Adobe's Fresnel model", Eq. 2 with
+    F90 = 1 and exponent 5; MaterialX's ``mx_fresnel_hoffman_schlick``): F = S(cosθ; f0) − a cosθ (1 − cosθ)⁶ with
+    a = S(1/7; f0) (1 − f82) / ((1/7)(6/7)⁶), S `schlick`'s term, so that F(1/7) = f82 · S(1/7; f0).
+
+    Arguments:
+        cos_theta: cosine of the incidence angle on the microsurface (clipped to [0, 1]).
+        f0: reflectance at normal incidence; f82: the tint at θ ≈ 82° (broadcastable with ``f0``).
+
+    Returns:
+        The reflectance, broadcast shape.
+    """
+    x = jnp.clip(cos_theta, 0.0, 1.0)
+    a = schlick(_COS_82, f0) * (1.0 - f82) / (_COS_82 * (1.0 - _COS_82) ** 6)
+    return schlick(x, f0) - a * x * (1.0 - x) ** 6
 
 
 def normal_reflectance(eta):

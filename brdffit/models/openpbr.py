@@ -22,7 +22,7 @@ the direction to the viewer (MaterialX's V), ωi the light's (L), h their half v
     directional albedo, Ē = a (1 + c₂ r), ρ_ms = ρ² Ē / (1 − ρ (1 − Ē)), c₁ = 1/2 − 2/(3π), c₂ = 2/3 − 28/(15π);
 - the metal, a ``generalized_schlick_bsdf`` of weight w, color0 base_color and color82 specular_color:
   f_m = w F_82(c) DG K(F_82), with F_82 the F82-tinted Schlick term of Hoffman 2023
-  (``mx_fresnel_hoffman_schlick``): F_82 = F0 + (1 − F0)(1 − c)⁵ − a c (1 − c)⁶,
+  (``mx_fresnel_hoffman_schlick``, `brdffit.models.fresnel.f82_tint`): F_82 = F0 + (1 − F0)(1 − c)⁵ − a c (1 − c)⁶,
   a = (F0 + (1 − F0)(6/7)⁵)(1 − F82) / ((1/7)(6/7)⁶).
 
 f = (1 − base_metalness) f_d + base_metalness f_m. MaterialX clamps the cosines to at least 1e-8 and ωi·ωo to
@@ -68,7 +68,6 @@ _ALBEDO_FIT = np.array([
 _FUJII_1 = 0.5 - 2.0 / (3.0 * math.pi)
 _FUJII_2 = 2.0 / 3.0 - 28.0 / (15.0 * math.pi)
 _F0_CAP = 0.99999  # the graph's clamp of the weighted F0 (scaled_specular_F0_clamped)
-_COS_82 = 1.0 / 7.0  # Hoffman's F82 angle, cos θ = 1/7
 
 
 def ggx_albedo_fit(mu, alpha, xp=None):
@@ -105,14 +104,6 @@ def _oren_nayar(pair: LocalPair, mu_i, mu_o, colour, rough):
     weight = (jnp.maximum(EPS, 1.0 - _fujii_albedo(mu_o, rough, a))
               * jnp.maximum(EPS, 1.0 - _fujii_albedo(mu_i, rough, a)) / jnp.maximum(EPS, 1.0 - mean))
     return single + multi_colour * weight[..., None]
-
-
-def _f82(c, f0, f82):
-    """Hoffman's F82-tinted Schlick term with F90 = 1 and exponent 5 (``mx_fresnel_hoffman_schlick``)."""
-    x = jnp.clip(c, 0.0, 1.0)[..., None]
-    factor = 1.0 / (_COS_82 * (1.0 - _COS_82) ** 6)
-    a = (f0 + (1.0 - f0) * (1.0 - _COS_82) ** 5) * (1.0 - f82) * factor
-    return f0 + (1.0 - f0) * (1.0 - x) ** 5 - a * x * (1.0 - x) ** 6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -175,6 +166,6 @@ class OpenPBR(Lobe):
         albedo = (fr.normal_reflectance(modulated) * a_fit + b_fit)[..., None] * k_dielectric
         diffuse = _oren_nayar(pair, mu_i, mu_o, base, rough) / jnp.pi
         dielectric = tint * f_dielectric * microfacet[..., None] * k_dielectric + (1.0 - albedo) * diffuse
-        f_metal = _f82(c, base, tint)
+        f_metal = fr.f82_tint(c[..., None], base, tint)
         metal = weight * f_metal * microfacet[..., None] * compensation(f_metal)
         return (1.0 - metalness) * dielectric + metalness * metal
