@@ -6,11 +6,8 @@
 - energy: the largest directional albedo (`brdffit.properties.scan_albedo`, θi 0-89°) must not exceed 1
   (+ 1e-3): a passive surface cannot reflect more light than it receives. Above 1 only beyond the data's largest
   θi it is a caution (the lobes of a sum are not energy-coupled, so Lambert + a Fresnel lobe passes 1 towards
-  grazing), within them it is implausible. A model that is not reciprocal (a renderer's layered material:
-  MaterialX's OpenPBR Surface, Cycles' Principled BSDF, weighting the layer beneath by the layer's albedo at the
-  view) is judged by its albedo at each view, ∫ f_r cosθi dωi, the one such layering keeps at or below 1 and the
-  one a renderer tracing from the camera multiplies by; its albedo at each incidence can pass 1 towards grazing
-  light;
+  grazing), within them it is implausible. A model that is not reciprocal (a renderer's layered material) is
+  judged by its albedo at each view, ∫ f_r cosθi dωi (`brdffit.properties.judged_at_the_view` says why);
 - specular: every unbounded amplitude (ks, ks_j) times the largest value of its lobe's Fresnel factor over the
   angles must not exceed 1 by more than `PLAUSIBILITY_SIGMAS` standard errors; every Fresnel factor of the
   library reaches 1 at grazing (and lobes without one have F = 1), so that largest ks·F is ks;
@@ -27,7 +24,7 @@ import math
 import numpy as np
 
 from .models import Model
-from .properties import PLAUSIBILITY_PHI_I, PLAUSIBILITY_THETA_I, scan_albedo
+from .properties import PLAUSIBILITY_PHI_I, PLAUSIBILITY_THETA_I, judged_at_the_view, scan_albedo
 
 __all__ = [
     "plausibility",
@@ -102,7 +99,7 @@ class Plausibility:
 def _energy(models, theta_max) -> Check:
     worst, where, inside = -math.inf, (0.0, 0.0, 0), -math.inf
     for k, model in enumerate(models):
-        albedo = scan_albedo(model, view=not model.reciprocal)  # (T, P, C)
+        albedo = scan_albedo(model, view=judged_at_the_view(model))  # (T, P, C)
         i, j, c = np.unravel_index(int(np.argmax(albedo)), albedo.shape)
         if albedo[i, j, c] > worst:
             # φi is worth naming only where the albedo depends on it (an anisotropic model, off the normal).
@@ -113,8 +110,7 @@ def _energy(models, theta_max) -> Check:
         if measured.any():
             inside = max(inside, float(albedo[measured].max()))
     theta, phi, channel = where
-    # A model that is not reciprocal is judged by its albedo at each view (`scan_albedo`'s ``view``).
-    side = "i" if all(model.reciprocal for model in models) else "o"
+    side = "o" if any(judged_at_the_view(model) for model in models) else "i"
     at = f"θ{side} = {math.degrees(theta):.1f}°" + (f", φ{side} = {math.degrees(phi):.0f}°" if phi else "")
     limit = 1.0 + PLAUSIBILITY_TOL
     if worst <= limit:

@@ -56,6 +56,7 @@ __all__ = [
     "ISOTROPY_TOL",
     "direction_pairs",
     "scan_albedo",
+    "judged_at_the_view",
     "PLAUSIBILITY_THETA_I",
 ]
 
@@ -524,6 +525,16 @@ PLAUSIBILITY_PHI_I = np.deg2rad([0.0, 90.0])
 PLAUSIBILITY_RESOLUTION = 64
 
 
+def judged_at_the_view(model: Model) -> bool:
+    """Whether the energy of ``model`` is judged by its albedo at each view (`scan_albedo` with ``view``) rather
+    than at each incidence: so for a model that is not reciprocal (a renderer's layered material, MaterialX's
+    OpenPBR Surface or Cycles' Principled BSDF, weights the layer beneath by the layer's albedo at the view, which
+    keeps the albedo at each view, the one a renderer tracing from the camera multiplies by, within 1, while grazing
+    light can come back brighter). The plausibility check (`brdffit.plausibility`) and the report's albedo curve
+    (`brdffit.report.figures.albedo_curve`) both follow it."""
+    return not model.reciprocal
+
+
 def scan_albedo(model: Model, theta_i=PLAUSIBILITY_THETA_I, phi_i=PLAUSIBILITY_PHI_I,
                 resolution: int = PLAUSIBILITY_RESOLUTION, view: bool = False) -> np.ndarray:
     """The directional albedo on a grid of incidence directions, quickly: ``(len(theta_i), len(phi_i), C)``.
@@ -534,9 +545,7 @@ def scan_albedo(model: Model, theta_i=PLAUSIBILITY_THETA_I, phi_i=PLAUSIBILITY_P
     it (`brdffit.plausibility.plausibility`).
 
     With ``view``, the grid's directions are the viewer's and the integral runs over the light's:
-    ∫ f_r(ωi, ωo) cosθi dωi at each ωo, the albedo that a renderer's layering keeps at or below 1 in a model that is
-    not reciprocal (MaterialX's and Cycles' weight the layer beneath by the layer's albedo at the view); for a
-    reciprocal model the two are the same.
+    ∫ f_r(ωi, ωo) cosθi dωi at each ωo (`judged_at_the_view`); for a reciprocal model the two are the same.
     """
     theta, phi = (np.asarray(x, dtype=float).reshape(-1) for x in np.meshgrid(theta_i, phi_i, indexing="ij"))
     t, wt = _gauss_legendre(resolution, 0.0, 1.0)

@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 
 from ..geometry import to_half_diff
 from ..io._common import atomic_path
-from ..properties import directional_albedo, scan_albedo
+from ..properties import directional_albedo, judged_at_the_view, scan_albedo
 from ..colour import ColourError, spectral_colour
 from ..render import difference, render_sphere, tonemap
 
@@ -161,9 +161,8 @@ def _fit_models(fit_result) -> list:
 
 
 def _at_the_view(fit_result) -> bool:
-    """Whether the fit's albedo is the one at each view (a model that is not reciprocal, as the plausibility check
-    judges it: `brdffit.plausibility`) rather than at each incidence."""
-    return not all(m.reciprocal for m in _fit_models(fit_result))
+    """Whether the fit's albedo is the one at each view (`brdffit.properties.judged_at_the_view`)."""
+    return any(judged_at_the_view(m) for m in _fit_models(fit_result))
 
 
 def _fit_albedo(fit_result, theta) -> np.ndarray:
