@@ -229,7 +229,8 @@ def compiled_solve(problem: Problem, y0: dict, data: FitData):
     start = time.perf_counter()
     per_material = jax.vmap(lambda y, d, p: _solve_one(y, d, p, problem), in_axes=(0, None, 0))
     batched = jax.vmap(per_material, in_axes=(0, 0, 0))
-    executable = jax.jit(batched).lower(y0, data, no_pins(problem, y0)).compile(compiler_options=programs.compiler_options())
+    lowered = jax.jit(batched).lower(y0, data, no_pins(problem, y0))
+    executable = lowered.compile(compiler_options=programs.compiler_options())
     _COMPILED[key] = executable
     return executable, time.perf_counter() - start
 
