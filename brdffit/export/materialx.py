@@ -43,6 +43,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
+from ..models.openpbr import OpenPBR
 from . import gltf
 from . import terms as tm
 
@@ -79,12 +80,9 @@ def _openpbr_deviation(values: dict, reference: tm.Model):
     where that model does not represent it (a coat or a sheen: it has neither)."""
     if values["clearcoat"] > 0 or max(values["sheen_color"]) > 0:
         return None
-    from ..models import lobe_class
-
     inputs = {k: v for k, v in _openpbr(values).items() if k not in ("coat_weight", "coat_roughness")}
     inputs["base_diffuse_roughness"] = 0.0
-    counterpart = tm.assemble([(lobe_class("openpbr")(), {k: np.asarray(v, dtype=float) for k, v in inputs.items()})],
-                              3)
+    counterpart = tm.assemble([(OpenPBR(), {k: np.asarray(v, dtype=float) for k, v in inputs.items()})], 3)
     return tm.measure(reference, counterpart, pairs=tm.deviation_pairs(tm.peaks(reference, counterpart)))
 
 
