@@ -124,7 +124,9 @@ EQUATIONS = {
         "E₁ = A + B\n"
         "f_on: OpenPBR's energy-preserving Oren-Nayar diffuse of base_color, roughness base_diffuse_roughness\n"
         "F82: Hoffman's F82-tinted Schlick term, F0 = base_color, F82 = specular_color,  D = GGX,  "
-        "G2 height-correlated,  α = specular_roughness²"
+        "G2 height-correlated,  α = specular_roughness²\n"
+        "fuzz=true: f_fuzz = fuzz_weight fuzz_color E_z(co) D_LTC(ωi)/ci + (1 − fuzz_weight E_z(co)) f,  "
+        "Zeltner's sheen (MaterialX's fits of its LTC and albedo E_z, roughness fuzz_roughness)"
     ),
     "pbrt": (
         "f = (1 − amount) reflectance/π + amount · F(cd; eta + i k) · D G2/(4 ci co)\n"
@@ -210,10 +212,12 @@ NOTES = {
                "quadrature and agrees with Cycles' to 1e-4. `brdffit fit --for blender`, `brdffit export --to "
                "blender`; tests/test_export_blender.py renders the export in Cycles against brdffit's render.",
     "openpbr": "OpenPBR Surface as MaterialX 1.39 evaluates an opaque one (its graph `open_pbr_surface.mtlx` and "
-               "the GLSL of its BSDF nodes), uncoated, without fuzz, thin film, transmission, subsurface or emission, "
+               "the GLSL of its BSDF nodes), uncoated, without thin film, transmission, subsurface or emission, "
                "isotropic, base_weight 1: a dielectric specular layered over an energy-preserving Oren-Nayar "
                "diffuse by the layer's albedo at the view (MaterialX's rational fit), mixed by base_metalness with "
-               "an F82-tinted metal. specular_weight and specular_color are held at 1 unless freed (with no metal, "
+               "an F82-tinted metal; with `fuzz=true`, OpenPBR's fuzz layer over it (Zeltner et al.'s 2022 LTC "
+               "microfibre sheen, the `zeltner` mode of MaterialX's sheen_bsdf), for cloth and felt. "
+               "specular_weight and specular_color are held at 1 unless freed (with no metal, "
                "the graph's weight and index are one degree of freedom). Not reciprocal, as MaterialX's layering "
                "is not; tests/test_models.py holds it to a transcription of the GLSL. `brdffit fit --for openpbr`, "
                "`brdffit export --to openpbr` (a MaterialX document that MaterialX validates).",
@@ -263,6 +267,7 @@ VARIANTS = {
                       {"distribution": "std"}, {"distribution": "gtr"}],
     "ggx": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}, {"anisotropic": True}],
     "lafortune": [{"anisotropic": True}],
+    "openpbr": [{"fuzz": True}],
 }
 
 

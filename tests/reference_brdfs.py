@@ -936,12 +936,13 @@ _MX_ALBEDO = [
 
 @_quiet
 def openpbr(theta_i, phi_i, theta_o, phi_o, base_color, base_metalness, base_diffuse_roughness, specular_weight,
-            specular_color, specular_roughness, specular_ior):
+            specular_color, specular_roughness, specular_ior, fuzz_weight=0.0, fuzz_color=1.0, fuzz_roughness=0.5):
     """OpenPBR Surface (opaque, uncoated, isotropic, base_weight 1) as MaterialX 1.39 evaluates it, transcribed
     from MaterialX's GLSL (libraries/pbrlib/genglsl: mx_dielectric_bsdf, mx_generalized_schlick_bsdf,
-    mx_oren_nayar_diffuse_bsdf, mx_layer_bsdf, mx_mix_bsdf, lib/mx_microfacet_specular.glsl,
-    lib/mx_microfacet_diffuse.glsl) and the graph NG_open_pbr_surface_surfaceshader (libraries/bxdf): each BSDF's
-    ``response`` is f cosθi, so f = response / (N·L); L = ωi, V = ωo, EPS = M_FLOAT_EPS = 1e-8."""
+    mx_oren_nayar_diffuse_bsdf, mx_sheen_bsdf, mx_layer_bsdf, mx_mix_bsdf, lib/mx_microfacet_specular.glsl,
+    lib/mx_microfacet_diffuse.glsl, lib/mx_microfacet_sheen.glsl) and the graph NG_open_pbr_surface_surfaceshader
+    (libraries/bxdf): each BSDF's ``response`` is f cosθi, so f = response / (N·L); L = ωi, V = ωo, EPS =
+    M_FLOAT_EPS = 1e-8. The fuzz layer (weight 0: none) is the graph's ``fuzz_layer`` over the base."""
     eps = 1e-8
     pair = Pair(theta_i, phi_i, theta_o, phi_o)
     base, tint = _col(base_color), _col(specular_color)
@@ -1004,7 +1005,39 @@ def openpbr(theta_i, phi_i, theta_o, phi_o, base_color, base_metalness, base_dif
     f82 = base + (1.0 - base) * (1.0 - x) ** 5 - a82 * x * (1.0 - x) ** 6  # mx_fresnel_hoffman_schlick
     metal = (d * g / (4.0 * n_v))[:, None] * f82 * comp(f82) * specular_weight
     response = (1.0 - base_metalness) * dielectric + base_metalness * metal  # mx_mix_bsdf
+    if fuzz_weight >= eps:  # mx_sheen_bsdf returns nothing (throughput 1) below M_FLOAT_EPS
+        sheen_response, sheen_albedo = _zeltner_sheen(pair, n_v, fuzz_roughness)
+        response = (fuzz_weight * _col(fuzz_color) * sheen_response[:, None]
+                    + (1.0 - sheen_albedo * fuzz_weight)[:, None] * response)  # mx_layer_bsdf
     return _masked(pair, response / n_l[:, None])
+
+
+def _zeltner_sheen(pair, n_v, roughness):
+    """``mx_sheen_bsdf`` in its zeltner mode with white colour and weight 1: (response, dirAlbedo), built with the
+    GLSL's vectors (mx_orthonormal_basis_ltc: X = normalize(V − N N·V), Y = N × X; toLTC its transpose)."""
+    roughness = min(max(roughness, 0.01), 1.0)
+    x, y = n_v, roughness
+    s = y * (0.0206607 + 1.58491 * y) / (0.0379424 + y * (1.32227 + y))
+    m = y * (-0.193854 + y * (-1.14885 + y * (1.7932 - 0.95943 * y * y))) / (0.046391 + y)
+    o = y * (0.000654023 + (-0.0207818 + 0.119681 * y) * y) / (1.26264 + y * (-1.92021 + y))
+    dir_albedo = np.exp(-0.5 * ((x - m) / s) ** 2) / (s * np.sqrt(2.0 * np.pi)) + o
+    a_inv = (2.58126 * x + 0.813703 * y) * y / (1.0 + 0.310327 * x * x + 2.60994 * x * y)
+    b_inv = np.sqrt(1.0 - x) * (y - 1.0) * y * y * y / (0.0000254053 + 1.71228 * x - 1.71506 * x * y
+                                                          + 1.34174 * y * y)
+    light = np.stack([pair.si * np.cos(pair.pi_), pair.si * np.sin(pair.pi_), pair.ci], axis=-1)
+    view = np.stack([pair.so * np.cos(pair.po), pair.so * np.sin(pair.po), pair.co], axis=-1)
+    normal = np.array([0.0, 0.0, 1.0])
+    tangent = view - normal * (view @ normal)[:, None]
+    length2 = np.sum(tangent * tangent, axis=-1)
+    # V = N: mx_orthonormal_basis(N); any frame gives the same value there, as b_inv = 0.
+    tangent = np.where((length2 > 0.0)[:, None], tangent / np.sqrt(np.where(length2 > 0.0, length2, 1.0))[:, None],
+                       np.array([1.0, 0.0, 0.0]))
+    bitangent = np.cross(normal, tangent)
+    w = np.stack([np.sum(light * tangent, -1), np.sum(light * bitangent, -1), light @ normal], axis=-1)
+    wo = np.stack([a_inv * w[:, 0] + b_inv * w[:, 2], a_inv * w[:, 1], w[:, 2]], axis=-1)
+    len_sqr = np.sum(wo * wo, axis=-1)
+    ltc = np.maximum(wo[:, 2], 0.0) / np.pi * (a_inv / len_sqr) ** 2  # mx_cosine_hemisphere_PDF(wo.z) (aInv/|wo|²)²
+    return dir_albedo * ltc, dir_albedo
 
 
 @_quiet
@@ -1180,7 +1213,7 @@ REFERENCES = {
     "principled": lambda ti, pi_, to, po, p: principled(ti, pi_, to, po, **p),
     "gltf": lambda ti, pi_, to, po, p: gltf(ti, pi_, to, po, **p),
     "blender": lambda ti, pi_, to, po, p: blender(ti, pi_, to, po, **p),
-    "openpbr": lambda ti, pi_, to, po, p: openpbr(ti, pi_, to, po, **p),
+    "openpbr": lambda ti, pi_, to, po, p, fuzz=False: openpbr(ti, pi_, to, po, **p),
     "pbrt": lambda ti, pi_, to, po, p: pbrt(ti, pi_, to, po, **p),
     "roughplastic": lambda ti, pi_, to, po, p: roughplastic(ti, pi_, to, po, **p),
     "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),

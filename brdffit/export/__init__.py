@@ -128,7 +128,7 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
     if not candidates or not (target.refines or candidates[0].deviation.exact()):
         from .refit import exportable_specs, fit_exportable
 
-        for spec in [target.family] if target.family else exportable_specs(model):
+        for spec in target.renders if target.family else exportable_specs(model):
             fitted, line = fit_exportable(model, spec=spec)
             candidates.append(_export(target, fitted, name, header, model, line))
     return min(candidates, key=lambda c: c.deviation.rms)

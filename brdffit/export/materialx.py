@@ -76,13 +76,14 @@ def _openpbr(values: dict) -> dict:
 
 def _openpbr_deviation(values: dict, reference: tm.Model):
     """The measured deviation from ``reference`` of the OpenPBR counterpart of the glTF values (`_openpbr`), read as
-    brdffit's ``openpbr`` model (`brdffit.models.openpbr`, OpenPBR Surface as MaterialX evaluates it), or None
-    where that model does not represent it (a coat or a sheen: it has neither)."""
-    if values["clearcoat"] > 0 or max(values["sheen_color"]) > 0:
+    brdffit's ``openpbr`` model (`brdffit.models.openpbr`, OpenPBR Surface as MaterialX evaluates it, with its fuzz
+    for a sheen), or None where that model does not represent it (a coat: it has none)."""
+    if values["clearcoat"] > 0:
         return None
     inputs = {k: v for k, v in _openpbr(values).items() if k not in ("coat_weight", "coat_roughness")}
     inputs["base_diffuse_roughness"] = 0.0
-    counterpart = tm.assemble([(OpenPBR(), {k: np.asarray(v, dtype=float) for k, v in inputs.items()})], 3)
+    lobe = OpenPBR(fuzz="fuzz_weight" in inputs)
+    counterpart = tm.assemble([(lobe, {k: np.asarray(v, dtype=float) for k, v in inputs.items()})], 3)
     return tm.measure(reference, counterpart, pairs=tm.deviation_pairs(tm.peaks(reference, counterpart)))
 
 
@@ -162,7 +163,7 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     counterpart = _openpbr_deviation(values, model if source is None else source)
     measured = ("brdffit's openpbr model measures its deviation from the source: " + counterpart.describe()
                 if counterpart is not None else "its deviation is not measured (brdffit's openpbr model has no "
-                "coat or fuzz)")
+                "coat)")
     notes = [f"{material}_openpbr (open_pbr_surface) takes the glTF values under OpenPBR's names; OpenPBR layers the "
              "specular over the diffuse by albedo and tints its conductor by F82, where glTF mixes by Schlick's "
              f"Fresnel per direction: {measured} (the deviation below is the glTF material's, {material})",

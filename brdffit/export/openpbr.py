@@ -3,10 +3,11 @@
 The document holds one material, ``<surfacematerial name=NAME>``, whose shader is MaterialX's
 ``open_pbr_surface`` node (``ND_open_pbr_surface_surfaceshader``, OpenPBR Surface 1.1) with brdffit's ``openpbr``
 model's values under the node's own names (``base_color``, ``base_metalness``, ``base_diffuse_roughness``,
-``specular_weight``, ``specular_color``, ``specular_roughness``, ``specular_ior``) and the inputs the model holds
-written out at the values it assumes (``base_weight`` 1, ``specular_roughness_anisotropy``, ``coat_weight``,
-``fuzz_weight``, ``thin_film_weight``, ``transmission_weight``, ``subsurface_weight`` and ``emission_luminance``
-0), so that another default in a later OpenPBR version does not change the material. brdffit's ``openpbr`` model
+``specular_weight``, ``specular_color``, ``specular_roughness``, ``specular_ior``, and ``fuzz_weight``,
+``fuzz_color``, ``fuzz_roughness`` for a model with fuzz) and the inputs the model holds written out at the values
+it assumes (``base_weight`` 1, ``specular_roughness_anisotropy``, ``coat_weight``, ``fuzz_weight`` (without fuzz),
+``thin_film_weight``, ``transmission_weight``, ``subsurface_weight`` and ``emission_luminance`` 0), so that another
+default in a later OpenPBR version does not change the material. brdffit's ``openpbr`` model
 is that node as MaterialX's GLSL evaluates it (`brdffit.models.openpbr`), so a model that is that lobe alone is
 written exactly; any other is refused or, under the fit option, replaced by the ``openpbr`` model fitted to it,
 with the measured deviation stated in the document's comments.
@@ -21,7 +22,7 @@ __all__ = ["write", "FAMILY", "EXPORTABLE", "HELD"]
 
 FAMILY = "openpbr"
 EXPORTABLE = "the openpbr model alone (OpenPBR Surface as MaterialX evaluates it)"
-# The node's inputs that the model holds, at the values it assumes.
+# The node's inputs that the model holds, at the values it assumes (a model with fuzz writes its own fuzz_weight).
 HELD = {"base_weight": 1.0, "specular_roughness_anisotropy": 0.0, "coat_weight": 0.0, "fuzz_weight": 0.0,
         "thin_film_weight": 0.0, "transmission_weight": 0.0, "subsurface_weight": 0.0, "emission_luminance": 0.0}
 
@@ -30,7 +31,7 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     """The MaterialX document of ``model``'s OpenPBR Surface.
 
     Arguments:
-        model: a model that is brdffit's ``openpbr`` lobe alone (1 or 3 channels).
+        model: a model that is brdffit's ``openpbr`` lobe alone, with or without fuzz (1 or 3 channels).
         name: the material's name (made a valid MaterialX name; the shader node is ``SR_<name>``).
         header: comment lines (source, version, fit).
         source: the model the deviation is measured against (the original under the fit option).
@@ -44,5 +45,5 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     values, written, deviation = tm.own_model(model, FAMILY, "OpenPBR", EXPORTABLE, source)
     notes: list[str] = []
     text = document(tm.stated(header, notes, deviation),
-                    [("open_pbr_surface", identifier(name), dict(values, **HELD))])
+                    [("open_pbr_surface", identifier(name), {**HELD, **values})])
     return text, written, notes, deviation

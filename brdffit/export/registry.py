@@ -27,9 +27,9 @@ class Target:
         refines: whether ``write`` with a ``source`` fits the renderer's own parameters to it (pbrt-v4); a target
             that does not (Mitsuba 3, whose plugins brdffit's lambert + GGX lobes are exactly) gets a brdffit fit
             of those lobes (`brdffit.export.refit`) unless its direct mapping is exact.
-        family: the brdffit model the target writes exactly and alone (glTF: ``gltf``), which the fit option fits
-            in place of any other model; empty for a target whose fit option fits `brdffit.export.refit`'s
-            lambert + GGX families.
+        family: the brdffit lobe the target writes exactly and alone (glTF: ``gltf``), whose ``renders`` forms
+            the fit option fits in place of any other model (the one of least deviation is written); empty for a
+            target whose fit option fits `brdffit.export.refit`'s lambert + GGX families.
         renders: the brdffit models the target writes exactly with every parameter inside the ranges its own
             tools accept (no unbounded values, no blends): the candidates of a fit for the target
             (`brdffit.select`'s ``target``, ``brdffit fit --for``); empty where none is declared yet.
@@ -61,7 +61,7 @@ TARGETS = {t.name: t for t in (
     Target("materialx", "a MaterialX 1.39 document: the glTF material (gltf_pbr) and its OpenPBR Surface and "
            "Standard Surface counterparts", "materialx", family="gltf", renders=("gltf",)),
     Target("openpbr", "a MaterialX 1.39 document with one OpenPBR Surface (open_pbr_surface) as MaterialX evaluates "
-           "it", "openpbr", family="openpbr", renders=("openpbr",)),
+           "it", "openpbr", family="openpbr", renders=("openpbr", "openpbr(fuzz=true)")),
 )}
 EXPORT_FORMATS = tuple(TARGETS)
 # The targets a fit can be made for (`brdffit fit --for`): those with models declared exact and in range.

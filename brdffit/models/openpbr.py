@@ -29,6 +29,18 @@ f = (1 − base_metalness) f_d + base_metalness f_m. MaterialX clamps the cosine
 [1e-8, 1] inside the diffuse term (``mx_oren_nayar_diffuse_bsdf``); this lobe does the same, so at r = 0 the
 multiple-scattering lobe is ρ² 1e-8, as there. The layer's weight depends on the viewing direction (and on c
 through K), so the model is not reciprocal, as MaterialX's is not; nothing in it is linear in a parameter.
+
+With ``fuzz=True`` the graph's fuzz layer lies over that base (``fuzz_layer``, a ``layer`` of a ``sheen_bsdf`` in
+its ``zeltner`` mode): Zeltner et al.'s (2022) microfibre sheen, a linearly transformed cosine fitted to the
+multiple-scattering microflake volume, as MaterialX's GLSL evaluates it (``mx_zeltner_sheen_brdf``,
+``mx_zeltner_sheen_dir_albedo``, its rational and Gaussian fits to the LTC's coefficients and albedo). With
+r = clamp(fuzz_roughness, 0.01, 1), E_z(μo, r) the fitted albedo and D_LTC(ωi) the LTC of the view (its frame: X
+along ωo's projection on the surface, Y = n × X; ω = (ωi·X, ωi·Y, μi) mapped to ω' = (a ω_x + b μi, a ω_y, μi)
+with a, b the inverse matrix's fitted entries; D_LTC = (ω'_z/π) (a/|ω'|²)²):
+  f = fuzz_weight fuzz_color E_z(μo, r) D_LTC(ωi)/μi + (1 − fuzz_weight E_z(μo, r)) f_base,
+the layer's throughput being 1 − fuzz_weight E_z, the sheen's response E_z D_LTC its f cosθi
+(``mx_sheen_bsdf``). D_LTC integrates to 1 over the hemisphere (the transform keeps ω_z), so the fuzz's own view
+albedo is fuzz_weight fuzz_color E_z(μo, r).
 """
 
 from __future__ import annotations
@@ -49,7 +61,7 @@ from .specs import MIN_ROUGHNESS
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["OpenPBR", "ggx_albedo_fit", "EPS"]
+__all__ = ["OpenPBR", "ggx_albedo_fit", "zeltner_sheen_fit", "EPS"]
 
 EPS = 1e-8  # MaterialX's M_FLOAT_EPS (libraries/stdlib/genglsl/lib/mx_math.glsl)
 # MaterialX's rational fit of the GGX directional albedo (mx_ggx_dir_albedo_analytic): r = Σ_k c_k m_k(μ, α) over
@@ -106,6 +118,47 @@ def _oren_nayar(pair: LocalPair, mu_i, mu_o, colour, rough):
     return single + multi_colour * weight[..., None]
 
 
+def zeltner_sheen_fit(mu, rough, xp=None):
+    """MaterialX's fits of Zeltner et al.'s sheen at view cosine ``mu`` and roughness ``rough``: ``(E, a, b)``, the
+    directional albedo (a Gaussian in μ plus an offset, ``mx_zeltner_sheen_dir_albedo``) and the inverse LTC
+    matrix's entries (``mx_zeltner_sheen_ltc_aInv``, ``mx_zeltner_sheen_ltc_bInv``), as the GLSL computes them.
+
+    Arguments:
+        mu: cosine of the viewing direction; rough: the fuzz roughness in [0.01, 1] (broadcastable).
+        xp: the array module (default ``jax.numpy``).
+    """
+    xp = jnp if xp is None else xp
+    x, y = mu, rough
+    s = y * (0.0206607 + 1.58491 * y) / (0.0379424 + y * (1.32227 + y))
+    m = y * (-0.193854 + y * (-1.14885 + y * (1.7932 - 0.95943 * y * y))) / (0.046391 + y)
+    o = y * (0.000654023 + (-0.0207818 + 0.119681 * y) * y) / (1.26264 + y * (-1.92021 + y))
+    albedo = xp.exp(-0.5 * ((x - m) / s) ** 2) / (s * math.sqrt(2.0 * math.pi)) + o
+    a = (2.58126 * x + 0.813703 * y) * y / (1.0 + 0.310327 * x * x + 2.60994 * x * y)
+    b = xp.sqrt(xp.maximum(1.0 - x, 0.0)) * (y - 1.0) * y ** 3 / (0.0000254053 + 1.71228 * x - 1.71506 * x * y
+                                                                   + 1.34174 * y * y)
+    return albedo, a, b
+
+
+def _fuzz(pair: LocalPair, mu_o, rough):
+    """Zeltner's sheen at the pair: ``(E_z(μo), E_z D_LTC(ωi)/μi)``, its albedo and its f without the colour (module
+    doc; ``mx_sheen_bsdf`` in ``zeltner`` mode, MaterialX's clamps)."""
+    rough = jnp.clip(rough, 0.01, 1.0)
+    albedo, a, b = zeltner_sheen_fit(mu_o, rough)  # unclamped, as the GLSL leaves it in this mode
+    wi, wo = pair.wi, pair.wo
+    # ωi in the LTC's frame: X along ωo's tangential part (any frame where ωo = n: there b = 0 and D_LTC depends
+    # on the tangential length alone).
+    tangential = safe_sqrt(wo[..., 0] ** 2 + wo[..., 1] ** 2, tiny=0.0)
+    ok = tangential > 0.0
+    scale = jnp.where(ok, 1.0 / jnp.where(ok, tangential, 1.0), 0.0)
+    x_i = jnp.where(ok, (wi[..., 0] * wo[..., 0] + wi[..., 1] * wo[..., 1]) * scale, wi[..., 0])
+    y_i = jnp.where(ok, (wo[..., 0] * wi[..., 1] - wo[..., 1] * wi[..., 0]) * scale, wi[..., 1])
+    z_i = wi[..., 2]
+    ox, oy = a * x_i + b * z_i, a * y_i
+    length2 = ox * ox + oy * oy + z_i * z_i
+    ltc = jnp.maximum(z_i, 0.0) / jnp.pi * (a / length2) ** 2
+    return albedo, albedo * ltc / pair.cos_i
+
+
 @dataclasses.dataclass(frozen=True)
 class OpenPBR(Lobe):
     """OpenPBR Surface, opaque and uncoated, as MaterialX 1.39 evaluates it (module doc): base_color,
@@ -115,7 +168,12 @@ class OpenPBR(Lobe):
 
     specular_weight and specular_color are held at 1 (white) unless a fit frees them: the graph modulates the
     dielectric's index by the product specular_weight · F0(specular_ior) alone, so with no metal the two are one
-    degree of freedom, and the tint scales the dielectric's specular as the index partly does."""
+    degree of freedom, and the tint scales the dielectric's specular as the index partly does.
+
+    Options:
+        fuzz: add OpenPBR's fuzz layer (fuzz_weight, fuzz_color, fuzz_roughness; Zeltner et al.'s sheen), for
+            cloth, felt and dusty surfaces (module doc). With fuzz_weight 0 it is the model without fuzz.
+    """
 
     name = "openpbr"
     stand_in = "lambert+ggx(fresnel=dielectric)"
@@ -124,6 +182,12 @@ class OpenPBR(Lobe):
                  "oren_nayar_diffuse_bsdf, layer, mix)")
     reciprocal = False
     offset = True
+
+    fuzz: bool = False
+
+    def __post_init__(self):
+        if not isinstance(self.fuzz, bool):
+            raise ValueError(f"openpbr: fuzz must be True or False, got {self.fuzz!r}")
 
     def param_specs(self):
         return (
@@ -139,6 +203,16 @@ class OpenPBR(Lobe):
             ParamSpec("specular_roughness", 0.3, math.sqrt(MIN_ROUGHNESS), 1.0, scale=True,
                       doc="Specular Roughness: GGX α = specular_roughness²"),
             ParamSpec("specular_ior", 1.5, 1.0, 3.0, doc="Specular IOR: the dielectric's index of refraction"),
+        ) + (self._fuzz_specs() if self.fuzz else ())
+
+    @staticmethod
+    def _fuzz_specs():
+        return (
+            ParamSpec("fuzz_weight", 0.5, 0.0, 1.0,
+                      doc="Fuzz Weight: the fuzz layer's presence (its sheen's weight, and its darkening of the base)"),
+            ParamSpec("fuzz_color", 1.0, 0.0, 1.0, colour=True, doc="Fuzz Color: the sheen's colour"),
+            ParamSpec("fuzz_roughness", 0.5, 0.01, 1.0,
+                      doc="Fuzz Roughness: Zeltner's sheen roughness (MaterialX clamps it to [0.01, 1])"),
         )
 
     def peaks(self, params):
@@ -168,4 +242,10 @@ class OpenPBR(Lobe):
         dielectric = tint * f_dielectric * microfacet[..., None] * k_dielectric + (1.0 - albedo) * diffuse
         f_metal = fr.f82_tint(c[..., None], base, tint)
         metal = weight * f_metal * microfacet[..., None] * compensation(f_metal)
-        return (1.0 - metalness) * dielectric + metalness * metal
+        base_f = (1.0 - metalness) * dielectric + metalness * metal
+        if not self.fuzz:
+            return base_f
+        fuzz_weight = params["fuzz_weight"]
+        sheen_albedo, sheen = _fuzz(pair, mu_o, params["fuzz_roughness"])
+        return (fuzz_weight * params["fuzz_color"] * sheen[..., None]
+                + (1.0 - fuzz_weight * sheen_albedo)[..., None] * base_f)
