@@ -125,6 +125,9 @@ EQUATIONS = {
         "f_on: OpenPBR's energy-preserving Oren-Nayar diffuse of base_color, roughness base_diffuse_roughness\n"
         "F82: Hoffman's F82-tinted Schlick term, F0 = base_color, F82 = specular_color,  D = GGX,  "
         "G2 height-correlated,  α = specular_roughness²\n"
+        "coat=true: f_coat = w_c F(cd; coat_ior) D G2/(4 ci co) K_c(F) + (1 − w_c E_c(co) K_c(F)) T_c f,  w_c = "
+        "coat_weight, α_c = coat_roughness²,\n"
+        "  T_c: the coat's colour and darkening; f's roughness and index as the coat changes them (docs/export.md)\n"
         "fuzz=true: f_fuzz = fuzz_weight fuzz_color E_z(co) D_LTC(ωi)/ci + (1 − fuzz_weight E_z(co)) f,  "
         "Zeltner's sheen (MaterialX's fits of its LTC and albedo E_z, roughness fuzz_roughness)"
     ),
@@ -212,11 +215,14 @@ NOTES = {
                "quadrature and agrees with Cycles' to 1e-4. `brdffit fit --for blender`, `brdffit export --to "
                "blender`; tests/test_export_blender.py renders the export in Cycles against brdffit's render.",
     "openpbr": "OpenPBR Surface as MaterialX 1.39 evaluates an opaque one (its graph `open_pbr_surface.mtlx` and "
-               "the GLSL of its BSDF nodes), uncoated, without thin film, transmission, subsurface or emission, "
+               "the GLSL of its BSDF nodes), without thin film, transmission, subsurface or emission, "
                "isotropic, base_weight 1: a dielectric specular layered over an energy-preserving Oren-Nayar "
                "diffuse by the layer's albedo at the view (MaterialX's rational fit), mixed by base_metalness with "
-               "an F82-tinted metal; with `fuzz=true`, OpenPBR's fuzz layer over it (Zeltner et al.'s 2022 LTC "
-               "microfibre sheen, the `zeltner` mode of MaterialX's sheen_bsdf), for cloth and felt. "
+               "an F82-tinted metal; with `coat=true`, OpenPBR's coat over it (a GGX dielectric layer that "
+               "roughens, darkens and tints what lies beneath; coat_color held white and coat_darkening at 1 "
+               "unless freed), for lacquer and varnish; with `fuzz=true`, OpenPBR's fuzz layer over that (Zeltner "
+               "et al.'s 2022 LTC microfibre sheen, the `zeltner` mode of MaterialX's sheen_bsdf), for cloth and "
+               "felt. "
                "specular_weight and specular_color are held at 1 unless freed (with no metal, "
                "the graph's weight and index are one degree of freedom). Not reciprocal, as MaterialX's layering "
                "is not; tests/test_models.py holds it to a transcription of the GLSL. `brdffit fit --for openpbr`, "
@@ -267,7 +273,7 @@ VARIANTS = {
                       {"distribution": "std"}, {"distribution": "gtr"}],
     "ggx": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}, {"anisotropic": True}],
     "lafortune": [{"anisotropic": True}],
-    "openpbr": [{"fuzz": True}],
+    "openpbr": [{"coat": True}, {"fuzz": True}],
 }
 
 

@@ -936,20 +936,25 @@ _MX_ALBEDO = [
 
 @_quiet
 def openpbr(theta_i, phi_i, theta_o, phi_o, base_color, base_metalness, base_diffuse_roughness, specular_weight,
-            specular_color, specular_roughness, specular_ior, fuzz_weight=0.0, fuzz_color=1.0, fuzz_roughness=0.5):
+            specular_color, specular_roughness, specular_ior, coat_weight=0.0, coat_color=1.0, coat_roughness=0.0,
+            coat_ior=1.6, coat_darkening=1.0, fuzz_weight=0.0, fuzz_color=1.0, fuzz_roughness=0.5):
     """OpenPBR Surface (opaque, uncoated, isotropic, base_weight 1) as MaterialX 1.39 evaluates it, transcribed
     from MaterialX's GLSL (libraries/pbrlib/genglsl: mx_dielectric_bsdf, mx_generalized_schlick_bsdf,
     mx_oren_nayar_diffuse_bsdf, mx_sheen_bsdf, mx_layer_bsdf, mx_mix_bsdf, lib/mx_microfacet_specular.glsl,
     lib/mx_microfacet_diffuse.glsl, lib/mx_microfacet_sheen.glsl) and the graph NG_open_pbr_surface_surfaceshader
     (libraries/bxdf): each BSDF's ``response`` is f cosθi, so f = response / (N·L); L = ωi, V = ωo, EPS =
-    M_FLOAT_EPS = 1e-8. The fuzz layer (weight 0: none) is the graph's ``fuzz_layer`` over the base."""
+    M_FLOAT_EPS = 1e-8. The coat (weight 0: none) is the graph's ``coat_layer`` over the darkened, attenuated base
+    substrate, and the fuzz layer (weight 0: none) its ``fuzz_layer`` over that."""
     eps = 1e-8
     pair = Pair(theta_i, phi_i, theta_o, phi_o)
     base, tint = _col(base_color), _col(specular_color)
     n_l, n_v = np.clip(pair.ci, eps, 1.0), np.clip(pair.co, eps, 1.0)
     v_h = np.clip(pair.cos_d, eps, 1.0)
+    # The graph's effective_specular_roughness: mix(bg = specular_roughness, fg = coat_affected, coat_weight).
+    coat_affected = min(1.0, 2.0 * coat_roughness ** 4 + specular_roughness ** 4) ** 0.25
+    effective = specular_roughness * (1.0 - coat_weight) + coat_affected * coat_weight
     # open_pbr_anisotropy at anisotropy 0: alpha = roughness^2 * sqrt(2 / (1 + 1)); safeAlpha, avgAlpha.
-    alpha = min(max(specular_roughness ** 2, eps), 1.0)
+    alpha = min(max(effective ** 2, eps), 1.0)
     he2 = (pair.hx ** 2 + pair.hy ** 2) / alpha ** 2
     d = 1.0 / (np.pi * alpha * alpha * (he2 + pair.hz ** 2) ** 2)  # mx_ggx_NDF
     lam_l = np.sqrt(alpha ** 2 + (1.0 - alpha ** 2) * n_l ** 2)
@@ -965,9 +970,12 @@ def openpbr(theta_i, phi_i, theta_o, phi_o, base_color, base_metalness, base_dif
     def comp(f):  # mx_ggx_energy_compensation
         return 1.0 + f * (1.0 - e_ss) / e_ss
 
-    # The graph's modulated_eta_s (coat_weight 0: eta_s = specular_ior).
-    f0 = ((specular_ior - 1.0) / (specular_ior + 1.0)) ** 2
-    epsilon = np.sign(specular_ior - 1.0) * np.sqrt(np.clip(specular_weight * f0, 0.0, 0.99999))
+    # The graph's eta_s (specular_to_coat_ior_ratio_tir_fix: ifgreater(ratio, 1, ratio, 1 / ratio) mixed by
+    # coat_weight with specular_ior) and modulated_eta_s.
+    ratio = specular_ior / coat_ior
+    eta_s = specular_ior * (1.0 - coat_weight) + (ratio if ratio > 1.0 else coat_ior / specular_ior) * coat_weight
+    f0 = ((eta_s - 1.0) / (eta_s + 1.0)) ** 2
+    epsilon = np.sign(eta_s - 1.0) * np.sqrt(np.clip(specular_weight * f0, 0.0, 0.99999))
     eta = (1.0 + epsilon) / (1.0 - epsilon)
     # mx_fresnel_dielectric (Lagarde's form).
     g2 = eta * eta + v_h * v_h - 1.0
@@ -1004,7 +1012,30 @@ def openpbr(theta_i, phi_i, theta_o, phi_o, base_color, base_metalness, base_dif
     a82 = (base + (1.0 - base) * (1.0 - cos_max) ** 5) * (1.0 - tint) * factor
     f82 = base + (1.0 - base) * (1.0 - x) ** 5 - a82 * x * (1.0 - x) ** 6  # mx_fresnel_hoffman_schlick
     metal = (d * g / (4.0 * n_v))[:, None] * f82 * comp(f82) * specular_weight
-    response = (1.0 - base_metalness) * dielectric + base_metalness * metal  # mx_mix_bsdf
+    response = (1.0 - base_metalness) * dielectric + base_metalness * metal  # mx_mix_bsdf: base_substrate
+    if coat_weight >= eps:  # mx_dielectric_bsdf returns nothing (throughput 1) below M_FLOAT_EPS
+        coat_f0 = ((coat_ior - 1.0) / (coat_ior + 1.0)) ** 2
+        k_coat = 1.0 - (1.0 - coat_f0) / coat_ior ** 2
+        e_base = base * (1.0 - base_metalness) + base * specular_weight * base_metalness
+        darkening = (1.0 - k_coat) / (1.0 - e_base * k_coat)
+        amount = coat_weight * coat_darkening
+        substrate = response * (darkening * amount + (1.0 - amount)) * (_col(coat_color) * coat_weight
+                                                                         + (1.0 - coat_weight))
+        c_alpha = min(max(coat_roughness ** 2, eps), 1.0)
+        c_d = 1.0 / (np.pi * c_alpha ** 2 * ((pair.hx ** 2 + pair.hy ** 2) / c_alpha ** 2 + pair.hz ** 2) ** 2)
+        c_lam_l = np.sqrt(c_alpha ** 2 + (1.0 - c_alpha ** 2) * n_l ** 2)
+        c_lam_v = np.sqrt(c_alpha ** 2 + (1.0 - c_alpha ** 2) * n_v ** 2)
+        c_g = 2.0 * n_l * n_v / (c_lam_l * n_v + c_lam_v * n_l)
+        r = [sum(c[k] * m(n_v, c_alpha) for c, m in _MX_ALBEDO) for k in range(4)]
+        c_a, c_b = np.clip(r[0] / r[2], 0.0, 1.0), np.clip(r[1] / r[3], 0.0, 1.0)
+        g2 = coat_ior ** 2 + v_h ** 2 - 1.0
+        gg = np.sqrt(g2)
+        c_fresnel = 0.5 * ((gg - v_h) / (gg + v_h)) ** 2 * (1.0 + (((gg + v_h) * v_h - 1.0)
+                                                                  / ((gg - v_h) * v_h + 1.0)) ** 2)
+        c_comp = 1.0 + c_fresnel * (1.0 - (c_a + c_b)) / (c_a + c_b)
+        coat_response = c_d * c_fresnel * c_g * c_comp * coat_weight / (4.0 * n_v)
+        coat_throughput = 1.0 - (coat_f0 * c_a + c_b) * c_comp * coat_weight
+        response = coat_response[:, None] + coat_throughput[:, None] * substrate  # mx_layer_bsdf: coat_layer
     if fuzz_weight >= eps:  # mx_sheen_bsdf returns nothing (throughput 1) below M_FLOAT_EPS
         sheen_response, sheen_albedo = _zeltner_sheen(pair, n_v, fuzz_roughness)
         response = (fuzz_weight * _col(fuzz_color) * sheen_response[:, None]
@@ -1213,7 +1244,7 @@ REFERENCES = {
     "principled": lambda ti, pi_, to, po, p: principled(ti, pi_, to, po, **p),
     "gltf": lambda ti, pi_, to, po, p: gltf(ti, pi_, to, po, **p),
     "blender": lambda ti, pi_, to, po, p: blender(ti, pi_, to, po, **p),
-    "openpbr": lambda ti, pi_, to, po, p, fuzz=False: openpbr(ti, pi_, to, po, **p),
+    "openpbr": lambda ti, pi_, to, po, p, coat=False, fuzz=False: openpbr(ti, pi_, to, po, **p),
     "pbrt": lambda ti, pi_, to, po, p: pbrt(ti, pi_, to, po, **p),
     "roughplastic": lambda ti, pi_, to, po, p: roughplastic(ti, pi_, to, po, **p),
     "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),

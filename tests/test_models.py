@@ -121,6 +121,18 @@ OTHER_CASES = [
                                      "specular_color": [0.95, 0.6, 0.9], "specular_roughness": 0.45,
                                      "specular_ior": 1.7, "fuzz_weight": 0.7, "fuzz_color": [0.3, 0.9, 0.6],
                                      "fuzz_roughness": 0.35}),
+    Case("openpbr", {"coat": True, "fuzz": True},
+         {"base_color": [0.7, 0.4, 0.15], "base_metalness": 0.35, "base_diffuse_roughness": 0.6,
+          "specular_weight": 0.8, "specular_color": [0.95, 0.6, 0.9], "specular_roughness": 0.45, "specular_ior": 1.7,
+          "coat_weight": 0.6, "coat_color": [0.9, 0.8, 0.5], "coat_roughness": 0.2, "coat_ior": 1.45,
+          "coat_darkening": 0.7, "fuzz_weight": 0.3, "fuzz_color": [0.3, 0.9, 0.6], "fuzz_roughness": 0.35}),
+    # The base's index below the coat's: the graph takes coat_ior / specular_ior (its fix of total internal
+    # reflection) instead of the ratio.
+    Case("openpbr", {"coat": True},
+         {"base_color": [0.2, 0.5, 0.75], "base_metalness": 0.15, "base_diffuse_roughness": 0.3,
+          "specular_weight": 0.9, "specular_color": [0.85, 0.9, 0.7], "specular_roughness": 0.6, "specular_ior": 1.3,
+          "coat_weight": 0.85, "coat_color": [0.6, 0.7, 0.95], "coat_roughness": 0.08, "coat_ior": 1.8,
+          "coat_darkening": 0.4}),
     Case("gltf", {}, {"base_color": [0.7, 0.4, 0.15], "metallic": 0.35, "roughness": 0.4, "specular": 0.8,
                       "ior": 1.7, "specular_color": [0.95, 0.6, 0.9], "clearcoat": 0.6,
                       "clearcoat_roughness": 0.25, "sheen_color": [0.6, 0.3, 0.45], "sheen_roughness": 0.4}),

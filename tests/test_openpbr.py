@@ -210,13 +210,13 @@ def test_fuzz_alone_reflects_its_fitted_albedo():
         np.testing.assert_allclose(_light_integral(model, theta_o), expected, rtol=1e-3, err_msg=f"roughness {rough}")
 
 
-def test_fuzz_weight_zero_is_the_model_without_fuzz():
+def test_coat_and_fuzz_of_weight_zero_are_the_model_without_them():
     rng = np.random.default_rng(3)
     angles = (rng.uniform(0, 1.5, 200), rng.uniform(-3, 3, 200), rng.uniform(0, 1.5, 200), rng.uniform(-3, 3, 200))
-    plain = models.get("openpbr", **MATERIAL)
-    fuzzy = models.get("openpbr(fuzz=true)", **MATERIAL, fuzz_weight=0.0, fuzz_color=[0.2, 0.9, 0.4])
-    np.testing.assert_array_equal(np.asarray(brdffit.evaluate(fuzzy, *angles)),
-                                  np.asarray(brdffit.evaluate(plain, *angles)))
+    plain = np.asarray(brdffit.evaluate(models.get("openpbr", **MATERIAL), *angles))
+    layered = models.get("openpbr(coat=true, fuzz=true)", **MATERIAL, coat_weight=0.0, coat_color=[0.3, 0.5, 0.9],
+                         coat_roughness=0.2, coat_ior=2.2, fuzz_weight=0.0, fuzz_color=[0.2, 0.9, 0.4])
+    np.testing.assert_allclose(np.asarray(brdffit.evaluate(layered, *angles)), plain, rtol=1e-15, atol=0.0)
 
 
 def test_fit_recovers_a_synthetic_fuzzy_material():
@@ -231,15 +231,48 @@ def test_fit_recovers_a_synthetic_fuzzy_material():
     assert brdffit.fit(data, "openpbr").cost > 10 * result.cost
 
 
-def test_fuzz_export_is_exact_and_validates_in_materialx():
-    _materialx()
-    model = models.get("openpbr(fuzz=true)", **FUZZY)
+# A lacquered red: a clear coat over a dielectric base whose index (2.4) lies above the coat's, so that the base's
+# specular stays visible under it (module doc of brdffit.models.openpbr: below the coat's index the graph's fix of
+# total internal reflection puts a kink in the base's index, where its specular vanishes).
+COATED = dict(base_color=[0.55, 0.12, 0.08], base_diffuse_roughness=0.2, specular_roughness=0.6, specular_ior=2.4,
+              coat_weight=0.8, coat_roughness=0.3, coat_ior=1.5)
+
+
+def test_fit_recovers_a_synthetic_coated_material():
+    """The default fit of a coated material (1 % noise) reaches the optimum that a fit started at the truth
+    reaches, below the truth's own cost, and recovers the coat and the base colour (5 %, 0.02). The base's index
+    and roughness under a coat are weakly determined: 2.22 and 0.576 at the optimum against 2.4 and 0.6 (10 %)."""
+    truth = models.get("openpbr(coat=true)", **COATED)
+    data = synth.generate(truth, pattern="half-diff", n=3000, noise="relative:0.01", seed=7)
+    result = brdffit.fit(data, "openpbr(coat=true)")
+    from_truth = brdffit.fit(data, "openpbr(coat=true)", init=truth)
+    assert result.cost <= from_truth.cost * (1 + 1e-6), (result.summary(), from_truth.summary())
+    for name, value in COATED.items():
+        loose = name in ("specular_ior", "specular_roughness", "base_diffuse_roughness")
+        np.testing.assert_allclose(np.asarray(result.params[name]), value, rtol=0.1 if loose else 0.05,
+                                   atol=0.05 if loose else 0.02, err_msg=name)
+
+
+@pytest.mark.parametrize("spec, values", [("openpbr(fuzz=true)", FUZZY), ("openpbr(coat=true)", COATED),
+                                          ("openpbr(coat=true, fuzz=true)", dict(FUZZY, **COATED))])
+def test_layered_export_is_exact_and_validates_in_materialx(spec, values):
+    mx = _materialx()
+    from MaterialX import PyMaterialXGenGlsl as genglsl
+    from MaterialX import PyMaterialXGenShader as genshader
+
+    model = models.get(spec, **values)
     details = export_details(model, "openpbr", name="felt")
     assert details.exact and details.deviation.rms < 1e-12
     doc = _document(details.text)
     valid, message = doc.validate()
     assert valid, message
     inputs = {i.getName(): i.getValue() for i in doc.getChild("SR_felt").getInputs()}
-    for name, value in FUZZY.items():
+    for name, value in model.layout.local_params(model.params, 0).items():
         got = inputs[name].asTuple() if hasattr(inputs[name], "asTuple") else inputs[name]
-        np.testing.assert_allclose(np.asarray(got, dtype=float), value, rtol=1e-7, err_msg=name)
+        np.testing.assert_allclose(np.asarray(got, dtype=float), np.asarray(value, dtype=float), rtol=1e-7,
+                                   err_msg=name)
+    gen = genglsl.GlslShaderGenerator.create()
+    context = genshader.GenContext(gen)
+    context.registerSourceCodeSearchPath(mx.getDefaultDataSearchPath())
+    (element,) = genshader.findRenderableElements(doc)
+    assert "void main" in gen.generate(element.getNamePath(), element, context).getSourceCode(genshader.PIXEL_STAGE)

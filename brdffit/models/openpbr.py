@@ -1,8 +1,8 @@
 r"""OpenPBR Surface as MaterialX 1.39 evaluates an opaque one (``open_pbr_surface``, its GLSL implementation).
 
 MaterialX's graph of the node (``libraries/bxdf/open_pbr_surface.mtlx``, ``NG_open_pbr_surface_surfaceshader``)
-with no coat, fuzz, thin film, transmission, subsurface or emission, isotropic, and ``base_weight`` 1 reduces to
-a mix by ``base_metalness`` of two BSDFs, evaluated by the shader code of ``libraries/pbrlib/genglsl``. With ωo
+with no thin film, transmission, subsurface or emission, isotropic, ``base_weight`` 1, and without the coat and
+fuzz of the options below, reduces to a mix by ``base_metalness`` of two BSDFs, evaluated by the shader code of ``libraries/pbrlib/genglsl``. With ωo
 the direction to the viewer (MaterialX's V), ωi the light's (L), h their half vector, c = ωi·h, μo = n·ωo,
 μi = n·ωi, α = specular_roughness² (``open_pbr_anisotropy`` at anisotropy 0) and DG = D(h) G2(ωi, ωo)/(4 μi μo)
 (GGX with height-correlated Smith masking, Heitz 2014 Eq. 99; ``mx_ggx_NDF``, ``mx_ggx_smith_G2``):
@@ -29,6 +29,20 @@ f = (1 − base_metalness) f_d + base_metalness f_m. MaterialX clamps the cosine
 [1e-8, 1] inside the diffuse term (``mx_oren_nayar_diffuse_bsdf``); this lobe does the same, so at r = 0 the
 multiple-scattering lobe is ρ² 1e-8, as there. The layer's weight depends on the viewing direction (and on c
 through K), so the model is not reciprocal, as MaterialX's is not; nothing in it is linear in a parameter.
+
+With ``coat=True`` the graph's coat lies over that base (``coat_layer``): a ``layer`` of a GGX ``dielectric_bsdf``
+of weight w_c = coat_weight, index η_c = coat_ior and width α_c = coat_roughness², untinted, over the base
+darkened and attenuated, f_coat = w_c F(c; η_c) DG_c K_c(F) + (1 − w_c E_c(μo; F0(η_c)) K_c(F)) T_c f_base, where
+- the base sees the coat: its specular roughness r_s becomes the mix by w_c of r_s and (min(1, 2 r_c⁴ + r_s⁴))^¼
+  (``effective_specular_roughness``), and its index the mix by w_c of η and η/η_c or η_c/η, whichever is ≥ 1
+  (``eta_s``, the graph's fix of total internal reflection), before specular_weight modulates it;
+- T_c = (1 + w_c (coat_color − 1)) (1 + w_c coat_darkening (Δ − 1)) with Δ = (1 − K)/(1 − E_b K), K = 1 − (1 −
+  F0(η_c))/η_c² (the coat's internal diffuse reflection) and E_b = base_color (1 − base_metalness +
+  base_metalness specular_weight) (``coat_attenuation``, ``base_darkening``);
+- coat_color is held at white (a clear coat: it tints the diffuse as base_color does) and coat_darkening at 1
+  (the physical value) unless a fit frees them. Where specular_ior is below coat_ior the base's index has a kink at
+  their equality (the graph's fix), where the base's specular vanishes: a fit can stop there (``stalled``), and a
+  multistart fit (``multistart=``) looks past it.
 
 With ``fuzz=True`` the graph's fuzz layer lies over that base (``fuzz_layer``, a ``layer`` of a ``sheen_bsdf`` in
 its ``zeltner`` mode): Zeltner et al.'s (2022) microfibre sheen, a linearly transformed cosine fitted to the
@@ -159,18 +173,34 @@ def _fuzz(pair: LocalPair, mu_o, rough):
     return albedo, albedo * ltc / pair.cos_i
 
 
+def _mix(bg, fg, amount):
+    """MaterialX's ``mix`` node: fg where amount is 1, bg where it is 0."""
+    return bg * (1.0 - amount) + fg * amount
+
+
+def _compensation(e_white):
+    """K(F) = 1 + F (1 − E₁)/E₁ as a function of F ``(..., C)`` (``mx_ggx_energy_compensation``; Turquin 2019,
+    Eqs. 14 and 16), E₁ ``(...)`` the white GGX albedo at the view."""
+    gain = ((1.0 - e_white) / e_white)[..., None]
+    return lambda f: 1.0 + f * gain
+
+
 @dataclasses.dataclass(frozen=True)
 class OpenPBR(Lobe):
-    """OpenPBR Surface, opaque and uncoated, as MaterialX 1.39 evaluates it (module doc): base_color,
-    base_metalness, base_diffuse_roughness, specular_weight, specular_color, specular_roughness and specular_ior,
-    under OpenPBR's names and in its ranges; the other inputs at their defaults or off (base_weight 1, no coat,
-    fuzz, thin film, transmission, subsurface or emission, anisotropy 0).
+    """OpenPBR Surface, opaque, as MaterialX 1.39 evaluates it (module doc): base_color, base_metalness,
+    base_diffuse_roughness, specular_weight, specular_color, specular_roughness and specular_ior, and the coat's and
+    the fuzz's inputs where the options add them, under OpenPBR's names and in its ranges; the other inputs at their
+    defaults or off (base_weight 1, no thin film, transmission, subsurface or emission, anisotropy 0).
 
     specular_weight and specular_color are held at 1 (white) unless a fit frees them: the graph modulates the
     dielectric's index by the product specular_weight · F0(specular_ior) alone, so with no metal the two are one
     degree of freedom, and the tint scales the dielectric's specular as the index partly does.
 
     Options:
+        coat: add OpenPBR's coat (coat_weight, coat_roughness, coat_ior; coat_color held at white and
+            coat_darkening at 1 unless freed), a dielectric layer over the base, for lacquer, varnish and car paint
+            (module doc). With coat_weight 0 it is the model without coat. A coat's colour tints the base as the
+            base colour does, so a fit holds it unless told otherwise.
         fuzz: add OpenPBR's fuzz layer (fuzz_weight, fuzz_color, fuzz_roughness; Zeltner et al.'s sheen), for
             cloth, felt and dusty surfaces (module doc). With fuzz_weight 0 it is the model without fuzz.
     """
@@ -183,11 +213,13 @@ class OpenPBR(Lobe):
     reciprocal = False
     offset = True
 
+    coat: bool = False
     fuzz: bool = False
 
     def __post_init__(self):
-        if not isinstance(self.fuzz, bool):
-            raise ValueError(f"openpbr: fuzz must be True or False, got {self.fuzz!r}")
+        for option in ("coat", "fuzz"):
+            if not isinstance(getattr(self, option), bool):
+                raise ValueError(f"openpbr: {option} must be True or False, got {getattr(self, option)!r}")
 
     def param_specs(self):
         return (
@@ -203,7 +235,20 @@ class OpenPBR(Lobe):
             ParamSpec("specular_roughness", 0.3, math.sqrt(MIN_ROUGHNESS), 1.0, scale=True,
                       doc="Specular Roughness: GGX α = specular_roughness²"),
             ParamSpec("specular_ior", 1.5, 1.0, 3.0, doc="Specular IOR: the dielectric's index of refraction"),
-        ) + (self._fuzz_specs() if self.fuzz else ())
+        ) + (self._coat_specs() if self.coat else ()) + (self._fuzz_specs() if self.fuzz else ())
+
+    @staticmethod
+    def _coat_specs():
+        return (
+            ParamSpec("coat_weight", 0.5, 0.0, 1.0, doc="Coat Weight: the coat's presence"),
+            ParamSpec("coat_color", 1.0, 0.0, 1.0, colour=True, fixed=True,
+                      doc="Coat Color: the coat's transmittance, which tints what lies beneath it"),
+            ParamSpec("coat_roughness", 0.1, math.sqrt(MIN_ROUGHNESS), 1.0, scale=True,
+                      doc="Coat Roughness: GGX α = coat_roughness² of the coat's reflection"),
+            ParamSpec("coat_ior", 1.6, 1.0, 3.0, doc="Coat IOR: the coat's index of refraction"),
+            ParamSpec("coat_darkening", 1.0, 0.0, 1.0, fixed=True,
+                      doc="Coat Darkening: scales the darkening of the base by the coat's internal reflection"),
+        )
 
     @staticmethod
     def _fuzz_specs():
@@ -216,21 +261,26 @@ class OpenPBR(Lobe):
         )
 
     def peaks(self, params):
-        return (Peak("half", scalar(params, "specular_roughness") ** 2),)
+        peaks = (Peak("half", scalar(params, "specular_roughness") ** 2),)
+        return peaks + ((Peak("half", scalar(params, "coat_roughness") ** 2),) if self.coat else ())
 
     def __call__(self, params, pair: LocalPair):
         base, tint = params["base_color"], params["specular_color"]
         metalness, weight = params["base_metalness"], params["specular_weight"]
         eta, rough = params["specular_ior"], params["base_diffuse_roughness"]
-        alpha = jnp.clip(params["specular_roughness"] ** 2, EPS, 1.0)
+        specular_roughness = params["specular_roughness"]
+        if self.coat:  # the base under a coat: roughened, and its index relative to the coat's
+            coat_weight, coat_ior = params["coat_weight"], params["coat_ior"]
+            roughened = jnp.minimum(1.0, 2.0 * params["coat_roughness"] ** 4 + specular_roughness ** 4) ** 0.25
+            specular_roughness = _mix(specular_roughness, roughened, coat_weight)
+            ratio = eta / coat_ior
+            eta = _mix(eta, jnp.where(ratio > 1.0, ratio, coat_ior / eta), coat_weight)
+        alpha = jnp.clip(specular_roughness ** 2, EPS, 1.0)
         mu_i, mu_o = jnp.clip(pair.cos_i, EPS, 1.0), jnp.clip(pair.cos_o, EPS, 1.0)
         c = jnp.clip(pair.cos_d, EPS, 1.0)
         microfacet = ggx_correlated(pair, alpha)
         a_fit, b_fit = ggx_albedo_fit(mu_o, alpha)
-        e_white = a_fit + b_fit
-
-        def compensation(f):  # K(F), Turquin 2019, Eqs. 14 and 16
-            return 1.0 + f * ((1.0 - e_white) / e_white)[..., None]
+        compensation = _compensation(a_fit + b_fit)
 
         weighted_f0 = jnp.clip(weight * fr.normal_reflectance(eta), 0.0, _F0_CAP)
         epsilon = jnp.sign(eta - 1.0) * safe_sqrt(weighted_f0, tiny=0.0)
@@ -243,9 +293,29 @@ class OpenPBR(Lobe):
         f_metal = fr.f82_tint(c[..., None], base, tint)
         metal = weight * f_metal * microfacet[..., None] * compensation(f_metal)
         base_f = (1.0 - metalness) * dielectric + metalness * metal
+        if self.coat:
+            base_f = self._coated(params, pair, mu_o, c, base_f)
         if not self.fuzz:
             return base_f
         fuzz_weight = params["fuzz_weight"]
         sheen_albedo, sheen = _fuzz(pair, mu_o, params["fuzz_roughness"])
         return (fuzz_weight * params["fuzz_color"] * sheen[..., None]
                 + (1.0 - fuzz_weight * sheen_albedo)[..., None] * base_f)
+
+    @staticmethod
+    def _coated(params, pair: LocalPair, mu_o, c, base_f):
+        """The graph's ``coat_layer`` over ``base_f`` (module doc)."""
+        weight, ior, base = params["coat_weight"], params["coat_ior"], params["base_color"]
+        f0 = fr.normal_reflectance(ior)
+        internal = 1.0 - (1.0 - f0) / (ior * ior)  # Kcoat
+        albedo_estimate = _mix(base, base * params["specular_weight"], params["base_metalness"])  # Ebase
+        darkening = (1.0 - internal) / (1.0 - albedo_estimate * internal)
+        beneath = (_mix(1.0, darkening, weight * params["coat_darkening"])
+                   * _mix(1.0, params["coat_color"], weight)) * base_f
+        alpha = jnp.clip(params["coat_roughness"] ** 2, EPS, 1.0)
+        a_fit, b_fit = ggx_albedo_fit(mu_o, alpha)
+        f = fr.dielectric(c, 1.0, ior)[..., None]
+        k = _compensation(a_fit + b_fit)(f)
+        response = weight * f * ggx_correlated(pair, alpha)[..., None] * k
+        throughput = 1.0 - weight * (f0 * a_fit + b_fit)[..., None] * k
+        return response + throughput * beneath
