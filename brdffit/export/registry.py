@@ -61,7 +61,8 @@ TARGETS = {t.name: t for t in (
     Target("materialx", "a MaterialX 1.39 document: the glTF material (gltf_pbr) and its OpenPBR Surface and "
            "Standard Surface counterparts", "materialx", family="gltf", renders=("gltf",)),
     Target("openpbr", "a MaterialX 1.39 document with one OpenPBR Surface (open_pbr_surface) as MaterialX evaluates "
-           "it", "openpbr", family="openpbr", renders=("openpbr", "openpbr(fuzz=true)")),
+           "it", "openpbr", family="openpbr",
+           renders=("openpbr", "openpbr(fuzz=true)", "openpbr(coat=true)", "openpbr(coat=true, fuzz=true)")),
 )}
 EXPORT_FORMATS = tuple(TARGETS)
 # The targets a fit can be made for (`brdffit fit --for`): those with models declared exact and in range.
