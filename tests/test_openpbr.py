@@ -153,9 +153,10 @@ def test_fit_for_openpbr_then_export(tmp_path, monkeypatch):
 
 
 def test_materialx_export_states_the_measured_deviation_of_its_openpbr_counterpart():
-    """`--to materialx` writes the glTF values under OpenPBR's names beside the glTF material; without a coat or a
-    sheen, brdffit's openpbr model reads that counterpart and its comment states its deviation from the source, the
-    deviation of the model built here from the same values by OpenPBR's names (a wrong mapping would differ)."""
+    """`--to materialx` writes the glTF values under OpenPBR's names beside the glTF material; brdffit's openpbr
+    model (with its coat for a clearcoat, its fuzz for a sheen) reads that counterpart and its comment states its
+    deviation from the source, the deviation of the model built here from the same values by OpenPBR's names (a
+    wrong mapping would differ)."""
     from brdffit.export import terms as tm
     from brdffit.export.materialx import OPENPBR_NAMES
 
@@ -167,8 +168,14 @@ def test_materialx_export_states_the_measured_deviation_of_its_openpbr_counterpa
     text = export(source, "materialx")
     line = next(line for line in text.splitlines() if "material_openpbr (open_pbr_surface)" in line)
     assert f"measures its deviation from the source: cosine-weighted relative RMS error {expected.rms:.3g}," in line
-    coated = export(models.get("gltf", **values, clearcoat=0.5), "materialx")
-    assert "its deviation is not measured (brdffit's openpbr model has no coat)" in coated
+    # A clearcoat is OpenPBR's coat (of KHR_materials_clearcoat's index 1.5): measured too.
+    coated = models.get("gltf", **values, clearcoat=0.5, clearcoat_roughness=0.2)
+    counterpart = models.get("openpbr(coat=true)", **{OPENPBR_NAMES[k]: v for k, v in values.items()},
+                             coat_weight=0.5, coat_roughness=0.2, coat_ior=1.5)
+    expected = tm.measure(coated, counterpart, pairs=tm.deviation_pairs(tm.peaks(coated, counterpart)))
+    line = next(line for line in export(coated, "materialx").splitlines()
+                if "material_openpbr (open_pbr_surface)" in line)
+    assert f"measures its deviation from the source: cosine-weighted relative RMS error {expected.rms:.3g}," in line
     # A sheen is OpenPBR's fuzz (weight: the sheen colour's largest channel, colour: divided by it): measured too.
     sheen = dict(values, sheen_color=[0.6, 0.3, 0.45], sheen_roughness=0.4)
     source = models.get("gltf", **sheen)

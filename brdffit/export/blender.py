@@ -1,9 +1,9 @@
 """Blender 4.2+: a fitted model as a Python script that builds the material's node tree with ``bpy``.
 
 The script makes a material of one ``Principled BSDF`` node (distribution ``GGX``) feeding the ``Material Output``:
-``Base Color``, ``Metallic``, ``Roughness`` and ``IOR`` from brdffit's ``blender`` model, every other input at its
-neutral value (``Specular IOR Level`` 0.5, ``Specular Tint`` white, no subsurface, sheen, coat, transmission or
-emission). brdffit's ``blender`` model is that node as Cycles evaluates it (`brdffit.models.blender`), so a model
+``Base Color``, ``Metallic``, ``Roughness`` and ``IOR`` from brdffit's ``blender`` model (and ``Coat Weight``,
+``Coat Roughness``, ``Coat IOR``, ``Coat Tint`` from a model with a coat), every other input at its neutral value
+(``Specular IOR Level`` 0.5, ``Specular Tint`` white, no subsurface, sheen, coat, transmission or emission). brdffit's ``blender`` model is that node as Cycles evaluates it (`brdffit.models.blender`), so a model
 that is that lobe alone is written exactly; any other model is refused or, under the fit option, replaced by the
 ``blender`` model fitted to it, with the measured deviation stated in the script's comments.
 
@@ -26,8 +26,10 @@ __all__ = ["write", "FAMILY", "EXPORTABLE", "NODE_INPUTS"]
 FAMILY = "blender"
 EXPORTABLE = "the blender model alone (Blender's Principled BSDF with the GGX distribution)"
 # The blender model's parameters -> the Principled BSDF's inputs.
-NODE_INPUTS = {"base_color": "Base Color", "metallic": "Metallic", "roughness": "Roughness", "ior": "IOR"}
-# The inputs held at their neutral values (Blender 4.2's names).
+NODE_INPUTS = {"base_color": "Base Color", "metallic": "Metallic", "roughness": "Roughness", "ior": "IOR",
+               "coat_weight": "Coat Weight", "coat_roughness": "Coat Roughness", "coat_ior": "Coat IOR",
+               "coat_tint": "Coat Tint"}
+# The inputs held at their neutral values (Blender 4.2's names); a model with a coat writes its own Coat Weight.
 _NEUTRAL = {"Specular IOR Level": 0.5, "Specular Tint": (1.0, 1.0, 1.0, 1.0), "Anisotropic": 0.0,
             "Subsurface Weight": 0.0, "Transmission Weight": 0.0, "Coat Weight": 0.0, "Sheen Weight": 0.0,
             "Emission Strength": 0.0, "Alpha": 1.0}
@@ -57,8 +59,8 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     values, written, deviation = tm.own_model(model, FAMILY, "Blender", EXPORTABLE, source)
     values = {k: (tuple(v) if isinstance(v, list) else v) for k, v in values.items()}
     notes: list[str] = []
-    inputs = {NODE_INPUTS[k]: (v + (1.0,) if isinstance(v, tuple) else v) for k, v in values.items()}
-    inputs.update(_NEUTRAL)
+    inputs = dict(_NEUTRAL)
+    inputs.update({NODE_INPUTS[k]: (v + (1.0,) if isinstance(v, tuple) else v) for k, v in values.items()})
     lines = [f"# {line}" for line in tm.stated(header, notes, deviation)]
     lines += [
         '"""The brdffit material as a Blender (4.2+) Principled BSDF: run in Blender, with `blender --python FILE`,',

@@ -59,15 +59,20 @@ OPENPBR_NAMES = {"base_color": "base_color", "metallic": "base_metalness", "roug
 STANDARD_SURFACE_NAMES = {"base_color": "base_color", "metallic": "metalness", "roughness": "specular_roughness",
                           "ior": "specular_IOR", "specular": "specular", "specular_color": "specular_color",
                           "clearcoat": "coat", "clearcoat_roughness": "coat_roughness"}
+# KHR_materials_clearcoat's index of refraction, written as the OpenPBR coat's.
+CLEARCOAT_IOR = 1.5
 # The sheen's parameters, written to OpenPBR's fuzz by `_openpbr` and Standard Surface's sheen by
 # `_standard_surface` (a split, not a renaming).
 _SHEEN = ("sheen_color", "sheen_roughness")
 
 
 def _openpbr(values: dict) -> dict:
-    """OpenPBR Surface's inputs for the glTF values: renamed by `OPENPBR_NAMES`; a sheen as fuzz (weight the
-    sheen colour's largest channel, colour the sheen colour divided by it, roughness the sheen's)."""
+    """OpenPBR Surface's inputs for the glTF values: renamed by `OPENPBR_NAMES`; a clearcoat as a coat of index
+    1.5 (KHR_materials_clearcoat's, where OpenPBR's default is 1.6); a sheen as fuzz (weight the sheen colour's
+    largest channel, colour the sheen colour divided by it, roughness the sheen's)."""
     inputs = {OPENPBR_NAMES[k]: v for k, v in values.items() if k not in _SHEEN}
+    if values["clearcoat"] > 0:
+        inputs["coat_ior"] = CLEARCOAT_IOR
     strength, colour = _split_sheen(values)
     if strength > 0:
         inputs.update(fuzz_weight=strength, fuzz_color=colour, fuzz_roughness=values["sheen_roughness"])
@@ -76,13 +81,14 @@ def _openpbr(values: dict) -> dict:
 
 def _openpbr_deviation(values: dict, reference: tm.Model):
     """The measured deviation from ``reference`` of the OpenPBR counterpart of the glTF values (`_openpbr`), read as
-    brdffit's ``openpbr`` model (`brdffit.models.openpbr`, OpenPBR Surface as MaterialX evaluates it, with its fuzz
-    for a sheen), or None where that model does not represent it (a coat: it has none)."""
-    if values["clearcoat"] > 0:
-        return None
-    inputs = {k: v for k, v in _openpbr(values).items() if k not in ("coat_weight", "coat_roughness")}
+    brdffit's ``openpbr`` model (`brdffit.models.openpbr`, OpenPBR Surface as MaterialX evaluates it, with its coat
+    for a clearcoat and its fuzz for a sheen)."""
+    inputs = _openpbr(values)
+    coated = values["clearcoat"] > 0
+    if not coated:
+        inputs = {k: v for k, v in inputs.items() if k not in ("coat_weight", "coat_roughness")}
     inputs["base_diffuse_roughness"] = 0.0
-    lobe = OpenPBR(fuzz="fuzz_weight" in inputs)
+    lobe = OpenPBR(coat=coated, fuzz="fuzz_weight" in inputs)
     counterpart = tm.assemble([(lobe, {k: np.asarray(v, dtype=float) for k, v in inputs.items()})], 3)
     return tm.measure(reference, counterpart, pairs=tm.deviation_pairs(tm.peaks(reference, counterpart)))
 
@@ -161,9 +167,7 @@ def write(model: tm.Model, name: str, header: list[str], source=None):
     values, written, deviation = gltf.measured(model, source)
     material = identifier(name)
     counterpart = _openpbr_deviation(values, model if source is None else source)
-    measured = ("brdffit's openpbr model measures its deviation from the source: " + counterpart.describe()
-                if counterpart is not None else "its deviation is not measured (brdffit's openpbr model has no "
-                "coat)")
+    measured = "brdffit's openpbr model measures its deviation from the source: " + counterpart.describe()
     notes = [f"{material}_openpbr (open_pbr_surface) takes the glTF values under OpenPBR's names; OpenPBR layers the "
              "specular over the diffuse by albedo and tints its conductor by F82, where glTF mixes by Schlick's "
              f"Fresnel per direction: {measured} (the deviation below is the glTF material's, {material})",

@@ -57,7 +57,7 @@ TARGETS = {t.name: t for t in (
                    "sphere",
            "gltf", family="gltf", renders=("gltf",)),
     Target("blender", "a Python script that builds the material (Principled BSDF, GGX) with bpy, Blender 4.2+",
-           "blender", family="blender", renders=("blender",)),
+           "blender", family="blender", renders=("blender", "blender(coat=true)")),
     Target("materialx", "a MaterialX 1.39 document: the glTF material (gltf_pbr) and its OpenPBR Surface and "
            "Standard Surface counterparts", "materialx", family="gltf", renders=("gltf",)),
     Target("openpbr", "a MaterialX 1.39 document with one OpenPBR Surface (open_pbr_surface) as MaterialX evaluates "
