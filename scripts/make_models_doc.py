@@ -114,10 +114,9 @@ EQUATIONS = {
         "co = ωo·n (the view)\n"
         "S(c; f0) = f0 + (1 − f0)(1 − c)⁵,  D = GGX,  G2 = 1/(1 + Λ(ωi) + Λ(ωo)),  α = roughness²\n"
         "s: Cycles' table ggx_gen_schlick_ior_s (16³ nodes, trilinear), computed by quadrature\n"
-        "coat=true: f_coat = w (1 + F_ms (1 − E)/E) F_dielectric(cd; coat_ior) D_c G2_c/(4 ci co)\n"
-        "    + clamp(1 − w K R, 0, 1) mix(1, coat_tint^(1/cosθt), w) f,  w = coat_weight,  α_c = coat_roughness²\n"
-        "E, E_avg: Cycles' ggx_E and ggx_Eavg (computed by quadrature),  F_ms = F_ss E_avg/(1 − F_ss (1 − E_avg)),  "
-        "R = F0 + (1 − F0) s at coat_ior"
+        "coat=true: f_coat = w F_dielectric(cd; coat_ior) D_c G2_c/(4 ci co)\n"
+        "    + clamp(1 − w F_dielectric(co; coat_ior), 0, 1) mix(1, coat_tint^(1/cosθt), w) f,\n"
+        "w = coat_weight,  α_c = coat_roughness²,  cosθt = √(1 − (1 − co²)/coat_ior²)"
     ),
     "openpbr": (
         "f = (1 − base_metalness) [specular_color F(cd; η') D G2/(4 ci co) K(F) + (1 − E(co; F0') K(F)) f_on]\n"
@@ -215,7 +214,7 @@ NOTES = {
     "blender": "Blender's Principled BSDF (4.2+) with the GGX distribution, as Cycles evaluates it "
                "(intern/cycles/kernel/svm/closure.h): the inputs Base Color, Metallic, Roughness and IOR, the others "
                "neutral; with `coat=true` also Coat Weight, Coat Roughness and Coat IOR (Coat Tint held white unless "
-               "freed), the coat layered over the rest as Cycles layers it, with its energy compensation. The diffuse layer is attenuated by Cycles' estimate of the specular layer's albedo at the "
+               "freed), the coat layered over the rest as Cycles 4.2 layers it. The diffuse layer is attenuated by Cycles' estimate of the specular layer's albedo at the "
                "viewing direction, so the model is not reciprocal, as Cycles' is not; its table is computed again by "
                "quadrature and agrees with Cycles' to 1e-4. `brdffit fit --for blender`, `brdffit export --to "
                "blender`; tests/test_export_blender.py renders the export in Cycles against brdffit's render.",

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import cmath
 import functools
-import itertools
 import math
 
 import numpy as np
@@ -869,61 +868,6 @@ def cycles_layering_table(u_nodes: int = 96, phi_nodes: int = 64) -> np.ndarray:
     return out
 
 
-@functools.lru_cache(maxsize=1)
-def cycles_energy_tables(u_nodes: int = 96, phi_nodes: int = 64):
-    """Cycles' ``ggx_E`` and ``ggx_Eavg`` (``app/cycles_precompute.cpp``: the mean of eval/pdf over VNDF samples of
-    GGX with F = 1, i.e. of G2/G1 over the visible normals of v, 0 where the mirror direction is below the surface):
-    E at roughness r and μ = i/31 (clamped to [1e-4, 1]) = ∫ D_v(h) G2/G1 = G1-free form ∫ (v·h)⁺ D G2/μ dω_h, and
-    E_avg(r) = ∫₀¹ 2μ E(r, μ) dμ; Gauss-Legendre in t = tan²θh/(α² + tan²θh) and φ, and in μ for E_avg. Returns
-    (E indexed [μ, r], E_avg indexed [r])."""
-    nodes = np.clip(np.arange(32) / 31.0, 1e-4, 1.0)
-    t, wt = np.polynomial.legendre.leggauss(u_nodes)
-    t, wt = (t + 1.0) / 2.0, wt / 2.0
-    p, wp = np.polynomial.legendre.leggauss(phi_nodes)
-    p, wp = (p + 1.0) * np.pi / 2.0, wp * np.pi / 2.0
-    m, wm = np.polynomial.legendre.leggauss(u_nodes)
-    m, wm = (m + 1.0) / 2.0, wm / 2.0
-
-    def e(r, mu):
-        alpha2 = r ** 4
-        theta_h = np.arctan(np.sqrt(alpha2 * t / (1.0 - t)))
-        h = np.stack([np.sin(theta_h)[:, None] * np.cos(p)[None, :], np.sin(theta_h)[:, None] * np.sin(p)[None, :],
-                      np.cos(theta_h)[:, None] * np.ones(phi_nodes)[None, :]], axis=-1)
-        w = (wt[:, None] * wp[None, :]) / np.pi
-        v = np.array([math.sqrt(1.0 - mu * mu), 0.0, mu])
-        vh = h @ v
-        mirror_z = 2.0 * vh * h[..., 2] - mu
-
-        def lam(c):
-            return 0.5 * (np.sqrt(1.0 + alpha2 * (1.0 - c * c) / (c * c)) - 1.0)
-
-        with np.errstate(all="ignore"):
-            g2 = 1.0 / (1.0 + lam(mu) + lam(mirror_z))
-            return float(np.sum(np.where((vh > 0) & (mirror_z > 0), w * vh * g2 / (mu * h[..., 2]), 0.0)))
-
-    table = np.array([[min(max(e(r, mu), 0.0), 1.0) for r in nodes] for mu in nodes])
-    average = np.array([min(max(sum(2.0 * wk * mk * e(r, mk) for mk, wk in zip(m, wm)), 0.0), 1.0) for r in nodes])
-    return table, average
-
-
-def _lookup(table, *coords):
-    """Cycles' ``lookup_table_read`` / ``_2D``: linear per axis over nodes i/(n − 1); ``coords`` in the table's axis
-    order."""
-    corners = []
-    for n, c in zip(table.shape, coords):
-        c = np.clip(np.asarray(c, float), 0.0, 1.0) * (n - 1)
-        i = np.minimum(c.astype(int), n - 1)
-        corners.append((i, np.minimum(i + 1, n - 1), c - i))
-    total = 0.0
-    for bits in itertools.product((0, 1), repeat=len(corners)):
-        index = tuple(hi if b else lo for (lo, hi, _), b in zip(corners, bits))
-        weight = 1.0
-        for (_, _, t), b in zip(corners, bits):
-            weight = weight * (t if b else 1.0 - t)
-        total = total + weight * table[index]
-    return total
-
-
 def _lookup3(table, x, y, z):
     """Cycles' ``lookup_table_read_3D`` (kernel/util/lookup_table.h): linear per axis over nodes i/(n − 1)."""
     n = table.shape[0]
@@ -954,13 +898,11 @@ def blender(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, ior
         diffuse = (1 − E) base_color/π,  E = F0 + (1 − F0) S(roughness, N·V, √((ior − 1)/(ior + 1))),
         f = metallic metal + (1 − metallic)(dielectric + diffuse),
 
-    S Cycles' table `cycles_layering_table`, read by `_lookup3`. A coat of weight w (closure.h's second layer, over
-    the rest): a GGX dielectric closure of weight w, roughness coat_roughness and index coat_ior whose setup
-    (bsdf_microfacet_setup_fresnel_dielectric -> microfacet_ggx_preserve_energy) multiplies its weight by
-    darkening = (1 + Fms (1 − E)/E)/energy_scale and its value by energy_scale = 1/E, E = ggx_E(r, N·V) and E_avg =
-    ggx_Eavg(r) (`cycles_energy_tables`), Fss = (η − 1)/(4.08567 + 1.00071 η) (bsdf_util.h), Fms = Fss E_avg/(1 −
-    Fss (1 − E_avg)); the layers beneath weighted by closure_layering_weight(albedo) = clamp(1 − albedo, 0, 1) with
-    albedo = w darkening (F0 + (1 − F0) S(r, N·V, z)) (bsdf_microfacet_estimate_albedo, dielectric branch), and by
+    S Cycles' table `cycles_layering_table`, read by `_lookup3`. A coat of weight w (Cycles 4.2's closure.h, its
+    second layer, over the rest): a GGX closure of weight w, α_c = coat_roughness², with the dielectric Fresnel term
+    of coat_ior and no energy compensation (4.2's bsdf_microfacet_setup_fresnel_dielectric); the layers beneath
+    weighted by closure_layering_weight = clamp(1 − w F_dielectric(N·V), 0, 1) (bsdf_albedo: the closure's weight
+    times the smooth-surface Fresnel term at the view, bsdf_microfacet_estimate_albedo) and by
     mix(1, coat_tint^(1/cosNT), w), cosNT = √(1 − (1 − (N·V)²)/η²)."""
     pair = Pair(theta_i, phi_i, theta_o, phi_o)
     base = _col(base_color)
@@ -989,21 +931,14 @@ def blender(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, ior
             return 0.5 * (np.sqrt(1.0 + a2c * (1.0 - c * c) / (c * c)) - 1.0)
 
         spec_c = d_c / (1.0 + lam_c(pair.ci) + lam_c(pair.co)) / (4.0 * pair.ci * pair.co)
-        e_table, e_avg_table = cycles_energy_tables()
-        e = _lookup(e_table, pair.co, coat_roughness)
-        e_avg = float(_lookup(e_avg_table, coat_roughness))
-        fss = (coat_ior - 1.0) / (4.08567 + 1.00071 * coat_ior)
-        fms = fss * e_avg / (1.0 - fss * (1.0 - e_avg))
-        energy_scale = 1.0 + (1.0 - e) / e
-        darkening = (1.0 + fms * (1.0 - e) / e) / energy_scale
         cos_tc = np.sqrt(1.0 - (1.0 - pair.cos_d ** 2) / coat_ior ** 2)
         fresnel_c = 0.5 * (((pair.cos_d - coat_ior * cos_tc) / (pair.cos_d + coat_ior * cos_tc)) ** 2
                            + ((coat_ior * pair.cos_d - cos_tc) / (coat_ior * pair.cos_d + cos_tc)) ** 2)
-        coat = coat_weight * darkening * energy_scale * fresnel_c * spec_c
-        f0_c = ((coat_ior - 1.0) / (coat_ior + 1.0)) ** 2
-        s_c = _lookup3(cycles_layering_table(), coat_roughness, pair.co, math.sqrt((coat_ior - 1.0) / (coat_ior + 1.0)))
-        layering = np.clip(1.0 - coat_weight * darkening * (f0_c + (1.0 - f0_c) * s_c), 0.0, 1.0)
+        coat = coat_weight * fresnel_c * spec_c
         cos_nt = np.sqrt(1.0 - (1.0 - pair.co ** 2) / coat_ior ** 2)
+        fresnel_v = 0.5 * (((pair.co - coat_ior * cos_nt) / (pair.co + coat_ior * cos_nt)) ** 2
+                           + ((coat_ior * pair.co - cos_nt) / (coat_ior * pair.co + cos_nt)) ** 2)
+        layering = np.clip(1.0 - coat_weight * fresnel_v, 0.0, 1.0)
         tint = 1.0 + coat_weight * (_col(coat_tint) ** (1.0 / cos_nt)[:, None] - 1.0)
         response = coat[:, None] + (layering[:, None] * tint) * response
     return _masked(pair, response)

@@ -23,21 +23,14 @@ The diffuse weight depends on the viewing direction alone, so the model is not r
 value is affine in base_color channel by channel, a linear amplitude that a fit solves exactly.
 
 With ``coat=True`` the node's coat (``Coat Weight`` w, ``Coat Roughness`` r_c, ``Coat IOR`` η_c, ``Coat Tint``)
-lies over that sum as Cycles layers it (closure.h's second layer):
-
-- the coat, a GGX dielectric closure of weight w with α_c = r_c² that Cycles keeps energy-preserving
-  (``bsdf_microfacet_setup_fresnel_dielectric``, ``microfacet_ggx_preserve_energy``):
-  f_c = w (1 + F_ms (1 − E)/E) F_d(c; η_c) D_c G2_c/(4 ci co), F_ms = F_ss E_avg/(1 − F_ss (1 − E_avg)), with E and
-  E_avg Cycles' tables ``ggx_E`` (32 × 32 over (r_c, co), bilinear) and ``ggx_Eavg`` (32 over r_c), computed again
-  here by quadrature (`energy_tables`), and F_ss = (η_c − 1)/(4.08567 + 1.00071 η_c) Cycles' fit of the average
-  Fresnel (``fresnel_dielectric_Fss``, bsdf_util.h);
-- everything beneath weighted by ``closure_layering_weight``: clamp(1 − w K R, 0, 1), K = (1 + F_ms (1 − E)/E)/(1 +
-  (1 − E)/E) the closure's darkening and R = F0(η_c) + (1 − F0(η_c)) s(r_c, co, η_c) its albedo estimate (the table
-  above), times the tint mix(1, Coat Tint^(1/cosθt), w), θt the view refracted into the coat (Beer's law along
-  the refracted view, Cycles' approximation).
-
-``Coat Tint`` is held white unless a fit frees it (it scales the base as Base Color does, but for its dependence on
-the view).
+lies over that sum as Cycles 4.2 layers it (closure.h's second layer, the kernel source that the ``bpy`` 4.2 package
+ships): a GGX closure of weight w with α_c = r_c² and the exact dielectric Fresnel term of η_c (no energy
+compensation: ``bsdf_microfacet_setup_fresnel_dielectric`` sets none in 4.2), f_c = w F_d(c; η_c) D_c G2_c/(4 ci co);
+everything beneath weighted by ``closure_layering_weight``, clamp(1 − w F_d(co; η_c), 0, 1) (the closure's albedo
+estimate for a dielectric Fresnel term is the smooth surface's, ``bsdf_microfacet_estimate_albedo``), and by the
+tint along the refracted view, mix(1, Coat Tint^(1/cosθt), w) with cosθt = √(1 − (1 − co²)/η_c²) (Beer's law,
+Cycles' approximation). ``Coat Tint`` is held white unless a fit frees it (it scales the base as Base Color does,
+but for its dependence on the view).
 """
 
 from __future__ import annotations
@@ -59,10 +52,9 @@ from .specs import base_color, metallic, perceptual_roughness
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["BlenderPrincipled", "layering_table", "energy_tables", "TABLE_SIZE", "ENERGY_TABLE_SIZE"]
+__all__ = ["BlenderPrincipled", "layering_table", "TABLE_SIZE"]
 
 TABLE_SIZE = 16
-ENERGY_TABLE_SIZE = 32  # Cycles' ggx_E and ggx_Eavg
 # Gauss-Legendre nodes of the table's quadrature: in u, the GGX distribution's own CDF variable of θh, and in φh.
 _U_NODES, _PHI_NODES = 96, 64
 _MAX_IOR = 3.0
@@ -110,61 +102,6 @@ def layering_table() -> np.ndarray:
                 blend = np.clip((fr.dielectric(vh, 1.0, e, np) - f0) / (1.0 - f0), 0.0, 1.0)
                 table[k, j, i] = np.clip(np.sum(base * blend), 0.0, 1.0)
     return table
-
-
-@functools.lru_cache(maxsize=1)
-def energy_tables() -> tuple[np.ndarray, np.ndarray]:
-    """Cycles' ``ggx_E`` and ``ggx_Eavg`` by quadrature: shapes ``(co, roughness)`` = (32, 32) and ``(roughness,)``.
-
-    E(r, μ) is the directional albedo of GGX with F = 1 and height-correlated masking at α = r², view at cosine μ,
-    as ``cycles_precompute.cpp`` estimates it (the mean of G2/G1 over the visible normals, a reflection below the
-    surface counting 0): E = ∫ (v·h)⁺ D(h) G2(ℓ, v) 1[ℓ·n > 0]/μ dω_h, in u = tan²θh/(α² + tan²θh), where D cosθh dω_h
-    = du dφ/(2π): E = 1/(2π μ) ∫∫ (v·h)⁺ G2 1[ℓ·n > 0]/cosθh du dφ. E_avg(r) = ∫₀¹ 2μ E(r, μ) dμ (Gauss-Legendre in μ).
-    Nodes as Cycles': r and μ at i/31 clamped to [1e-4, 1]; values clamped to [0, 1].
-
-    Returns:
-        ``(E, E_avg)``, float64.
-    """
-    nodes = np.clip(np.arange(ENERGY_TABLE_SIZE) / (ENERGY_TABLE_SIZE - 1), 1e-4, 1.0)
-    x, wx = np.polynomial.legendre.leggauss(_U_NODES)
-    u, wu = 0.5 * (x + 1.0), 0.5 * wx
-    y, wy = np.polynomial.legendre.leggauss(_PHI_NODES)
-    phi, wphi = np.pi * 0.5 * (y + 1.0), np.pi * 0.5 * wy  # φh in [0, π]: the integrand is even in φh
-    g, wg = np.polynomial.legendre.leggauss(_U_NODES)
-    mu_avg, w_avg = 0.5 * (g + 1.0), 0.5 * wg
-
-    def albedo(r: float, mu: np.ndarray) -> np.ndarray:
-        a2 = r ** 4
-        tan2 = a2 * u / (1.0 - u)
-        cos_h = (1.0 / np.sqrt(1.0 + tan2))[:, None, None]
-        sin_h = np.sqrt(tan2)[:, None, None] * cos_h
-        hx, hz = sin_h * np.cos(phi)[None, :, None], cos_h
-        vx, vz = np.sqrt(1.0 - mu * mu)[None, None, :], mu[None, None, :]
-        vh = vx * hx + vz * hz
-        lz = 2.0 * vh * hz - vz
-
-        def lam(c):
-            c = np.maximum(c, 1e-300)
-            return 0.5 * (np.sqrt(1.0 + a2 * (1.0 - c * c) / (c * c)) - 1.0)
-
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            g2 = 1.0 / (1.0 + lam(vz) + lam(lz))
-            term = np.where((vh > 0.0) & (lz > 0.0), vh * g2 / hz, 0.0)
-        weight = (2.0 * wu[:, None] * wphi[None, :] / (2.0 * np.pi))[..., None]  # both halves of φh
-        return np.sum(weight * term, axis=(0, 1)) / mu
-
-    e = np.empty((ENERGY_TABLE_SIZE, ENERGY_TABLE_SIZE))
-    e_avg = np.empty(ENERGY_TABLE_SIZE)
-    for i, r in enumerate(nodes):
-        e[:, i] = np.clip(albedo(r, nodes), 0.0, 1.0)
-        e_avg[i] = np.clip(np.sum(w_avg * 2.0 * mu_avg * albedo(r, mu_avg)), 0.0, 1.0)
-    return e, e_avg
-
-
-def average_fresnel(eta):
-    """Cycles' fit of the cosine-weighted hemispherical average of the dielectric Fresnel term for η ≥ 1
-    (``fresnel_dielectric_Fss``, intern/cycles/kernel/closure/bsdf_util.h)."""
-    return (eta - 1.0) / (4.08567 + 1.00071 * eta)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -232,18 +169,10 @@ class BlenderPrincipled(Lobe):
 
     @staticmethod
     def _coated(params, pair: LocalPair, beneath):
-        """The coat over ``beneath`` as Cycles layers it (module doc)."""
+        """The coat over ``beneath`` as Cycles 4.2 layers it (module doc)."""
         weight, rough, eta = params["coat_weight"], params["coat_roughness"], params["coat_ior"]
-        e_table, e_avg_table = energy_tables()
-        e = multilinear(e_table, pair.cos_o, rough)
-        e_avg = multilinear(e_avg_table, rough)
-        fss = average_fresnel(eta)
-        missing = (1.0 - e) / e
-        scale = 1.0 + fss * e_avg / (1.0 - fss * (1.0 - e_avg)) * missing  # darkening × energy scale
-        coat = weight * scale * fr.dielectric(pair.cos_d, 1.0, eta) * ggx_correlated(pair, rough * rough)
-        f0 = fr.normal_reflectance(eta)
-        s = multilinear(layering_table(), jnp.sqrt((eta - 1.0) / (eta + 1.0)), pair.cos_o, rough)
-        layer = jnp.clip(1.0 - weight * scale / (1.0 + missing) * (f0 + (1.0 - f0) * s), 0.0, 1.0)
+        coat = weight * fr.dielectric(pair.cos_d, 1.0, eta) * ggx_correlated(pair, rough * rough)
+        layer = jnp.clip(1.0 - weight * fr.dielectric(pair.cos_o, 1.0, eta), 0.0, 1.0)
         refracted = jnp.sqrt(1.0 - (1.0 - pair.cos_o * pair.cos_o) / (eta * eta))
         tint = 1.0 + weight * (params["coat_tint"] ** (1.0 / refracted)[..., None] - 1.0)
         return coat[..., None] + layer[..., None] * tint * beneath
