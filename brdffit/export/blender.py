@@ -3,9 +3,11 @@
 The script makes a material of one ``Principled BSDF`` node (distribution ``GGX``) feeding the ``Material Output``:
 ``Base Color``, ``Metallic``, ``Roughness`` and ``IOR`` from brdffit's ``blender`` model (and ``Coat Weight``,
 ``Coat Roughness``, ``Coat IOR``, ``Coat Tint`` from a model with a coat), every other input at its neutral value
-(``Specular IOR Level`` 0.5, ``Specular Tint`` white, no subsurface, sheen, coat, transmission or emission). brdffit's ``blender`` model is that node as Cycles evaluates it (`brdffit.models.blender`), so a model
-that is that lobe alone is written exactly; any other model is refused or, under the fit option, replaced by the
-``blender`` model fitted to it, with the measured deviation stated in the script's comments.
+(``Specular IOR Level`` 0.5, ``Specular Tint`` white, no subsurface, sheen, coat, transmission or emission).
+brdffit's ``blender`` model is that node as Cycles evaluates it (`brdffit.models.blender`), so a model that is
+that lobe alone is written exactly; any other model is refused or, under the fit option, replaced by the closest
+of the target's forms fitted to it (with and without the coat), with the measured deviation stated in the script's
+comments.
 
 Two settings make Cycles evaluate the node as the model does, and the script sets them: the ``GGX`` distribution
 (Blender's default, ``Multiscatter GGX``, adds an energy-compensation term the single-scattering model has not), and

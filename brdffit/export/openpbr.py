@@ -10,8 +10,9 @@ model's values under the node's own names (``base_color``, ``base_metalness``, `
 ``thin_film_weight``, ``transmission_weight``, ``subsurface_weight`` and ``emission_luminance`` 0), so that another
 default in a later OpenPBR version does not change the material. brdffit's ``openpbr`` model
 is that node as MaterialX's GLSL evaluates it (`brdffit.models.openpbr`), so a model that is that lobe alone is
-written exactly; any other is refused or, under the fit option, replaced by the ``openpbr`` model fitted to it,
-with the measured deviation stated in the document's comments.
+written exactly; any other is refused or, under the fit option, replaced by the closest of the target's forms of
+the ``openpbr`` model fitted to it (with and without coat and fuzz), with the measured deviation stated in the
+document's comments.
 """
 
 from __future__ import annotations

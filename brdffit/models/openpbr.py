@@ -2,8 +2,9 @@ r"""OpenPBR Surface as MaterialX 1.39 evaluates an opaque one (``open_pbr_surfac
 
 MaterialX's graph of the node (``libraries/bxdf/open_pbr_surface.mtlx``, ``NG_open_pbr_surface_surfaceshader``)
 with no thin film, transmission, subsurface or emission, isotropic, ``base_weight`` 1, and without the coat and
-fuzz of the options below, reduces to a mix by ``base_metalness`` of two BSDFs, evaluated by the shader code of ``libraries/pbrlib/genglsl``. With ωo
-the direction to the viewer (MaterialX's V), ωi the light's (L), h their half vector, c = ωi·h, μo = n·ωo,
+fuzz of the options below, reduces to a mix by ``base_metalness`` of two BSDFs, evaluated by the shader code of
+``libraries/pbrlib/genglsl`` (MaterialX 1.39.5, the ``materialx`` package of the test extra). With ωo the direction
+to the viewer (MaterialX's V), ωi the light's (L), h their half vector, c = ωi·h, μo = n·ωo,
 μi = n·ωi, α = specular_roughness² (``open_pbr_anisotropy`` at anisotropy 0) and DG = D(h) G2(ωi, ωo)/(4 μi μo)
 (GGX with height-correlated Smith masking, Heitz 2014 Eq. 99; ``mx_ggx_NDF``, ``mx_ggx_smith_G2``):
 
