@@ -1,7 +1,7 @@
 r"""Blender's Principled BSDF as Cycles evaluates an opaque one with the GGX distribution (Blender 4.2+).
 
 Cycles' principled closure (``intern/cycles/kernel/svm/closure.h``) with no transmission, subsurface, sheen, coat
-or emission, and ``Specular Tint`` white, is a sum of three layers. With h = normalize(ωi + ωo), α = roughness²,
+(but see the option below) or emission, and ``Specular Tint`` white, is a sum of three layers. With h = normalize(ωi + ωo), α = roughness²,
 ωo the direction to the viewer (Cycles' ``sd->wi``) and c = ωi·h:
 
 - metal: metallic · F_S(c; base_color) · D G2 / (4 ci co), F_S Schlick's term with f0 = base_color (Cycles' F82-tint
@@ -107,8 +107,8 @@ def layering_table() -> np.ndarray:
 @dataclasses.dataclass(frozen=True)
 class BlenderPrincipled(Lobe):
     """Blender's Principled BSDF with the GGX distribution as Cycles evaluates it (module doc): Base Color,
-    Metallic, Roughness and IOR, the other inputs at their neutral values (Specular IOR Level 0.5, Specular Tint
-    white, no subsurface, sheen, coat, transmission or emission).
+    Metallic, Roughness and IOR (and the coat's inputs where the option adds them), the other inputs at their
+    neutral values (Specular IOR Level 0.5, Specular Tint white, no subsurface, sheen, transmission or emission).
 
     Options:
         coat: add the node's coat (Coat Weight, Coat Roughness, Coat IOR; Coat Tint held white unless freed), a
