@@ -385,6 +385,16 @@ def _simplest(rows: list[dict], eligible) -> dict:
     return min((r for r in rows if eligible(r)), key=_simplicity)
 
 
+def _threshold(best: dict, criterion: str, margin: float) -> float:
+    """The largest score within the criterion's margin of the best row's: ``heldout`` a relative margin on the
+    held-out error, ``cv`` one standard error of the best's, ``aic``/``bic`` an additive margin."""
+    if criterion == "heldout":
+        return best["score"] * (1.0 + margin)
+    if criterion == "cv":
+        return best["score"] + (best["heldout_se"] if math.isfinite(best["heldout_se"]) else 0.0)
+    return best["score"] + margin
+
+
 @one_blas_thread()
 def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto", *, loss: str = FIT.loss,
            margin: float | None = None, folds: int = 5, holdout: float = 0.2, scene=None,
@@ -498,7 +508,8 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
         row["verdict"] = _verdict(row, chosen, best, threshold, criterion, usable, implausible)
     for_target = None
     if renders:
-        for_target = _choose_for_target(finite, renders, measurements, screened, done, options, warnings)
+        for_target = _choose_for_target(finite, renders, criterion, margin, measurements, screened, done, options,
+                                        warnings)
         for_target["verdict"] = f"chosen for {target}: its best model by the {criterion} score"
     by_scene, scene_results = None, {}
     if scene is not None:
@@ -597,15 +608,19 @@ def target_models(target: str | None, scene) -> tuple:
     return TARGETS[target].renders
 
 
-def _choose_for_target(finite, renders, measurements, screened, done, options, warnings) -> dict:
-    """The row of the target's choice: the best score among its models, its fit to all the data made where the row
-    still holds a screening fit. A screening fit that ran out of steps is measured like any other (its held-out
-    error is that of the values it reached) and continued by the full-data fit; a warning says so if that one does
-    not converge either."""
+def _choose_for_target(finite, renders, criterion, margin, measurements, screened, done, options,
+                       warnings) -> dict:
+    """The row of the target's choice: the simplest of its models within the criterion's margin of their best
+    (`_threshold`: its forms nest, a coat or a fuzz of weight 0 being the form without it), among the converged ones
+    where there are any, its fit to all the data made where the row still holds a screening fit. A screening fit that ran out of steps is measured like any other
+    (its held-out error is that of the values it reached) and continued by the full-data fit; a warning says so if
+    that one does not converge either."""
     own = [r for r in finite if r["spec"] in renders]
     if not own:
         raise ValueError(f"none of the target's models ({', '.join(renders)}) produced a finite score")
-    row = min(own, key=lambda r: (r["score"], _simplicity(r)))
+    own = [r for r in own if Status(r["status"]).converged] or own  # an unconverged fit only where all are
+    threshold = _threshold(min(own, key=lambda r: r["score"]), criterion, margin)
+    row = _simplest(own, lambda r: r["score"] <= threshold)
     spec = row["spec"]
     if screened is not None and done[spec] is screened.get(spec):
         done[spec] = fit(measurements, spec, init=done[spec].model, **options)
@@ -628,11 +643,7 @@ def _choose_by_criterion(rows, usable, criterion, margin, plausible, done, impla
     """
     while True:
         best = min(usable, key=lambda r: r["score"])
-        if criterion == "cv":
-            se = best["heldout_se"] if math.isfinite(best["heldout_se"]) else 0.0
-            threshold = best["score"] + se
-        else:
-            threshold = best["score"] + margin
+        threshold = _threshold(best, criterion, margin)
         chosen = _simplest(usable, lambda r: r["score"] <= threshold)
         # Nor is a fit plausible where the data are that reflects far more light than it receives beyond them
         # while another converged candidate remains: it would render wrong there (docs/model-selection.md). A fit
@@ -706,7 +717,7 @@ def _choose_by_heldout(usable, margin, plausible, done, implausible, warnings):
         ``(best, threshold, chosen)``: the best row, the largest error within the margin, the chosen row.
     """
     best = min(usable, key=lambda r: r["score"])
-    threshold = best["score"] * (1.0 + margin)
+    threshold = _threshold(best, "heldout", margin)
     within = sorted((r for r in usable if r["score"] <= threshold), key=_simplicity)
     for row in within:
         why = _implausible_where_measured(done[row["spec"]]) if plausible else ""
