@@ -510,7 +510,8 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
     if renders:
         for_target = _choose_for_target(finite, renders, criterion, margin, measurements, screened, done, options,
                                         warnings)
-        for_target["verdict"] = f"chosen for {target}: its best model by the {criterion} score"
+        for_target["verdict"] = (f"chosen for {target}: the simplest of its models within the margin of their best "
+                                 f"by the {criterion} score")
     by_scene, scene_results = None, {}
     if scene is not None:
         by_scene, scene_results = _choose_by_scene(scene, reference, tolerance, scene_metric, rows, usable, best,
@@ -612,9 +613,9 @@ def _choose_for_target(finite, renders, criterion, margin, measurements, screene
                        warnings) -> dict:
     """The row of the target's choice: the simplest of its models within the criterion's margin of their best
     (`_threshold`: its forms nest, a coat or a fuzz of weight 0 being the form without it), among the converged ones
-    where there are any, its fit to all the data made where the row still holds a screening fit. A screening fit that ran out of steps is measured like any other
-    (its held-out error is that of the values it reached) and continued by the full-data fit; a warning says so if
-    that one does not converge either."""
+    where there are any, its fit to all the data made where the row still holds a screening fit. A screening fit
+    that ran out of steps is measured like any other (its held-out error is that of the values it reached) and
+    continued by the full-data fit; a warning says so if that one does not converge either."""
     own = [r for r in finite if r["spec"] in renders]
     if not own:
         raise ValueError(f"none of the target's models ({', '.join(renders)}) produced a finite score")

@@ -8,10 +8,9 @@ RGL-EPFL materials, CEA's retro-reflective tape) and each target of `brdffit.exp
   their held-out errors on the selection's own held-out rows (the 20% it holds out, seed 0), and their ratio;
 - every parameter of the target's fit inside its declared bounds (the target's ranges);
 - its export to the target (glTF: the Khronos glTF-Validator, no error; MaterialX and OpenPBR:
-  `Document.validate()`; Mitsuba:
-  `mitsuba.load_string`, no ``blendbsdf`` and no ``unbounded`` texture but a conductor's η and k; pbrt-v4, which cannot be installed here: the
-  statements read back and every value in the ranges its scene parser takes), and whether the export states it
-  exact.
+  `Document.validate()`; Mitsuba: `mitsuba.load_string`, no ``blendbsdf`` and no ``unbounded`` texture but a
+  conductor's η and k; pbrt-v4, which cannot be installed here: the statements read back and every value in the
+  ranges its scene parser takes), and whether the export states it exact.
 
 Writes docs/real-data/renderers.json and prints the markdown table of docs/export.md ("Shared real materials").
 

@@ -186,6 +186,19 @@ def _compensation(e_white):
     return lambda f: 1.0 + f * gain
 
 
+def _dielectric_layer(f, f0, microfacet, a_fit, b_fit, weight=1.0):
+    """MaterialX's ``dielectric_bsdf`` in reflection (``mx_dielectric_bsdf``), untinted: ``(response, throughput)``,
+    w F DG K(F) and 1 − w E(μo; F0) K(F), the f of the layer and the weight of what lies beneath it.
+
+    Arguments:
+        f: the dielectric Fresnel term at the pair ``(..., 1)``; f0: its value at normal incidence.
+        microfacet: DG ``(...)``; a_fit, b_fit: MaterialX's albedo fit at the view (`ggx_albedo_fit`).
+        weight: the node's weight.
+    """
+    k = _compensation(a_fit + b_fit)(f)
+    return weight * f * microfacet[..., None] * k, 1.0 - weight * (f0 * a_fit + b_fit)[..., None] * k
+
+
 @dataclasses.dataclass(frozen=True)
 class OpenPBR(Lobe):
     """OpenPBR Surface, opaque, as MaterialX 1.39 evaluates it (module doc): base_color, base_metalness,
@@ -281,18 +294,16 @@ class OpenPBR(Lobe):
         c = jnp.clip(pair.cos_d, EPS, 1.0)
         microfacet = ggx_correlated(pair, alpha)
         a_fit, b_fit = ggx_albedo_fit(mu_o, alpha)
-        compensation = _compensation(a_fit + b_fit)
 
         weighted_f0 = jnp.clip(weight * fr.normal_reflectance(eta), 0.0, _F0_CAP)
         epsilon = jnp.sign(eta - 1.0) * safe_sqrt(weighted_f0, tiny=0.0)
         modulated = (1.0 + epsilon) / (1.0 - epsilon)
-        f_dielectric = fr.dielectric(c, 1.0, modulated)[..., None]
-        k_dielectric = compensation(f_dielectric)
-        albedo = (fr.normal_reflectance(modulated) * a_fit + b_fit)[..., None] * k_dielectric
+        specular, throughput = _dielectric_layer(fr.dielectric(c, 1.0, modulated)[..., None],
+                                                 fr.normal_reflectance(modulated), microfacet, a_fit, b_fit)
         diffuse = _oren_nayar(pair, mu_i, mu_o, base, rough) / jnp.pi
-        dielectric = tint * f_dielectric * microfacet[..., None] * k_dielectric + (1.0 - albedo) * diffuse
+        dielectric = tint * specular + throughput * diffuse
         f_metal = fr.f82_tint(c[..., None], base, tint)
-        metal = weight * f_metal * microfacet[..., None] * compensation(f_metal)
+        metal = weight * f_metal * microfacet[..., None] * _compensation(a_fit + b_fit)(f_metal)
         base_f = (1.0 - metalness) * dielectric + metalness * metal
         if self.coat:
             base_f = self._coated(params, pair, mu_o, c, base_f)
@@ -314,9 +325,6 @@ class OpenPBR(Lobe):
         beneath = (_mix(1.0, darkening, weight * params["coat_darkening"])
                    * _mix(1.0, params["coat_color"], weight)) * base_f
         alpha = jnp.clip(params["coat_roughness"] ** 2, EPS, 1.0)
-        a_fit, b_fit = ggx_albedo_fit(mu_o, alpha)
-        f = fr.dielectric(c, 1.0, ior)[..., None]
-        k = _compensation(a_fit + b_fit)(f)
-        response = weight * f * ggx_correlated(pair, alpha)[..., None] * k
-        throughput = 1.0 - weight * (f0 * a_fit + b_fit)[..., None] * k
+        response, throughput = _dielectric_layer(fr.dielectric(c, 1.0, ior)[..., None], f0,
+                                                 ggx_correlated(pair, alpha), *ggx_albedo_fit(mu_o, alpha), weight)
         return response + throughput * beneath
