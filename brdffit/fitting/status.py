@@ -10,6 +10,7 @@ import itertools
 import numpy as np
 
 from ..params import at_bound
+from .bvls import bounded_least_squares
 from .outcome import STATUSES, Status
 from .problem import Problem
 
@@ -40,7 +41,7 @@ def bounded_step(problem: Problem, params: dict, jtj, jtr) -> tuple[np.ndarray, 
     coordinates (physical units span many decades) and on the range of JᵀJ (a direction the data do not see
     predicts nothing). A scalar within `brdffit.params.at_bound`'s margin of a bound counts as on it. The plain
     step rᵀJ (JᵀJ)⁺ Jᵀr is the answer when it stays inside; otherwise the box-constrained linear least squares
-    (scipy.optimize.lsq_linear) is. Near 0 at a true (constrained) optimum: Karush-Kuhn-Tucker.
+    (`brdffit.fitting.bvls.bounded_least_squares`) is. Near 0 at a true (constrained) optimum: Karush-Kuhn-Tucker.
 
     Arguments:
         problem: the `Problem`.
@@ -77,9 +78,7 @@ def bounded_step(problem: Problem, params: dict, jtj, jtr) -> tuple[np.ndarray, 
     high = np.where(at_upper, 0.0, (upper - values) * scale)
     if np.all((z >= low) & (z <= high)):
         return z / scale, max(full, 0.0)
-    from scipy.optimize import lsq_linear  # here, not at import: only a step that leaves the box needs it
-
-    z = lsq_linear(a, -b, bounds=(low, np.maximum(high, low)), method="bvls").x
+    z = bounded_least_squares(a, b, low, np.maximum(high, low))
     rest = a @ z + b
     return z / scale, max(full - float(rest @ rest), 0.0)
 
