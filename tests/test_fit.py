@@ -353,15 +353,16 @@ def test_coarse_stage_of_optimistix_lm_solves_normal_equations_in_float64_only()
 @pytest.mark.parametrize("spec", ["lambert+cook-torrance", "lambert+ward", "lambert+lafortune(lobes=2)",
                                   "lambert+blinn-phong"])
 def test_the_coarse_stage_ends_within_its_stated_cost_of_the_optimum(spec):
-    """`COARSE_OFFSET` = 1e-2 leaves a Gauss-Newton step of about 1e-2 √p standard errors: the cost within ~1e-4 p
-    of its minimum in χ² units (cost over cost/dof). Measured on these misspecified fits: at most 5.1e-5 p."""
+    """`COARSE_OFFSET` = 3e-2 leaves a Gauss-Newton step of about 3e-2 √p standard errors: the cost within ~1e-3 p
+    of its minimum in χ² units (the offset squared times p; cost over cost/dof). Measured on these misspecified
+    fits: at most 3.8e-4 p (two Lafortune lobes)."""
     truth = models.get("lambert+ggx", rho_d=[0.3, 0.2, 0.1], ks=[0.6, 0.5, 0.4], alpha=0.25, f0=0.05)
     data = synth.generate(truth, pattern="uniform", n=800, noise="relative:0.01", seed=21)
     tight = fit(data, spec)
     coarse = fit(data, spec, solver=coarse_solver("lm", 1e-5, 1e-8))
     assert tight.converged and coarse.converged
     excess = (coarse.cost - tight.cost) / (tight.cost / tight.dof)
-    assert -1e-6 <= excess <= 1e-4 * tight.n_params, excess
+    assert -1e-6 <= excess <= 1e-3 * tight.n_params, excess
 
 
 @pytest.mark.slow
