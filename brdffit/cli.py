@@ -376,6 +376,15 @@ def _load(path, args):
                              "theta_i=NAME,phi_i=NAME,theta_o=NAME,phi_o=NAME (see --help)") from None
 
 
+def _job(args, measurements) -> str:
+    """The words that decide a command's compiled programs, for `enable_compilation_cache`'s prefetch: the command,
+    its options (not the file, the output folder or how the result is printed) and the data's shape (samples,
+    channels)."""
+    skipped = {"run", "command", "file", "result", "out", "json", "quiet", "force"}
+    options = sorted((k, repr(v)) for k, v in vars(args).items() if k not in skipped)
+    return f"{args.command} {options} {measurements.n}x{measurements.n_channels}"
+
+
 def _cmd_models(args) -> int:
     from . import models
 
@@ -524,7 +533,7 @@ def _cmd_fit(args) -> int:
     measurements = _load(path, args)  # first: a file that cannot be read is reported before JAX is loaded
     from . import fit, io, select
 
-    enable_compilation_cache()
+    enable_compilation_cache(_job(args, measurements))
     if args.report:
         _import_in_background("brdffit.report")
     selection = None
@@ -632,7 +641,7 @@ def _cmd_report(args) -> int:
     h5 = Path(args.result)
     measurements = io.load(h5)
     result = FitResult.load(h5, args.name)
-    enable_compilation_cache()  # the figures' programs, as a fit's report finds them
+    enable_compilation_cache(_job(args, measurements))  # the figures' programs, as a fit's report finds them
     post = None
     with h5py.File(h5, "r") as f:
         chain_group = f"posteriors/{(args.name or result.spec).replace('/', '_')}/chain"
@@ -885,7 +894,7 @@ def _cmd_select(args) -> int:
     from . import select
     from .select import DEFAULT_CANDIDATES
 
-    enable_compilation_cache()
+    enable_compilation_cache(_job(args, measurements))
     candidates = [c.strip() for c in args.candidates.split(";")] if args.candidates else list(DEFAULT_CANDIDATES)
     _check_fixed(_parse_fixed(args.fixed), candidates)
     selection = select(measurements, candidates, criterion=args.criterion, folds=args.folds,

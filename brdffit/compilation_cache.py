@@ -23,9 +23,16 @@ def cache_dir() -> Path:
     return Path(base) / "brdffit" / "jax"
 
 
-def enable_compilation_cache() -> None:
+def enable_compilation_cache(job: str | None = None) -> None:
     """Turn on JAX's persistent compilation cache (and so `brdffit.programs`' kept executables) in `cache_dir`, so
-    that a second process starts warm. An unwritable directory leaves it off: it only costs time."""
+    that a second process starts warm. An unwritable directory leaves it off: it only costs time.
+
+    Arguments:
+        job: what the process is about to do, in words that decide its programs (the CLI: the command, its options
+            and the data's shape). With it, the kept executables that the last process with the same job used are
+            read in the background from now on (`brdffit.programs.prefetch`), and at exit this process's are
+            recorded for the next one (`brdffit.programs.record`).
+    """
     import jax
 
     try:
@@ -35,3 +42,10 @@ def enable_compilation_cache() -> None:
         return
     jax.config.update("jax_compilation_cache_dir", str(directory))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    if job is not None:
+        import atexit
+
+        from . import programs
+
+        programs.prefetch(job)
+        atexit.register(programs.record, job)

@@ -18,6 +18,13 @@ again and replaced; files are written to a temporary name and renamed, so a read
 
 A `Program` may be called from several threads (`brdffit.select` fits candidates concurrently): the first call of
 a signature compiles it while later callers of that signature wait for it, and other signatures compile beside it.
+
+Reading a kept executable back costs about 10 ms (a warm default fit of a real file reads some fifty), mostly
+outside Python's lock. A process that knows its job (the CLI: the command, its options and the data's shape) names
+it (`prefetch`): the executables that the last process with that job used (its manifest, `record`) are then read in
+a background thread while this one imports and reads its data, and a program finds its own there. A manifest that
+no longer fits (other data, an edited source) only costs that thread its reads: a program whose key differs, or
+that the thread has not reached, is read by its caller as before.
 """
 
 from __future__ import annotations
@@ -35,7 +42,7 @@ from jax._src import config as _jax_config  # its options as thread-local contex
 
 from .arrays import traced
 
-__all__ = ["Program", "program_directory", "compiler_options"]
+__all__ = ["Program", "program_directory", "compiler_options", "prefetch", "record"]
 
 _FOLDER = "brdffit-programs"
 # XLA's options for brdffit's programs on the CPU: the loop emitters that preceded XLA's MLIR fusion emitters. They
@@ -123,6 +130,8 @@ class Program:
             if executable is not None:
                 return executable(*leaves)
             path, text = self._path(signature)
+            if path is not None:
+                _used(path)
             executable = _load(path, text) if path is not None else None
             out = _run(executable, leaves)
             if out is None:  # nothing kept, or a kept file that does not run: compile (and keep)
@@ -185,17 +194,116 @@ def _run(executable, leaves):
 
 
 def _load(path: Path, text: str):
-    """The executable kept under ``path`` for the key ``text``, or None (absent, damaged, another key)."""
+    """The executable kept under ``path`` for the key ``text``, or None (absent, damaged, another key): the one
+    `prefetch` read, where it read this file, else read here."""
+    fetched = _prefetched(path.name)
+    if fetched is not None and fetched[0] == text:
+        return fetched[1]
+    stored, executable = _read(path)
+    return executable if stored == text else None
+
+
+def _read(path: Path) -> tuple:
+    """``(key text, executable)`` of a kept file, ``(None, None)`` where it cannot be read back."""
     try:
         with open(path, "rb") as f:
             stored, blob, in_tree, out_tree = pickle.load(f)
-        if stored != text:
-            return None
         from jax.experimental.serialize_executable import deserialize_and_load
 
-        return deserialize_and_load(blob, in_tree, out_tree)
+        return stored, deserialize_and_load(blob, in_tree, out_tree)
     except Exception:  # noqa: BLE001 - any failure to read it back means: compile it again
+        return None, None
+
+
+# The kept files this process used, in order of first use (`record`), and `prefetch`'s state: the files its thread
+# has still to read (a caller that needs one first reads it itself) and, for each file it took, an event set when
+# its read is done and the result.
+_LOCK = threading.Lock()
+_USED: dict[str, None] = {}
+_QUEUED: set = set()
+_TAKEN: dict[str, threading.Event] = {}
+_FETCHED: dict[str, tuple] = {}
+
+
+def _used(path: Path) -> None:
+    with _LOCK:
+        _USED.setdefault(path.name, None)
+
+
+def _manifest(job: str) -> Path | None:
+    """The manifest file of a job, in the programs' folder (None where nothing is kept)."""
+    directory = program_directory()
+    return None if directory is None else directory / "manifests" / (hashlib.sha256(job.encode()).hexdigest() + ".txt")
+
+
+def prefetch(job: str) -> None:
+    """Read, in a daemon thread, the kept executables that the last process with this ``job`` used (module doc).
+
+    Arguments:
+        job: what this process is about to do, in words that decide its programs (the CLI: its command, options and
+            the data's shape); `record` under the same words writes the manifest this reads.
+    """
+    manifest = _manifest(job)
+    try:
+        names = manifest.read_text().split() if manifest is not None else []
+    except OSError:
+        return
+    folder = manifest.parent.parent
+    with _LOCK:
+        names = [n for n in names if n not in _TAKEN and n not in _QUEUED]
+        _QUEUED.update(names)
+    if names:
+        threading.Thread(target=_read_all, args=(folder, names), name="brdffit prefetch", daemon=True).start()
+
+
+def _read_all(folder: Path, names: list) -> None:
+    for name in names:
+        with _LOCK:
+            if name not in _QUEUED:  # a caller came first
+                continue
+            _QUEUED.discard(name)
+            done = _TAKEN[name] = threading.Event()
+        try:
+            _FETCHED[name] = _read(folder / name)
+        finally:
+            done.set()
+
+
+def _prefetched(name: str) -> tuple | None:
+    """The prefetch thread's ``(key text, executable)`` of a file (waiting while it reads it), or None where it has
+    not taken it (the caller reads it: the thread then skips it)."""
+    with _LOCK:
+        if name in _QUEUED:
+            _QUEUED.discard(name)
+            return None
+        done = _TAKEN.get(name)
+    if done is None:
         return None
+    done.wait()
+    return _FETCHED.pop(name, None)
+
+
+def record(job: str) -> None:
+    """Write the kept files this process used as ``job``'s manifest, for the next process's `prefetch` (atomically;
+    a folder that cannot be written only costs the next process its prefetch)."""
+    manifest = _manifest(job)
+    with _LOCK:
+        names = list(_USED)
+    if manifest is None or not names:
+        return
+    temporary = None
+    try:
+        manifest.parent.mkdir(parents=True, exist_ok=True)
+        fd, temporary = tempfile.mkstemp(dir=manifest.parent, suffix=".tmp")
+        with os.fdopen(fd, "w") as f:
+            f.write("\n".join(names) + "\n")
+        os.replace(temporary, manifest)
+    except OSError:
+        if temporary is not None:
+            try:
+                os.unlink(temporary)
+            except OSError:
+                pass
 
 
 def _keep(path: Path, text: str, compiled, leaves):

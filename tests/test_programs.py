@@ -176,3 +176,51 @@ def test_programs_compile_with_the_declared_options_and_the_options_key_the_kept
     assert seen[-1] == {"xla_cpu_use_fusion_emitters": True}  # compiled anew, not loaded
     assert len(list(kept_in.glob("*.bin"))) == 2
     np.testing.assert_allclose(emitted, fused, rtol=1e-14, atol=0.0)
+
+
+def _reset_prefetch(monkeypatch):
+    """The prefetch state of a new process (the module's own dicts and sets replaced for the test)."""
+    for name, value in (("_USED", {}), ("_QUEUED", set()), ("_TAKEN", {}), ("_FETCHED", {})):
+        monkeypatch.setattr(programs, name, value)
+
+
+def test_a_recorded_job_is_read_back_by_the_prefetch_and_used_without_tracing(kept_in, monkeypatch):
+    """`record` writes the files a job used; a later process's `prefetch` of that job reads them in its thread, and
+    a program takes its executable from there (the same values, no trace, no read of its own)."""
+    _reset_prefetch(monkeypatch)
+    for n in (23, 29):  # sizes no other test compiles (a second compilation in a process is not kept)
+        Program(polynomial(), "polynomial")(*arguments(n))
+    programs.record("a job")
+    (manifest,) = (kept_in / "manifests").glob("*.txt")
+    assert sorted(manifest.read_text().split()) == sorted(p.name for p in kept_in.glob("*.bin"))
+    _reset_prefetch(monkeypatch)
+    TRACES.clear()
+    programs.prefetch("a job")
+    reads = []
+    monkeypatch.setattr(programs, "_read", lambda path, _read=programs._read: reads.append(path.name) or _read(path))
+    again = Program(polynomial(), "polynomial")
+    for n in (23, 29):
+        x, data = arguments(n)
+        np.testing.assert_allclose(again(x, data), np.sin(x) * 2.0 + np.arange(n) ** 2, rtol=1e-15)
+    assert TRACES == []
+    assert set(programs._TAKEN) | set(reads) == {p.name for p in kept_in.glob("*.bin")}
+    assert not programs._QUEUED and not programs._FETCHED  # every file read once, by the thread or its caller
+
+
+def test_a_manifest_that_no_longer_fits_costs_nothing_but_its_reads(kept_in, monkeypatch):
+    """A manifest naming a missing file and a file of another key (damaged): the prefetch reads what it can, the
+    programs run as without it (compiled again where nothing fits), and another job's manifest is not read."""
+    _reset_prefetch(monkeypatch)
+    Program(polynomial(), "polynomial")(*arguments(31))
+    (path,) = kept_in.glob("*.bin")
+    programs._USED["missing.bin"] = None
+    programs.record("stale")
+    path.write_bytes(b"not a program")
+    _reset_prefetch(monkeypatch)
+    TRACES.clear()
+    programs.prefetch("another job")  # no manifest: nothing to read
+    assert not programs._QUEUED and not programs._TAKEN
+    programs.prefetch("stale")
+    x, data = arguments(31)
+    np.testing.assert_allclose(Program(polynomial(), "polynomial")(x, data), np.sin(x) * 2.0 + np.arange(31) ** 2)
+    assert TRACES == [(31,)]
