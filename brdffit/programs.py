@@ -286,24 +286,19 @@ def _prefetched(name: str) -> tuple | None:
 def record(job: str) -> None:
     """Write the kept files this process used as ``job``'s manifest, for the next process's `prefetch` (atomically;
     a folder that cannot be written only costs the next process its prefetch)."""
+    from .io._common import atomic_path
+
     manifest = _manifest(job)
     with _LOCK:
         names = list(_USED)
     if manifest is None or not names:
         return
-    temporary = None
     try:
         manifest.parent.mkdir(parents=True, exist_ok=True)
-        fd, temporary = tempfile.mkstemp(dir=manifest.parent, suffix=".tmp")
-        with os.fdopen(fd, "w") as f:
-            f.write("\n".join(names) + "\n")
-        os.replace(temporary, manifest)
+        with atomic_path(manifest) as temporary:
+            temporary.write_text("\n".join(names) + "\n")
     except OSError:
-        if temporary is not None:
-            try:
-                os.unlink(temporary)
-            except OSError:
-                pass
+        pass
 
 
 def _keep(path: Path, text: str, compiled, leaves):
