@@ -18,14 +18,12 @@ import numpy as np
 __all__ = ["bounded_least_squares"]
 
 
-def bounded_least_squares(a: np.ndarray, b: np.ndarray, low: np.ndarray, high: np.ndarray,
-                          start: np.ndarray | None = None) -> np.ndarray:
-    """argmin ‖a z + b‖² over low ≤ z ≤ high.
+def bounded_least_squares(a: np.ndarray, b: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """argmin ‖a z + b‖² over low ≤ z ≤ high, started from 0 clipped into the box.
 
     Arguments:
         a: ``(m, n)``; b: ``(m,)``.
         low, high: ``(n,)`` bounds, low ≤ high (equal: the variable is fixed; ±inf: none).
-        start: a feasible point to start from (default: 0 clipped into the box).
 
     Returns:
         The optimum ``(n,)``, inside the box.
@@ -33,7 +31,7 @@ def bounded_least_squares(a: np.ndarray, b: np.ndarray, low: np.ndarray, high: n
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     low, high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
     n = a.shape[1]
-    z = np.clip(np.zeros(n) if start is None else np.asarray(start, dtype=float), low, high)
+    z = np.clip(np.zeros(n), low, high)
     scale = max(float(np.abs(a).max(initial=0.0)) * max(float(np.abs(b).max(initial=0.0)), 1.0), 1e-300)
     tol = 1e-12 * scale  # a multiplier smaller than this is zero
     at_low, at_high = z <= low, z >= high

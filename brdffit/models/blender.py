@@ -1,8 +1,8 @@
 r"""Blender's Principled BSDF as Cycles evaluates an opaque one with the GGX distribution (Blender 4.2+).
 
 Cycles' principled closure (``intern/cycles/kernel/svm/closure.h``) with no transmission, subsurface, sheen, coat
-(but see the option below) or emission, and ``Specular Tint`` white, is a sum of three layers. With h = normalize(ωi + ωo), α = roughness²,
-ωo the direction to the viewer (Cycles' ``sd->wi``) and c = ωi·h:
+(but see the option below) or emission, and ``Specular Tint`` white, is a sum of three layers. With
+h = normalize(ωi + ωo), α = roughness², ωo the direction to the viewer (Cycles' ``sd->wi``) and c = ωi·h:
 
 - metal: metallic · F_S(c; base_color) · D G2 / (4 ci co), F_S Schlick's term with f0 = base_color (Cycles' F82-tint
   Fresnel with a white tint is Schlick's);
