@@ -101,15 +101,17 @@ def jitted(fn):
     return jax.jit(fn, compiler_options=compiler_options())
 
 
-def padded_columns(fn, *columns, chunk: int = COLUMN_CHUNK) -> tuple:
+def padded_columns(fn, *columns, chunk: int = COLUMN_CHUNK, least: int = 256) -> tuple:
     """``fn(*columns)`` on 1-d columns of one length, called on lengths padded with zeros to a power of two (at
-    least 256) and in pieces of at most ``chunk`` samples, so that a compiled ``fn`` serves every length with a few
-    compilations (called per length, or eagerly, it compiled anew for each file: seconds each).
+    least ``least``) and in pieces of at most ``chunk`` samples, so that a compiled ``fn`` serves every length with a
+    few compilations (called per length, or eagerly, it compiled anew for each file: seconds each); with ``least``
+    equal to ``chunk``, with one.
 
     Arguments:
         fn: a compiled (jitted) function of the columns, returning an array or a tuple of arrays of their length.
         columns: 1-d arrays of one length (converted to float64).
         chunk: the most samples of one call (a power of two).
+        least: the fewest samples of one call (a power of two, at most ``chunk``).
 
     Returns:
         The outputs as float64 NumPy arrays cut back to the columns' length, a tuple.
@@ -120,7 +122,7 @@ def padded_columns(fn, *columns, chunk: int = COLUMN_CHUNK) -> tuple:
     for start in range(0, max(n, 1), chunk):
         part = [c[start:start + chunk] for c in columns]
         size = part[0].shape[0]
-        padded = max(256, 1 << max(size - 1, 0).bit_length())
+        padded = max(least, 1 << max(size - 1, 0).bit_length())
         out = fn(*(np.pad(c, (0, padded - size)) for c in part))
         pieces.append([np.asarray(o, dtype=np.float64)[:size] for o in (out if isinstance(out, tuple) else (out,))])
     return tuple(np.concatenate(column, axis=0) for column in zip(*pieces))

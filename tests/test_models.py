@@ -373,6 +373,24 @@ def test_evaluate_broadcasts_its_inputs():
     assert grid.shape == (2, 4, CHANNELS)
 
 
+
+def test_evaluations_of_every_size_share_one_compiled_program():
+    """A host call of any size runs in padded calls of one shape (`EVALUATION_ROWS`): one compilation per model
+    structure serves them all, and the values are those of the traced expression at the same pairs."""
+    from brdffit.models.model import EVALUATION_ROWS, _evaluate_rows
+
+    model = models.get("lambert+ggx+lafortune", channels=CHANNELS, alpha=0.23)  # a structure no other test uses
+    rng = np.random.default_rng(5)
+    before = len(_evaluate_rows._compiled)
+    for n in (1, 357, EVALUATION_ROWS, EVALUATION_ROWS + 1, 3 * EVALUATION_ROWS - 7):
+        angles = [rng.uniform(0.0, 1.5, n), rng.uniform(0, 2 * np.pi, n), rng.uniform(0.0, 1.5, n),
+                  rng.uniform(0, 2 * np.pi, n)]
+        values = brdffit.evaluate(model, *angles)
+        assert isinstance(values, np.ndarray) and values.shape == (n, CHANNELS)
+        traced = jax.jit(brdffit.evaluate)(model, *angles)
+        np.testing.assert_allclose(values, traced, rtol=1e-13, atol=1e-300)
+    assert len(_evaluate_rows._compiled) == before + 1
+
 # --------------------------------------------------------------------------------------------------------------
 # Sums of lobes and the naming rule
 

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import on_device, traced
+from ..arrays import on_device, padded_columns, traced
 from ..programs import Program
 from ..geometry import LocalPair, spherical_to_vector
 from ..params import ParamSpec, ParamTable
@@ -106,12 +106,23 @@ def coerce_value(spec: ParamSpec, value, channels: int):
     return value
 
 
-# `evaluate_dirs` and `evaluate` are compiled: one compilation per model structure and input shape, instead of one
-# per primitive as JAX does when it runs them eagerly (dozens per lobe, which made reports and selection spend
-# most of their time compiling). As `Program`s they are also kept on disk where JAX's persistent cache is on, so a
-# warm process loads them without tracing (a report's or a selection's plausibility checks traced them anew for
-# every model). Inside a traced function they inline as ``jax.jit`` does.
+# Host calls of `evaluate_dirs` and `evaluate` run one compiled program per model structure (`_evaluate_rows`,
+# instead of one per primitive as JAX does when it runs them eagerly: dozens per lobe), on `EVALUATION_ROWS` pairs a
+# call, the last call padded: every caller (a report's figures, scenes and tables, the plausibility checks, the
+# readers' and exports' evaluations) then shares that one compilation, where a program per input shape compiled
+# once for each of them on the critical path of a first report. As a `Program` it is also kept on disk where JAX's
+# persistent cache is on, so a warm process loads it without tracing. Called on traced values (inside ``jax.jit``,
+# ``jax.grad``), they are the plain JAX expression.
+EVALUATION_ROWS = 1 << 14
+
+
 @Program
+def _evaluate_rows(model: Model, xi, yi, zi, xo, yo, zo):
+    """f_r of ``model`` at the pairs of unit vectors whose components are the 1-d columns ``xi, ..., zo``: ``(N,
+    channels)``."""
+    return evaluate_pair(model, LocalPair.from_dirs(jnp.stack([xi, yi, zi], axis=-1), jnp.stack([xo, yo, zo], axis=-1)))
+
+
 def evaluate_dirs(model: Model, wi, wo):
     """Evaluate a model for pairs of unit direction vectors.
 
@@ -121,10 +132,16 @@ def evaluate_dirs(model: Model, wi, wo):
         wo: directions to the detector, broadcastable with ``wi``.
 
     Returns:
-        f_r in 1/sr without the cosine factor, shape ``broadcast(...) + (channels,)``; zero unless both directions
-        lie strictly above the horizon.
+        f_r in 1/sr without the cosine factor, shape ``broadcast(...) + (channels,)`` (a NumPy float64 array, or a
+        JAX array when called on traced values); zero unless both directions lie strictly above the horizon.
     """
-    return evaluate_pair(model, LocalPair.from_dirs(wi, wo))
+    if traced((model, wi, wo)):
+        return evaluate_pair(model, LocalPair.from_dirs(wi, wo))
+    wi, wo = np.broadcast_arrays(np.asarray(wi, dtype=float), np.asarray(wo, dtype=float))
+    shape = wi.shape[:-1]
+    columns = [w.reshape(-1, 3)[:, k] for w in (wi, wo) for k in range(3)]
+    (f,) = padded_columns(lambda *c: _evaluate_rows(model, *c), *columns, chunk=EVALUATION_ROWS, least=EVALUATION_ROWS)
+    return f.reshape(shape + (model.channels,))
 
 
 def evaluate_pair(model: Model, pair: LocalPair):
@@ -144,7 +161,6 @@ def evaluate_pair(model: Model, pair: LocalPair):
     return jnp.where(pair.above[..., None], total, 0.0)
 
 
-@Program
 def evaluate(model: Model, theta_i, phi_i, theta_o, phi_o):
     """Evaluate a model at spherical angles.
 
@@ -155,6 +171,8 @@ def evaluate(model: Model, theta_i, phi_i, theta_o, phi_o):
             All four broadcast against each other.
 
     Returns:
-        f_r in 1/sr, shape ``broadcast(...) + (channels,)`` (``(N, channels)`` for 1-d inputs).
+        f_r in 1/sr, shape ``broadcast(...) + (channels,)`` (``(N, channels)`` for 1-d inputs), as `evaluate_dirs`
+        returns it.
     """
-    return evaluate_dirs(model, spherical_to_vector(theta_i, phi_i), spherical_to_vector(theta_o, phi_o))
+    xp = jnp if traced((model, theta_i, phi_i, theta_o, phi_o)) else np
+    return evaluate_dirs(model, spherical_to_vector(theta_i, phi_i, xp=xp), spherical_to_vector(theta_o, phi_o, xp=xp))
