@@ -10,11 +10,12 @@ the full data need a specular lobe.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 import re
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import jax
 import numpy as np
@@ -279,7 +280,7 @@ def _smaller_lafortune(spec: str):
     return (f"{base}+{lobe}" if base else lobe), k
 
 
-def _each_candidate(candidates, work, bar, message):
+def _each_candidate(candidates, work, bar, message, when_idle=None):
     """``work(spec, init)`` for every candidate, `SELECT_THREADS` at a time, where ``init`` is ``"auto"`` or, for
     a Lafortune sum whose one-lobe-smaller spec is also a candidate, the new-lobe starts from that one's fit
     (`brdffit.fitting.progressive`). ``work`` returns a pair whose first element is the candidate's `FitResult`.
@@ -288,8 +289,14 @@ def _each_candidate(candidates, work, bar, message):
     are started first: the chain is the selection's critical path (each member waits for the one before), and a
     member in a pool slot of its own would hold that slot idle while it waits.
 
+    Arguments:
+        when_idle: ``when_idle(finished)``, run in the first pool slot that the candidates leave idle (once every
+            chain has started and one has ended), with ``finished`` the ``work`` outputs of the candidates done by
+            then (spec -> output): work that the caller would do next and can begin on a guess (`select` refits
+            the candidate leading so far). Its return value is returned beside the outputs.
+
     Returns:
-        The ``work`` outputs in the order of ``candidates``.
+        The ``work`` outputs in the order of ``candidates``; with ``when_idle``, the pair (those, its return).
     """
     chains: dict[str, list[str]] = {}  # the chain's first spec -> its specs in order
     head = {}
@@ -297,6 +304,7 @@ def _each_candidate(candidates, work, bar, message):
         smaller, _ = _smaller_lafortune(spec)
         head[spec] = head[smaller] if smaller in head else spec
         chains.setdefault(head[spec], []).append(spec)
+    finished = {}  # every chain's outputs so far, for `when_idle`
 
     def run(chain):
         out = {}
@@ -305,17 +313,22 @@ def _each_candidate(candidates, work, bar, message):
             smaller, k = _smaller_lafortune(spec)
             if smaller in out and out[smaller][0].model is not None:
                 init = new_lobe_candidates(out[smaller][0], k, "anisotropic=true" in spec.replace(" ", "").lower())
-            out[spec] = work(spec, init)
+            out[spec] = finished[spec] = work(spec, init)
         return out
+
+    def idle():  # queued after every chain: it starts when a slot has no chain left to start
+        wait(futures.values(), return_when=FIRST_COMPLETED)
+        return when_idle(dict(finished))
 
     with ThreadPoolExecutor(max_workers=SELECT_THREADS) as pool:
         futures = {first: pool.submit(run, chain)
                    for first, chain in sorted(chains.items(), key=lambda item: -len(item[1]))}
+        guess = pool.submit(idle) if when_idle is not None else None
         out = []
         for i, spec in enumerate(candidates):
             bar.update(i, message(spec))
             out.append(futures[head[spec]].result()[spec])
-    return out
+        return out if guess is None else (out, guess.result())
 
 
 def _verdict(row: dict, chosen: dict, best: dict, threshold: float, criterion: str, usable: list,
@@ -478,27 +491,25 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
             screen_data = measurements.take(seen)
         else:  # all the training rows, the held-out ones masked: the refits reuse the screening's programs
             seen, screen_data = train_rows, _masked(measurements, fold_rows[0])
-        rows, screened = _screened_rows(candidates, measurements, screen_data, seen, fold_rows[0], options, done,
-                                        bar)
-        if criterion != "heldout":
+        if criterion == "heldout":  # the choice's refit begins on the first idle pool slot (`_refit_leader`)
+            leader = functools.partial(_refit_leader, measurements=measurements, margin=margin, plausible=plausible,
+                                       options=options)
+            rows, screened, guess = _screened_rows(candidates, measurements, screen_data, seen, fold_rows[0],
+                                                   options, done, bar, when_idle=leader)
+        else:
+            rows, screened = _screened_rows(candidates, measurements, screen_data, seen, fold_rows[0], options,
+                                            done, bar)
             _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar)
     else:
         rows, screened = _fitted_rows(candidates, measurements, fold_rows, options, done, bar), None
-    for row in rows:
-        row["score"] = _score(row, criterion)
-    finite = [r for r in rows if r["status"] != Status.NONFINITE and math.isfinite(r["score"])]
-    if not finite:
-        raise ValueError("no candidate produced a finite score; check the data and candidates")
-    # Only a converged fit is a candidate's answer: an unconverged one's score says little about the model.
-    usable = [r for r in finite if Status(r["status"]).converged]
-    if not usable:
-        usable = finite
-        warnings.append("no candidate's fit converged: the choice is among unconverged fits (raise max_steps, "
-                        "or check the data)")
+    finite, usable = _scored(rows, criterion, warnings)
     implausible: dict[str, str] = {}
     if criterion == "heldout":
         best, threshold, chosen = _choose_by_heldout(usable, margin, plausible, done, implausible, warnings)
-        done[chosen["spec"]] = fit(measurements, chosen["spec"], init=done[chosen["spec"]].model, **options)
+        if guess is not None and guess[0] == chosen["spec"]:
+            done[chosen["spec"]] = guess[1]
+        else:
+            done[chosen["spec"]] = fit(measurements, chosen["spec"], init=done[chosen["spec"]].model, **options)
         chosen.update(_full_fit_fields(done[chosen["spec"]], train_error=False))
     else:
         best, threshold, chosen, usable = _choose_by_criterion(rows, usable, criterion, margin, plausible, done,
@@ -737,6 +748,40 @@ def _choose_by_heldout(usable, margin, plausible, done, implausible, warnings):
     return best, threshold, chosen
 
 
+def _scored(rows: list[dict], criterion: str, warnings: list) -> tuple[list, list]:
+    """Give every row its ``score`` under ``criterion``; return the rows with a finite score and those of them
+    that can be chosen: the converged ones (an unconverged fit's score says little about the model), or all of
+    them, with a line in ``warnings``, when none converged.
+
+    Raises:
+        ValueError: no row has a finite score.
+    """
+    for row in rows:
+        row["score"] = _score(row, criterion)
+    finite = [r for r in rows if r["status"] != Status.NONFINITE and math.isfinite(r["score"])]
+    if not finite:
+        raise ValueError("no candidate produced a finite score; check the data and candidates")
+    usable = [r for r in finite if Status(r["status"]).converged]
+    if not usable:
+        usable = finite
+        warnings.append("no candidate's fit converged: the choice is among unconverged fits (raise max_steps, "
+                        "or check the data)")
+    return finite, usable
+
+
+def _refit_leader(rows, screened, *, measurements, margin, plausible, options):
+    """The ``heldout`` choice among the candidates screened so far, refitted to all the data from its screening
+    fit, as ``(spec, FitResult)``: `select` runs it on the first pool slot that the screen leaves idle, and keeps the
+    refit when the choice among all the candidates is the same (the same fit from the same start), else refits its
+    choice as before (the guess then cost only that slot's time, and the wait for it)."""
+    try:
+        _, usable = _scored(rows, "heldout", [])
+    except ValueError:
+        return None
+    _, _, leader = _choose_by_heldout(usable, margin, plausible, screened, {}, [])
+    return leader["spec"], fit(measurements, leader["spec"], init=screened[leader["spec"]].model, **options)
+
+
 def _full_fit_fields(result: FitResult, *, train_error: bool = True) -> dict:
     """A row's entries that a fit to all the data determines (``train_error=False`` keeps the row's training
     error, that of the fit its held-out error comes from)."""
@@ -777,16 +822,23 @@ def _fitted_rows(candidates, measurements, fold_rows, options, done, bar):
     return rows
 
 
-def _screened_rows(candidates, measurements, screen_data, seen, held, options, done, bar):
+def _screened_rows(candidates, measurements, screen_data, seen, held, options, done, bar, when_idle=None):
     """The table of a screened selection: every candidate fitted to ``screen_data`` (training rows only: a
     subsample, or all the data with the held-out rows masked) and scored on all the data at that fit.
 
     A row's ``train_error`` and ``heldout_error`` are its screening fit's error on the rows it was fitted to
     (``seen``) and on the held-out rows ``held``, which that fit never saw; ``aic``/``bic``/``status``/``samples``
     are those of the reported fit (``done[spec]``): the full-data fit where one is made later
-    (`_refit_contenders`, or the ``heldout`` criterion's choice), else the screening fit scored on all the data."""
+    (`_refit_contenders`, or the ``heldout`` criterion's choice), else the screening fit scored on all the data.
+
+    Arguments:
+        when_idle: ``when_idle(rows, results)`` of the candidates screened by the time a pool slot falls idle
+            (`_each_candidate`): their rows (without ``cost_ns``) and screening fits.
+
+    Returns:
+        ``(rows, screened)``: the table and the screening fits by spec; with ``when_idle``, also its return.
+    """
     screened: dict[str, FitResult] = {}
-    rows = []
     n_values = int(np.isfinite(measurements.values).sum())
     training = int(np.any(np.isfinite(screen_data.values), axis=1).sum())
     # The screen is the coarse stage of a two-stage fit (`brdffit.fitting.api`), with its tolerances and solver: it
@@ -801,17 +853,24 @@ def _screened_rows(candidates, measurements, screen_data, seen, held, options, d
         result = fit(screen_data, spec, init=init, **loose)
         return (result,) + _loss_residuals(result, measurements)
 
-    for spec, (result, r, evaluation) in zip(candidates, _each_candidate(
-            candidates, work, bar, lambda spec: f"screening {spec} on {training} samples")):
+    def row(spec, result, r):
+        aic, bic = information_criteria(result.loss, float(np.nansum(r ** 2)), n_values, result.n_params)
+        return {"spec": spec, "n_params": result.n_params, "train_error": _rms(r[seen]),
+                "heldout_error": _rms(r[held]), "heldout_se": math.nan, "aic": aic, "bic": bic,
+                "status": result.status, "samples": result.n_samples}
+
+    def idle(finished):
+        return when_idle([row(spec, result, r) for spec, (result, r, _) in finished.items()],
+                         {spec: output[0] for spec, output in finished.items()})
+
+    outputs = _each_candidate(candidates, work, bar, lambda spec: f"screening {spec} on {training} samples",
+                              when_idle=None if when_idle is None else idle)
+    outputs, guess = outputs if when_idle is not None else (outputs, None)
+    rows = []
+    for spec, (result, r, evaluation) in zip(candidates, outputs):
         screened[spec] = done[spec] = result
-        cost_ns = _cost_ns(evaluation)
-        cost = float(np.nansum(r ** 2))
-        aic, bic = information_criteria(result.loss, cost, n_values, result.n_params)
-        rows.append({"spec": spec, "n_params": result.n_params, "train_error": _rms(r[seen]),
-                     "heldout_error": _rms(r[held]), "heldout_se": math.nan, "aic": aic,
-                     "bic": bic, "cost_ns": cost_ns, "status": result.status,
-                     "samples": result.n_samples})
-    return rows, screened
+        rows.append(dict(row(spec, result, r), cost_ns=_cost_ns(evaluation)))
+    return (rows, screened) if when_idle is None else (rows, screened, guess)
 
 
 def _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar, excluded=()):

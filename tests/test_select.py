@@ -1,6 +1,7 @@
 """Model selection with synthetic truth: the right model, the right number of lobes, simpler models under more
 noise, and a scene-aware choice that flips with what the scene sees."""
 
+import importlib
 from pathlib import Path
 
 import numpy as np
@@ -295,6 +296,39 @@ def test_heldout_chooses_the_truth_and_the_verdict_compares_with_lambert():
     assert f"= {rows['lambert+ggx']['heldout_error'] / scale:.1%} of the reflected radiance" in verdict, verdict
     assert rows["lambert+ggx"]["heldout_error"] / scale < 0.03  # 1% relative noise on a well-specified model
     assert selection.plausible and "verdict:" not in selection.summary()  # the verdict is printed once, before it
+
+
+def test_the_refit_begun_on_a_guess_is_the_refit_of_the_choice(monkeypatch):
+    """The ``heldout`` choice's refit begins on an idle pool slot with the candidates screened by then
+    (`_refit_leader`): a right guess is kept, a wrong one is refitted, and either way the chosen fit is the one that
+    the full data give from the choice's screening fit, to the last bit."""
+    selecting = importlib.import_module("brdffit.select")  # the module (brdffit.select is the function)
+
+    truth = models.get("lambert+ggx", rho_d=[0.3, 0.2, 0.1], ks=[0.5, 0.5, 0.5], alpha=0.2, f0=0.04)
+    data = _without_sigma(synth.generate(truth, pattern="uniform", n=1200, noise="relative:0.01", seed=4))
+    candidates = ["lambert", "lambert+ggx", "lambert+blinn-phong"]
+    guesses = []
+    leader = selecting._refit_leader
+
+    def kept(rows, screened, **options):
+        guesses.append((sorted(r["spec"] for r in rows), leader(rows, screened, **options)))
+        return guesses[-1][1]
+
+    monkeypatch.setattr(selecting, "_refit_leader", kept)
+    right = select(data, candidates)
+    (seen, (spec, refit)), = guesses
+    assert seen and set(seen) <= set(candidates)  # at least one chain had ended, maybe not all
+    assert right.chosen == "lambert+ggx"
+    if spec == right.chosen:
+        assert right.results[spec] is refit
+    alone = select(data, ["lambert+ggx"])  # one chain: the guess waits for it, sees every candidate and is right
+    assert guesses[-1][0] == ["lambert+ggx"] and alone.results["lambert+ggx"] is guesses[-1][1][1]
+    monkeypatch.setattr(selecting, "_refit_leader",
+                        lambda rows, screened, **options: ("lambert", leader(rows, screened, **options)[1]))
+    wrong = select(data, candidates)
+    assert wrong.chosen == right.chosen
+    for name, value in right.results[right.chosen].params.items():
+        np.testing.assert_array_equal(wrong.results[wrong.chosen].params[name], value)
 
 
 def test_heldout_prefers_a_plausible_candidate_within_the_margin():
