@@ -102,14 +102,15 @@ def jitted(fn):
 
 
 def padded_columns(fn, *columns, chunk: int = COLUMN_CHUNK, least: int = 256) -> tuple:
-    """``fn(*columns)`` on 1-d columns of one length, called on lengths padded with zeros to a power of two (at
-    least ``least``) and in pieces of at most ``chunk`` samples, so that a compiled ``fn`` serves every length with a
-    few compilations (called per length, or eagerly, it compiled anew for each file: seconds each); with ``least``
-    equal to ``chunk``, with one.
+    """``fn(*columns)`` on columns of one length (along their first axis), called on lengths padded with zeros to a
+    power of two (at least ``least``) and in pieces of at most ``chunk`` samples, so that a compiled ``fn`` serves
+    every length with a few compilations (called per length, or eagerly, it compiled anew for each file: seconds
+    each); with ``least`` equal to ``chunk``, with one.
 
     Arguments:
         fn: a compiled (jitted) function of the columns, returning an array or a tuple of arrays of their length.
-        columns: 1-d arrays of one length (converted to float64).
+        columns: arrays of one length along their first axis (1-d, or rows such as ``(N, 3)`` vectors), converted to
+            float64.
         chunk: the most samples of one call (a power of two).
         least: the fewest samples of one call (a power of two, at most ``chunk``).
 
@@ -123,6 +124,6 @@ def padded_columns(fn, *columns, chunk: int = COLUMN_CHUNK, least: int = 256) ->
         part = [c[start:start + chunk] for c in columns]
         size = part[0].shape[0]
         padded = max(least, 1 << max(size - 1, 0).bit_length())
-        out = fn(*(np.pad(c, (0, padded - size)) for c in part))
+        out = fn(*(np.pad(c, [(0, padded - size)] + [(0, 0)] * (c.ndim - 1)) for c in part))
         pieces.append([np.asarray(o, dtype=np.float64)[:size] for o in (out if isinstance(out, tuple) else (out,))])
     return tuple(np.concatenate(column, axis=0) for column in zip(*pieces))

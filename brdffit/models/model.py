@@ -117,10 +117,9 @@ EVALUATION_ROWS = 1 << 14
 
 
 @Program
-def _evaluate_rows(model: Model, xi, yi, zi, xo, yo, zo):
-    """f_r of ``model`` at the pairs of unit vectors whose components are the 1-d columns ``xi, ..., zo``: ``(N,
-    channels)``."""
-    return evaluate_pair(model, LocalPair.from_dirs(jnp.stack([xi, yi, zi], axis=-1), jnp.stack([xo, yo, zo], axis=-1)))
+def _evaluate_rows(model: Model, wi, wo):
+    """f_r of ``model`` at the pairs of unit vectors ``wi``, ``wo`` ``(N, 3)``: ``(N, channels)``."""
+    return evaluate_pair(model, LocalPair.from_dirs(wi, wo))
 
 
 def evaluate_dirs(model: Model, wi, wo):
@@ -138,10 +137,9 @@ def evaluate_dirs(model: Model, wi, wo):
     if traced((model, wi, wo)):
         return evaluate_pair(model, LocalPair.from_dirs(wi, wo))
     wi, wo = np.broadcast_arrays(np.asarray(wi, dtype=float), np.asarray(wo, dtype=float))
-    shape = wi.shape[:-1]
-    columns = [w.reshape(-1, 3)[:, k] for w in (wi, wo) for k in range(3)]
-    (f,) = padded_columns(lambda *c: _evaluate_rows(model, *c), *columns, chunk=EVALUATION_ROWS, least=EVALUATION_ROWS)
-    return f.reshape(shape + (model.channels,))
+    (f,) = padded_columns(lambda *rows: _evaluate_rows(model, *rows), wi.reshape(-1, 3), wo.reshape(-1, 3),
+                          chunk=EVALUATION_ROWS, least=EVALUATION_ROWS)
+    return f.reshape(wi.shape[:-1] + (model.channels,))
 
 
 def evaluate_pair(model: Model, pair: LocalPair):
