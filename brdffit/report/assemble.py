@@ -14,6 +14,7 @@ import math
 import os
 import platform
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -433,6 +434,12 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     channels = measurements.channels
+    # The albedo curve's quadrature (compiled, and run by XLA outside Python's lock) in a thread of its own while the
+    # figures before it are drawn (matplotlib, in Python): with an empty cache its compilation was a sizeable share
+    # of a first report's time.
+    pool = ThreadPoolExecutor(max_workers=1)
+    curve = pool.submit(F.albedo_curve, fit_result)
+    pool.shutdown(wait=False)  # the curve is computed all the same; `curve.result()` waits for it
     jobs = [
         ("slices", lambda p: F.plot_slices(p, measurements, fit_result, posterior)),
         ("hemisphere", lambda p: F.plot_hemisphere(p, fit_result, channels=channels)),
@@ -441,9 +448,7 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
     if posterior is not None:
         jobs += [("corner", lambda p: F.plot_corner(p, posterior, fit_result)),
                  ("traces", lambda p: F.plot_traces(p, posterior, fit_result))]
-    albedo = F.albedo_curve(fit_result)
-    captions = _captions(posterior, float(np.nanmax(albedo)))
-    jobs += [("albedo", lambda p: F.plot_albedo(p, fit_result, channels=channels, albedo=albedo)),
+    jobs += [("albedo", lambda p: F.plot_albedo(p, fit_result, channels=channels, albedo=curve.result())),
              ("spheres", lambda p: F.plot_spheres(p, measurements, fit_result))]
     wavelengths = F.spectral_axis(measurements, fit_result.models[0].channels) \
         if fit_result.channel_mode != "independent" else None
@@ -455,12 +460,15 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
         errors = (rows[selection.chosen_by_criterion]["heldout_error"], rows[selection.chosen]["heldout_error"])
         jobs.append(("renderer", lambda p: F.plot_renderer_view(p, measurements, free, fit_result,
                                                                 selection.target, errors)))
-    figure_paths = []
+    drawn = []
     with F.drawing_style():
         for name, draw in jobs:
             path = out / f"{name}.png"
             draw(path)
-            figure_paths.append((str(path), captions[name]))
+            drawn.append((name, str(path)))
+    albedo = curve.result()
+    captions = _captions(posterior, float(np.nanmax(albedo)))
+    figure_paths = [(path, captions[name]) for name, path in drawn]
     exports = exports if exports is not None else ExportLog(None)
     problems = [exports.problem] if exports.problem else []
     blocks = _blocks(measurements, fit_result, posterior, selection, run_info, figure_paths,
