@@ -18,25 +18,15 @@ that the main thread runs and whatever runs beside it (a selection's candidates 
 called from another thread changes nothing; Dask's workers, where `brdffit.fit_many` runs its fits, start with one
 BLAS thread already (distributed's nanny sets ``OPENBLAS_NUM_THREADS=1``). The limit is process-wide, as BLAS
 threading is: a user's own NumPy work in another thread during a fit runs single-threaded too.
-
-A process that has not loaded NumPy yet can instead start every OpenBLAS it loads with one thread
-(`start_single_threaded`: ``OPENBLAS_NUM_THREADS=1``, which OpenBLAS reads when it loads, NumPy's and SciPy's
-alike); `one_blas_thread` then has nothing to limit. The ``brdffit`` command does so: its fits would otherwise
-load SciPy's BLAS and scan the process's libraries (threadpoolctl) before every fit, about 0.7 s of a warm default
-fit's wall time, and nothing else it runs needs more than one BLAS thread. Its child processes inherit the
-variable (Dask's workers set it anyway).
 """
 
 from __future__ import annotations
 
 import contextlib
-import os
-import sys
 import threading
 
-__all__ = ["one_blas_thread", "start_single_threaded"]
+__all__ = ["one_blas_thread"]
 
-_single_from_start = False  # `start_single_threaded` set the variable before any BLAS was loaded
 _depth = 0  # the main thread's entries running now
 _limits = None  # the threadpoolctl limiter of the outermost one, which restores the previous limits
 
@@ -47,8 +37,6 @@ class one_blas_thread(contextlib.ContextDecorator):
 
     def __enter__(self):
         global _depth, _limits
-        if _single_from_start:
-            return self
         if threading.current_thread() is threading.main_thread():
             if _depth == 0:
                 import scipy.linalg  # noqa: F401 - loads SciPy's own BLAS, so that the limit reaches it too
@@ -60,25 +48,9 @@ class one_blas_thread(contextlib.ContextDecorator):
 
     def __exit__(self, *exc):
         global _depth, _limits
-        if _single_from_start:
-            return False
         if threading.current_thread() is threading.main_thread():
             _depth -= 1
             if _depth == 0:
                 _limits.restore_original_limits()
                 _limits = None
         return False
-
-
-def start_single_threaded() -> bool:
-    """Start every OpenBLAS that this process loads with one thread (``OPENBLAS_NUM_THREADS=1``), where NumPy is not
-    loaded yet and the environment does not set the variable already (module doc).
-
-    Returns:
-        Whether it did: then `one_blas_thread` does nothing in this process.
-    """
-    global _single_from_start
-    if "numpy" not in sys.modules and "OPENBLAS_NUM_THREADS" not in os.environ:
-        os.environ["OPENBLAS_NUM_THREADS"] = "1"
-        _single_from_start = True
-    return _single_from_start

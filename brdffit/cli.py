@@ -1241,11 +1241,7 @@ def run() -> None:
     After a fit, finalisation frees the objects of JAX, XLA, SciPy and matplotlib one by one: about half a second
     of a warm default fit's wall time on the 2-core host (docs/benchmarks.md), spent after the last line is
     written. The exit handlers still run (`atexit`: logging, a Dask cluster's processes, JAX's backend) and the
-    standard streams are flushed; a process with a non-daemon thread still running exits the usual way. Its
-    BLAS libraries start with one thread (`brdffit.blas_threads.start_single_threaded`)."""
-    from .blas_threads import start_single_threaded
-
-    start_single_threaded()
+    standard streams are flushed; a process with a non-daemon thread still running exits the usual way."""
     code = main()
     if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
         sys.exit(code)

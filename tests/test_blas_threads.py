@@ -1,7 +1,6 @@
 """`brdffit.blas_threads.one_blas_thread`: one BLAS thread while a fitting entry point that the main thread called
 runs (a selection's candidate fits in their threads included), the previous limits restored after."""
 
-import os
 import threading
 
 import pytest
@@ -65,35 +64,3 @@ def test_fit_and_select_run_with_one_blas_thread_and_restore_it(two_threads, mon
     brdffit.select(m, candidates=["lambert", "lambert+ggx"])
     assert during and all(set(threads) == {1} for threads in during)
     assert set(_blas_threads()) == {2}
-
-
-def _blas_threads_in_a_new_process(code: str, **env) -> list:
-    """The thread counts of every BLAS loaded in a new Python process after ``code`` and NumPy and SciPy's linear
-    algebra are imported there."""
-    import json
-    import subprocess
-    import sys
-
-    environment = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
-    script = (code + "\nimport json, numpy, scipy.linalg\nfrom threadpoolctl import threadpool_info\n"
-              "print(json.dumps([i['num_threads'] for i in threadpool_info() if i['user_api'] == 'blas']))")
-    done = subprocess.run([sys.executable, "-c", script], env=dict(environment, **env), capture_output=True,
-                          text=True, timeout=120, check=True)
-    return json.loads(done.stdout.splitlines()[-1])
-
-
-def test_a_process_started_single_threaded_loads_every_blas_with_one_thread():
-    """`start_single_threaded` before NumPy is loaded: NumPy's and SciPy's OpenBLAS both start with one thread (the
-    ``brdffit`` command's processes), and `one_blas_thread` has nothing left to do; after NumPy is loaded, or where
-    the environment sets the variable, it leaves the process as it is."""
-    started = _blas_threads_in_a_new_process(
-        "from brdffit.blas_threads import start_single_threaded, one_blas_thread\n"
-        "assert start_single_threaded()\nwith one_blas_thread(): pass")
-    assert len(started) == 2 and set(started) == {1}, started
-    late = _blas_threads_in_a_new_process("import numpy\nfrom brdffit.blas_threads import start_single_threaded\n"
-                                          "assert not start_single_threaded()")
-    if (os.cpu_count() or 1) > 1:  # OpenBLAS's default: a thread per core
-        assert max(late) > 1, late
-    given = _blas_threads_in_a_new_process("from brdffit.blas_threads import start_single_threaded\n"
-                                           "assert not start_single_threaded()", OPENBLAS_NUM_THREADS="2")
-    assert set(given) == {2}, given
