@@ -773,13 +773,14 @@ def _refit_leader(rows, screened, *, measurements, margin, plausible, options):
     """The ``heldout`` choice among the candidates screened so far, refitted to all the data from its screening
     fit, as ``(spec, FitResult)``: `select` runs it on the first pool slot that the screen leaves idle, and keeps the
     refit when the choice among all the candidates is the same (the same fit from the same start), else refits its
-    choice as before (the guess then cost only that slot's time, and the wait for it)."""
+    choice as before (the guess then cost only that slot's time, and the wait for it). A guess that fails is no
+    guess (None): the refit of the final choice, made as before, raises what it raises."""
     try:
         _, usable = _scored(rows, "heldout", [])
-    except ValueError:
+        _, _, leader = _choose_by_heldout(usable, margin, plausible, screened, {}, [])
+        return leader["spec"], fit(measurements, leader["spec"], init=screened[leader["spec"]].model, **options)
+    except Exception:  # noqa: BLE001 - see the docstring
         return None
-    _, _, leader = _choose_by_heldout(usable, margin, plausible, screened, {}, [])
-    return leader["spec"], fit(measurements, leader["spec"], init=screened[leader["spec"]].model, **options)
 
 
 def _full_fit_fields(result: FitResult, *, train_error: bool = True) -> dict:

@@ -329,6 +329,11 @@ def test_the_refit_begun_on_a_guess_is_the_refit_of_the_choice(monkeypatch):
     assert wrong.chosen == right.chosen
     for name, value in right.results[right.chosen].params.items():
         np.testing.assert_array_equal(wrong.results[wrong.chosen].params[name], value)
+    # a guess whose refit fails is no guess (the final choice's refit, made as before, raises what it raises)
+    screened = right.results["lambert"]
+    rows = [{"spec": "lambert", "n_params": screened.n_params, "heldout_error": 1.0, "status": screened.status}]
+    assert leader(rows, {"lambert": screened}, measurements=data, margin=0.05, plausible=True,
+                  options={"loss": "no such loss"}) is None
 
 
 def test_heldout_prefers_a_plausible_candidate_within_the_margin():
