@@ -296,7 +296,8 @@ def _each_candidate(candidates, work, bar, message, when_idle=None):
             the candidate leading so far). Its return value is returned beside the outputs.
 
     Returns:
-        The ``work`` outputs in the order of ``candidates``; with ``when_idle``, the pair (those, its return).
+        ``(outputs, guess)``: the ``work`` outputs in the order of ``candidates``, and ``when_idle``'s return (None
+        without it).
     """
     chains: dict[str, list[str]] = {}  # the chain's first spec -> its specs in order
     head = {}
@@ -328,7 +329,7 @@ def _each_candidate(candidates, work, bar, message, when_idle=None):
         for i, spec in enumerate(candidates):
             bar.update(i, message(spec))
             out.append(futures[head[spec]].result()[spec])
-        return out if guess is None else (out, guess.result())
+        return out, (None if guess is None else guess.result())
 
 
 def _verdict(row: dict, chosen: dict, best: dict, threshold: float, criterion: str, usable: list,
@@ -491,17 +492,15 @@ def select(measurements, candidates=DEFAULT_CANDIDATES, criterion: str = "auto",
             screen_data = measurements.take(seen)
         else:  # all the training rows, the held-out ones masked: the refits reuse the screening's programs
             seen, screen_data = train_rows, _masked(measurements, fold_rows[0])
-        if criterion == "heldout":  # the choice's refit begins on the first idle pool slot (`_refit_leader`)
-            leader = functools.partial(_refit_leader, measurements=measurements, margin=margin, plausible=plausible,
-                                       options=options)
-            rows, screened, guess = _screened_rows(candidates, measurements, screen_data, seen, fold_rows[0],
-                                                   options, done, bar, when_idle=leader)
-        else:
-            rows, screened = _screened_rows(candidates, measurements, screen_data, seen, fold_rows[0], options,
-                                            done, bar)
+        # heldout: the choice's refit begins on the first idle pool slot (`_refit_leader`)
+        leader = functools.partial(_refit_leader, measurements=measurements, margin=margin, plausible=plausible,
+                                   options=options) if criterion == "heldout" else None
+        rows, screened, guess = _screened_rows(candidates, measurements, screen_data, seen, fold_rows[0], options,
+                                               done, bar, when_idle=leader)
+        if criterion != "heldout":
             _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar)
     else:
-        rows, screened = _fitted_rows(candidates, measurements, fold_rows, options, done, bar), None
+        rows, screened, guess = _fitted_rows(candidates, measurements, fold_rows, options, done, bar), None, None
     finite, usable = _scored(rows, criterion, warnings)
     implausible: dict[str, str] = {}
     if criterion == "heldout":
@@ -809,8 +808,8 @@ def _fitted_rows(candidates, measurements, fold_rows, options, done, bar):
         return result, errors, timed
 
     rows = []
-    for spec, (result, errors, timed) in zip(candidates, _each_candidate(candidates, work, bar,
-                                                                         lambda spec: f"fitting {spec}")):
+    outputs, _ = _each_candidate(candidates, work, bar, lambda spec: f"fitting {spec}")
+    for spec, (result, errors, timed) in zip(candidates, outputs):
         done[spec] = result
         rows.append({
             "spec": spec,
@@ -837,7 +836,8 @@ def _screened_rows(candidates, measurements, screen_data, seen, held, options, d
             (`_each_candidate`): their rows (without ``cost_ns``) and screening fits.
 
     Returns:
-        ``(rows, screened)``: the table and the screening fits by spec; with ``when_idle``, also its return.
+        ``(rows, screened, guess)``: the table, the screening fits by spec and ``when_idle``'s return (None without
+        it).
     """
     screened: dict[str, FitResult] = {}
     n_values = int(np.isfinite(measurements.values).sum())
@@ -864,14 +864,13 @@ def _screened_rows(candidates, measurements, screen_data, seen, held, options, d
         return when_idle([row(spec, result, r) for spec, (result, r, _) in finished.items()],
                          {spec: output[0] for spec, output in finished.items()})
 
-    outputs = _each_candidate(candidates, work, bar, lambda spec: f"screening {spec} on {training} samples",
-                              when_idle=None if when_idle is None else idle)
-    outputs, guess = outputs if when_idle is not None else (outputs, None)
+    outputs, guess = _each_candidate(candidates, work, bar, lambda spec: f"screening {spec} on {training} samples",
+                                     when_idle=None if when_idle is None else idle)
     rows = []
     for spec, (result, r, evaluation) in zip(candidates, outputs):
         screened[spec] = done[spec] = result
         rows.append(dict(row(spec, result, r), cost_ns=_cost_ns(evaluation)))
-    return (rows, screened) if when_idle is None else (rows, screened, guess)
+    return rows, screened, guess
 
 
 def _refit_contenders(rows, measurements, screened, criterion, margin, options, done, bar, excluded=()):
