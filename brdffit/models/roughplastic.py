@@ -41,6 +41,7 @@ import math
 from .._lazy import module
 from ..geometry import LocalPair, safe_sqrt
 from ..params import ParamSpec
+from . import cubic
 from .cook_torrance import CookTorrance
 from .fresnel import dielectric
 from .lobe import Lobe
@@ -223,22 +224,6 @@ def _table():
         return data["sqrt_alpha"], data["sqrt_eta_minus_1"], data["values"]
 
 
-def _cubic_weights(t):
-    """Keys' cubic convolution weights (a = −1/2: Catmull-Rom) of the four nodes around a point at fraction t of
-    its cell (Keys, Cubic convolution interpolation for digital image processing, IEEE TASSP 1981, Eq. 15): a C¹
-    interpolant exact for quadratics."""
-    t2, t3 = t * t, t * t * t
-    return (-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0, -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2)
-
-
-def _cell(nodes, x, xp):
-    """(index of the first of the four nodes, fraction of the cell) of x on a uniform axis, neighbours clamped."""
-    step = (nodes[-1] - nodes[0]) / (len(nodes) - 1)
-    c = xp.clip((x - nodes[0]) / step, 0.0, len(nodes) - 1.0)
-    i = xp.minimum(xp.floor(c), len(nodes) - 2)
-    return i.astype("int32"), c - i
-
-
 def internal_reflectance_table(alpha, eta, xp=None):
     """R_smooth(α, η) (`smooth_internal_reflectance`) read from its table by cubic convolution in √α and √(η − 1)
     (R_smooth rises from 0 at η = 1 like (η − 1)^(3/2)); within `TABLE_TOLERANCE` of it over the declared ranges
@@ -254,13 +239,13 @@ def internal_reflectance_table(alpha, eta, xp=None):
     xp = jnp if xp is None else xp
     sqrt_alpha, sqrt_eta, values = _table()
     values = xp.asarray(values)
-    i, s = _cell(sqrt_alpha, xp.sqrt(alpha), xp)
-    j, t = _cell(sqrt_eta, xp.sqrt(xp.maximum(eta - 1.0, 0.0)), xp)
+    i, s = cubic.cell(sqrt_alpha, xp.sqrt(alpha), xp)
+    j, t = cubic.cell(sqrt_eta, xp.sqrt(xp.maximum(eta - 1.0, 0.0)), xp)
     rows = [xp.clip(i + k, 0, len(sqrt_alpha) - 1) for k in (-1, 0, 1, 2)]
     cols = [xp.clip(j + k, 0, len(sqrt_eta) - 1) for k in (-1, 0, 1, 2)]
     value = 0.0
-    for wa, row in zip(_cubic_weights(s), rows):
-        for we, col in zip(_cubic_weights(t), cols):
+    for wa, row in zip(cubic.weights(s), rows):
+        for we, col in zip(cubic.weights(t), cols):
             value = value + wa * we * values[row, col]
     return value
 
