@@ -48,6 +48,9 @@ __all__ = [
     "pbrt",
     "roughplastic",
     "mitsuba_rough_transmittance",
+    "coateddiffuse",
+    "coated_transmission",
+    "coated_internal_reflectance",
     "sheen",
     "charlie_sheen",
     "charlie_lambda",
@@ -1249,6 +1252,116 @@ def roughplastic(theta_i, phi_i, theta_o, phi_o, diffuse_reflectance, specular_r
     return _masked(pair, specular + _col(diffuse_reflectance) * diffuse)
 
 
+# pbrt-v4's coateddiffuse: the expectation of LayeredBxDF<DielectricBxDF, DiffuseBxDF, true>::f by the quadrature
+# brdffit's lobe uses (tests/test_coateddiffuse.py holds that quadrature to a finer one and to pbrt-v4's walk).
+_COATED_THICKNESS = 0.01
+
+
+def _coated_rule(alpha, n=32):
+    """Microfacet normals over GGX's D cosθm dm = dξ dφ/(2π) (tan²θm = α² ξ/(1 − ξ), ξ = 1 − s²): Gauss-Legendre
+    in s on [0, 1], midpoints in φ on [0, π] (the integrands are even in φ); as angles (θm, φm) and weights."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    s, ws = (x + 1.0) / 2.0, w / 2.0
+    theta = np.arctan(alpha * np.sqrt(1.0 - s * s) / s)
+    phi = (np.arange(n) + 0.5) * np.pi / n
+    theta, phi = np.meshgrid(theta, phi, indexing="ij")
+    weight = np.outer(2.0 * s * ws, np.full(n, 1.0 / n))
+    return theta.ravel(), phi.ravel(), weight.ravel()
+
+
+def _trowbridge_reitz_lambda(cos_theta, alpha):
+    return (np.sqrt(1.0 + alpha * alpha * np.tan(np.arccos(cos_theta)) ** 2) - 1.0) / 2.0
+
+
+@_quiet
+def coated_transmission(mu, alpha, eta):
+    """X(μ) and Y(μ) of pbrt-v4's coateddiffuse (brdffit.models.coateddiffuse's module doc) at cosines ``mu``: the
+    transmission through the rough dielectric (Walter et al. 2007's f_T in importance mode; pbrt-v4's
+    ``DielectricBxDF``), ∫ T G(ω, ω') |ω·m| / (|cos ω| cos θm) Tr(ω') over the normals of `_coated_rule`, with
+    ω' refracted by Snell's law and Tr = exp(−0.01/|cos ω'|); Y weighted by pbrt's power heuristics
+    ph(p(ω → ω'), |cos ω'|/π) + ph(|cos ω'|/π, p(ω' → ω)), p the transmission sampling density
+    G1 D |ω·m| / |cos ω| · |ω'·m| / (ω'·m + ω·m/η)² (and its mirror from ω')."""
+    theta_m, phi_m, weight = _coated_rule(alpha)
+    m = np.stack([np.sin(theta_m) * np.cos(phi_m), np.sin(theta_m) * np.sin(phi_m), np.cos(theta_m)], axis=-1)
+    d = 1.0 / (np.pi * alpha**2 * np.cos(theta_m) ** 4 * (1.0 + np.tan(theta_m) ** 2 / alpha**2) ** 2)
+    xs, ys = [], []
+    for mu_ in np.atleast_1d(mu):
+        w = np.array([np.sqrt(1.0 - mu_ * mu_), 0.0, mu_])
+        c = m @ w
+        theta_c = np.arccos(np.clip(c, -1.0, 1.0))
+        cos_t = np.cos(np.arcsin(np.sin(theta_c) / eta))
+        wt = -w / eta + (c / eta - cos_t)[:, None] * m
+        ok = (c > 0.0) & (wt[:, 2] < 0.0)
+        t = 1.0 - fresnel_dielectric(theta_c, 1.0, eta)
+        zt = np.abs(wt[:, 2])
+        lam_i, lam_t = _trowbridge_reitz_lambda(mu_, alpha), _trowbridge_reitz_lambda(zt, alpha)
+        value = np.where(ok, t * c / (mu_ * np.cos(theta_m) * (1.0 + lam_i + lam_t)) * np.exp(-_COATED_THICKNESS / zt),
+                         0.0)
+        wt_m = np.abs(np.sum(wt * m, axis=1))
+        p_in = d * c / (mu_ * (1.0 + lam_i)) * wt_m / (c / eta - wt_m) ** 2
+        p_out = d * wt_m / (zt * (1.0 + lam_t)) * c / (c - eta * wt_m) ** 2
+        base = zt / np.pi
+
+        def ph(a, b):
+            return np.where(a * a + b * b > 0.0, a * a / (a * a + b * b), 0.0)
+
+        xs.append(np.sum(weight * value))
+        ys.append(np.sum(weight * value * (ph(p_in, base) + ph(base, p_out))))
+    return np.array(xs), np.array(ys)
+
+
+@_quiet
+def coated_internal_reflectance(alpha, eta, nodes=24):
+    """R of pbrt-v4's coateddiffuse: ∫₀¹ 2μ Tr(μ) Z(μ) dμ, Z(μ) = ∫ F(ω·m; 1/η) G(ω, ω3) |ω·m| / (μ cosθm) Tr(ω3)
+    over the normals of `_coated_rule` (ω3 the mirror of ω about m, F = 1 beyond the critical angle), by
+    Gauss-Legendre on [0, μc] and [μc, 1], μc = √(1 − 1/η²)."""
+    theta_m, phi_m, weight = _coated_rule(alpha)
+    m = np.stack([np.sin(theta_m) * np.cos(phi_m), np.sin(theta_m) * np.sin(phi_m), np.cos(theta_m)], axis=-1)
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    x, w = (x + 1.0) / 2.0, w / 2.0
+    critical = math.sqrt(1.0 - 1.0 / eta**2)
+    total = 0.0
+    for lo, hi in ((0.0, critical), (critical, 1.0)):
+        for mu_, wm in zip(lo + (hi - lo) * x, (hi - lo) * w):
+            v = np.array([np.sqrt(1.0 - mu_ * mu_), 0.0, mu_])
+            c = m @ v
+            r = 2.0 * c[:, None] * m - v
+            ok = (c > 0.0) & (r[:, 2] > 0.0)
+            g = 1.0 / (1.0 + _trowbridge_reitz_lambda(mu_, alpha) + _trowbridge_reitz_lambda(r[:, 2], alpha))
+            f = fresnel_dielectric(np.arccos(np.clip(c, -1.0, 1.0)), eta, 1.0)
+            z = np.sum(weight * np.where(ok, f * g * c / (mu_ * np.cos(theta_m)) * np.exp(-_COATED_THICKNESS / r[:, 2]),
+                                         0.0))
+            total += wm * 2.0 * mu_ * math.exp(-_COATED_THICKNESS / mu_) * z
+    return total
+
+
+def _keys_cubic_1d(values, x):
+    """Keys 1981 cubic convolution of ``values`` at uniform nodes j/(n − 1) on [0, 1], at each x (`_keys_cubic`'s
+    kernel, neighbours clamped)."""
+    n = len(values)
+    out = []
+    for t in np.atleast_1d(x):
+        out.append(_keys_cubic(np.linspace(0.0, 1.0, n), np.array([0.0, 1.0]), np.stack([values, values], axis=1), t, 0.0))
+    return np.array(out)
+
+
+@_quiet
+def coateddiffuse(theta_i, phi_i, theta_o, phi_o, reflectance, roughness, eta):
+    """pbrt-v4's ``coateddiffuse`` (roughness α, remaproughness false; thickness 0.01, albedo 0, maxdepth 10): the
+    interface's reflection (``DielectricBxDF::f``: the pbrt reference's conductor term with k = 0) plus
+    (ρ/π) X(cosθo) Y(cosθi)/η² Σ_{k<5} (ρR)^k, X and Y computed at max(1e-6, j/63) (`coated_transmission`) and
+    read by Keys' cubic convolution, R `coated_internal_reflectance`."""
+    pair = Pair(theta_i, phi_i, theta_o, phi_o)
+    rho = _col(reflectance)
+    reflection = pbrt(theta_i, phi_i, theta_o, phi_o, 0.0, 1.0, roughness, eta, 0.0)
+    x, y = coated_transmission(np.maximum(1e-6, np.linspace(0.0, 1.0, 64)), roughness, eta)
+    co, ci = (np.where(pair.above, c, 0.0) for c in (pair.co, pair.ci))  # below the horizon: masked anyway
+    through = _keys_cubic_1d(x, co) * _keys_cubic_1d(y, ci) / eta**2
+    r = coated_internal_reflectance(roughness, eta)
+    series = sum((rho * r) ** k for k in range(5))
+    return _masked(pair, reflection + rho / np.pi * series * through[:, None])
+
+
 REFERENCES = {
     "lambert": lambda ti, pi_, to, po, p: lambert(ti, pi_, to, po, p["rho_d"]),
     "oren-nayar": lambda ti, pi_, to, po, p: oren_nayar(ti, pi_, to, po, p["rho_d"], p["sigma"]),
@@ -1272,6 +1385,7 @@ REFERENCES = {
     "openpbr": lambda ti, pi_, to, po, p, coat=False, fuzz=False: openpbr(ti, pi_, to, po, **p),
     "pbrt": lambda ti, pi_, to, po, p: pbrt(ti, pi_, to, po, **p),
     "roughplastic": lambda ti, pi_, to, po, p: roughplastic(ti, pi_, to, po, **p),
+    "coateddiffuse": lambda ti, pi_, to, po, p: coateddiffuse(ti, pi_, to, po, **p),
     "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),
     "abc-microfacet": lambda ti, pi_, to, po, p: abc_microfacet(ti, pi_, to, po, **p),
     "sgd": lambda ti, pi_, to, po, p: sgd(ti, pi_, to, po, **p),

@@ -141,6 +141,7 @@ OTHER_CASES = [
                       "clearcoat_roughness": 0.25, "sheen_color": [0.6, 0.3, 0.45], "sheen_roughness": 0.4}),
     Case("pbrt", {}, {"reflectance": [0.7, 0.4, 0.15], "amount": 0.35, "roughness": 0.3, "eta": [0.2, 0.9, 1.45],
                       "k": [3.2, 0.6, 0.001]}),
+    Case("coateddiffuse", {}, {"reflectance": [0.7, 0.4, 0.15], "roughness": 0.3, "eta": 1.7}),
     Case("roughplastic", {}, {"diffuse_reflectance": [0.7, 0.4, 0.15], "specular_reflectance": [0.9, 0.8, 0.95],
                               "alpha": 0.3, "int_ior": 1.7}),
     Case("ashikhmin-shirley", {}, {"rs": RS, "n": 35.0}),
@@ -196,7 +197,7 @@ def _values(case_id):
 # The lobes and options of the modern microfacet, Burley and sheen models: against the reference at random
 # directions above the horizon to 1e-12 relative (the fixed configurations above hold every lobe to 1e-10).
 MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "gltf", "blender",
-                                                  "openpbr", "pbrt", "roughplastic", "abc-smooth", "abc-microfacet",
+                                                  "openpbr", "pbrt", "coateddiffuse", "roughplastic", "abc-smooth", "abc-microfacet",
                                                   "sgd")
           or case.options.get("distribution") in ("std", "gtr")
           or case.options.get("anisotropic") is True and case.spec != "lafortune"
@@ -622,10 +623,10 @@ def test_cli_models_lists_every_lobe_with_its_parameters(capsys):
 
 def test_reciprocal_flags():
     """Every lobe but toon-diffuse, blender (Cycles' diffuse weight depends on the view alone), openpbr
-    (MaterialX's layer weight does) and gltf (the clearcoat's Fresnel weight does) is reciprocal by construction,
-    and the flag says so."""
+    (MaterialX's layer weight does), gltf (the clearcoat's Fresnel weight does) and coateddiffuse (pbrt-v4's walk
+    weights its two ends differently) is reciprocal by construction, and the flag says so."""
     flags = {name: models.lobe_class(name).reciprocal for name in models.names()}
-    assert [flags.pop(name) for name in ("toon-diffuse", "blender", "openpbr", "gltf")] == [False] * 4
+    assert [flags.pop(name) for name in ("toon-diffuse", "blender", "openpbr", "gltf", "coateddiffuse")] == [False] * 5
     assert all(flags.values())
     assert not models.get("lambert+toon-diffuse").reciprocal
     assert models.get("lambert+toon-specular").reciprocal

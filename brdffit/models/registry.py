@@ -12,6 +12,7 @@ import re
 from .._lazy import module
 from .abc import ABCMicrofacet, ABCSmooth
 from .ashikhmin_shirley import AshikhminShirley, AshikhminShirleyAniso
+from .coateddiffuse import CoatedDiffuse
 from .cook_torrance import GGX, CookTorrance
 from .blender import BlenderPrincipled
 from .diffuse import Burley, Lambert, OrenNayar
@@ -61,6 +62,7 @@ _LOBES: dict[str, type[Lobe]] = {
         BlenderPrincipled,
         OpenPBR,
         PbrtMaterial,
+        CoatedDiffuse,
         RoughPlastic,
         ToonDiffuse,
         ToonSpecular,
