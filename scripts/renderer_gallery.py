@@ -96,12 +96,20 @@ def _loads(text: str, target: str, model=None) -> str:
         return "ok" if not unbounded else "ok (η and k unbounded: indices)"
     if target == "pbrt":
         # No pbrt-v4 binary installs here: the statements are read back and held to what pbrt-v4's scene parser
-        # and materials take (paramdict.cpp: an RGB albedo in [0, 1], no negative RGB; FrComplex needs η > 0).
+        # and materials take (paramdict.cpp: an RGB albedo in [0, 1], no negative RGB; FrComplex needs η > 0; a
+        # coated interface's η above 1, its slab's albedo in [0, 1]).
         from brdffit.export.pbrt_reference import parse
 
+        def out_of_range(kind: str, key: str, value) -> bool:
+            v = np.atleast_1d(np.asarray(value, dtype=float))
+            if key in ("reflectance", "albedo"):
+                return not np.all((v >= 0.0) & (v <= 1.0))
+            if key == "eta":
+                return not np.all(v > (1.0 if kind == "coateddiffuse" else 0.0))
+            return key in ("k", "roughness", "thickness") and not np.all(v >= 0.0)
+
         bad = [f"{name}: {key} {value}" for name, material in parse(text).items() for key, value in material.items()
-               if (key == "reflectance" and not all(0.0 <= v <= 1.0 for v in value))
-               or (key in ("eta", "k") and not all(v >= 0.0 for v in value)) or (key == "eta" and min(value) <= 0.0)]
+               if key not in ("type", "materials", "remaproughness") and out_of_range(material["type"], key, value)]
         return "read back, in pbrt-v4's ranges (no pbrt-v4 binary)" if not bad else "out of range: " + "; ".join(bad)
     return "not checked"
 

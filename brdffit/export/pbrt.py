@@ -19,7 +19,11 @@ Schlick Fresnel), and the export states the deviation measured with those formul
 brdffit's ``pbrt`` model (`brdffit.models.pbrt`) is such a mix of one ``diffuse`` and one ``conductor`` as pbrt-v4
 evaluates it, with every parameter in the range pbrt-v4 takes: a model that is that lobe alone is written as it is
 (the diffuse ``reflectance`` R, the conductor's ``eta``, ``k`` and ``roughness``, the mix ``amount`` t; numbers to
-round-trip precision), exact and with nothing clamped; it is what ``brdffit fit --for pbrt`` fits.
+round-trip precision), exact and with nothing clamped. So is brdffit's ``coateddiffuse`` model
+(`brdffit.models.coateddiffuse`), pbrt-v4's ``coateddiffuse`` material as the expectation of its random walk:
+written with its ``reflectance``, ``roughness`` (``remaproughness`` false) and ``eta``, and the slab's parameters
+the model assumes (``thickness`` 0.01, ``albedo`` 0, ``g`` 0, ``maxdepth`` 10, ``nsamples`` 1) stated rather than
+left to pbrt's defaults. Those two are what ``brdffit fit --for pbrt`` fits.
 """
 
 from __future__ import annotations
@@ -35,9 +39,7 @@ from .terms import check_channels
 __all__ = ["write", "EXPORTABLE"]
 
 EXPORTABLE = ("lambert (any number, summed) and isotropic cook-torrance or ggx lobes with any Fresnel mode, summed; "
-              "or the pbrt model alone")
-# The brdffit model that is pbrt-v4's mix of a diffuse and a conductor (`brdffit.models.pbrt`).
-FAMILY = "pbrt"
+              "or the pbrt or the coateddiffuse model alone")
 # With a diffuse part beside the conductors, the conductors' weights sum to at most 1 minus this.
 _MIN_DIFFUSE_WEIGHT = 1e-3
 
@@ -131,6 +133,8 @@ def _statement(name: str, kind: str, params: list, number=tm.number) -> list[str
             text = number(value)
         elif tag == "string":
             text = " ".join(f'"{v}"' for v in value)
+        elif tag == "integer":
+            text = str(int(value))
         else:
             text = "true" if value else "false"
         lines.append(f'    "{tag} {key}" [ {text} ]')
@@ -176,10 +180,11 @@ _BOUNDS = {"weight": (1e-6, 1.0), "reflectance": (0.0, 1.0), "eta": (1e-3, 10.0)
 
 
 def _peaks(parts: list[_Part]) -> list:
-    """The peaks of the written conductors (Trowbridge-Reitz of width α = roughness, remaproughness false)."""
+    """The peaks of the written conductors and coated interfaces (Trowbridge-Reitz of width α = roughness,
+    remaproughness false)."""
     return [tm.Peak("half", float(np.clip(dict((key, value) for _, key, value in part.params)["roughness"], 1e-4,
-                                          1.0)), lobe="pbrt conductor")
-            for part in parts if part.kind == "conductor"]
+                                          1.0)), lobe=f"pbrt {part.kind}")
+            for part in parts if part.kind in ("conductor", "coateddiffuse")]
 
 
 def _refine(parts: list[_Part], source, model, name: str) -> list[_Part]:
@@ -234,20 +239,40 @@ def _round_trip(value) -> str:
     return repr(float(value))
 
 
-def _own_model(model, name: str):
-    """The statements of brdffit's ``pbrt`` model (a diffuse, a conductor and their mix with amount t), as parts
-    and text; every value as it is, so that the text reads back to the model's own parameters."""
-    v = {key: np.asarray(value, dtype=float) for key, value in model.layout.local_params(model.params, 0).items()}
+def _mix_parts(v: dict) -> list[_Part]:
+    """brdffit's ``pbrt`` model as pbrt-v4 materials: a diffuse, a conductor and their mix with amount t."""
     t = float(v["amount"])
-    parts = [_Part("diffuse", [("rgb", "reflectance", v["reflectance"])], 1.0 - t),
-             _Part("conductor", [("rgb", "eta", v["eta"]), ("rgb", "k", v["k"]),
-                                 ("float", "roughness", float(v["roughness"])), ("bool", "remaproughness", False)], t)]
+    return [_Part("diffuse", [("rgb", "reflectance", v["reflectance"])], 1.0 - t),
+            _Part("conductor", [("rgb", "eta", v["eta"]), ("rgb", "k", v["k"]),
+                                ("float", "roughness", float(v["roughness"])), ("bool", "remaproughness", False)], t)]
+
+
+def _coated_diffuse_parts(v: dict) -> list[_Part]:
+    """brdffit's ``coateddiffuse`` model as pbrt-v4's ``coateddiffuse``, the slab's parameters stated."""
+    from ..models import coateddiffuse as cd
+
+    return [_Part("coateddiffuse", [("rgb", "reflectance", v["reflectance"]),
+                                    ("float", "roughness", float(v["roughness"])), ("bool", "remaproughness", False),
+                                    ("float", "eta", float(v["eta"])), ("float", "thickness", cd.THICKNESS),
+                                    ("rgb", "albedo", np.zeros(3)), ("float", "g", 0.0),
+                                    ("integer", "maxdepth", cd.MAX_DEPTH), ("integer", "nsamples", 1)], 1.0)]
+
+
+# The brdffit models that are pbrt-v4 materials as they stand, and their materials.
+_OWN = {"pbrt": _mix_parts, "coateddiffuse": _coated_diffuse_parts}
+
+
+def _own_model(model, name: str):
+    """The statements of a model of `_OWN`, as parts and text; every value as it is, so that the text reads back
+    to the model's own parameters."""
+    v = {key: np.asarray(value, dtype=float) for key, value in model.layout.local_params(model.params, 0).items()}
+    parts = _OWN[model.lobes[0].name](v)
     return parts, "\n".join(_statements(parts, name, _round_trip)) + "\n"
 
 
 def _write_own(model, name: str, header: list[str], source=None):
-    """`write` for brdffit's ``pbrt`` model alone: written as it is, no approximation; the deviation (from
-    ``source`` under the fit option, else from the model) measured with pbrt-v4's formulas on the text."""
+    """`write` for a model of `_OWN` alone: written as it is, no approximation; the deviation (from ``source``
+    under the fit option, else from the model) measured with pbrt-v4's formulas on the text."""
     parts, body = _own_model(model, name)
     materials = pbrt_reference.parse(body)
 
@@ -272,7 +297,7 @@ def write(model, name: str, header: list[str], source=None):
         header: comment lines that open the text.
         source: for the fit option, the model that pbrt-v4's parameters of the mapping of ``model`` are then
             refined against (`_refine`) and the deviation measured against; None writes the mapping. brdffit's
-            ``pbrt`` model alone is written as it is (`_write_own`), not refined.
+            ``pbrt`` and ``coateddiffuse`` models alone are written as they are (`_write_own`), not refined.
 
     Returns:
         (text, a function (wi, wo) -> f_r of the written material by pbrt-v4's formulas, notes, `Deviation` from
@@ -284,7 +309,7 @@ def write(model, name: str, header: list[str], source=None):
     check_channels(model, "pbrt-v4")
     if '"' in name or "\n" in name:
         raise tm.ExportError(f"a pbrt material name cannot hold quotes or newlines: {name!r}")
-    if len(model.lobes) == 1 and model.lobes[0].name == FAMILY:
+    if len(model.lobes) == 1 and model.lobes[0].name in _OWN:
         return _write_own(model, name, header, source)
     notes: list[str] = []
     best = None

@@ -7,6 +7,12 @@ pbrt-v4 (github.com/mmp/pbrt-v4, commit 5f7a606): ``src/pbrt/bxdfs.h`` (``Diffus
 clamps its reflectance to [0, 1]; ``ConductorMaterial`` takes ``eta``/``k``, ``roughness`` and
 ``remaproughness``, default true, α = √roughness; ``MixMaterial::ChooseMaterial`` picks ``materials[1]`` with
 probability ``amount``, so its expected BSDF is (1 − amount) f0 + amount f1). Evaluated in float64.
+
+``coateddiffuse`` (``CoatedDiffuseMaterial``, ``LayeredBxDF<DielectricBxDF, DiffuseBxDF, true>::f``) is a random
+walk whose expectation has no closed form: it is evaluated here as `brdffit.models.coateddiffuse` derives it
+(``DielectricBxDF::f`` for the interface's reflection, then the light through the base by that module's
+quadrature, in NumPy), for the slab that module covers (thickness 0.01, albedo 0, g 0, maxdepth 10, a rough
+interface). tests/test_coateddiffuse.py checks that quadrature against a transcription of pbrt-v4's walk.
 """
 
 from __future__ import annotations
@@ -147,4 +153,33 @@ def evaluate(materials: dict, name: str, wi, wo) -> np.ndarray:
         G = 1.0 / (1.0 + Lambda(co) + Lambda(ci))
         f = (D(wm[:, 2]) * G / (4.0 * ci * co))[:, None] * F
         return np.where(above[:, None], f, 0.0)
+    if kind == "coateddiffuse":
+        return np.where(above[:, None], _coated_diffuse(mat, name, wi, wo), 0.0)
     raise ExportError(f"pbrt material {name!r} of type {kind!r}: no formula here")
+
+
+def _coated_diffuse(mat: dict, name: str, wi, wo) -> np.ndarray:
+    """f_r of a ``coateddiffuse`` material (module doc), above the surface."""
+    from ..models import coateddiffuse as cd
+
+    slab = {"thickness": cd.THICKNESS, "maxdepth": cd.MAX_DEPTH, "g": 0.0, "albedo": [0.0, 0.0, 0.0]}
+    for key, covered in slab.items():
+        given = mat.get(key, covered)
+        if not np.allclose(np.asarray(given, dtype=float), np.asarray(covered, dtype=float), rtol=0.0, atol=0.0):
+            raise ExportError(f"pbrt material {name!r}: coateddiffuse with {key} {given}; the formulas here cover "
+                              f"{key} {covered} only")
+    roughness = float(mat.get("roughness", 0.0))
+    alpha = np.sqrt(roughness) if mat.get("remaproughness", True) else roughness
+    eta = float(mat.get("eta", 1.5))
+    if alpha < 1e-3 or not cd.MIN_ETA <= eta <= cd.MAX_ETA:
+        raise ExportError(f"pbrt material {name!r}: coateddiffuse with alpha {alpha:g} and eta {eta:g}; the formulas "
+                          f"here cover a rough interface (alpha >= 1e-3) of eta in [{cd.MIN_ETA:g}, {cd.MAX_ETA:g}]")
+    rho = np.clip(_rgb(mat.get("reflectance", 0.5)), 0.0, 1.0)
+    ci, co = np.maximum(wi[:, 2], 1e-300), np.maximum(wo[:, 2], 1e-300)
+    D, Lambda = trowbridge_reitz(alpha)
+    wm = wi + wo
+    wm = wm / np.linalg.norm(wm, axis=1, keepdims=True)
+    F = fr_complex(np.abs(np.sum(wo * wm, axis=1)), eta, 0.0)  # DielectricBxDF::f's FrDielectric, η > 1
+    G = 1.0 / (1.0 + Lambda(co) + Lambda(ci))
+    reflection = D(wm[:, 2]) * G * F / (4.0 * ci * co)
+    return reflection[:, None] + cd.through_the_base(co, ci, rho, alpha, eta, np)
