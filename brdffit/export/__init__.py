@@ -125,12 +125,18 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
         candidates.append(_export(target, model, name, header, model))
     except ExportError:
         pass
-    if not candidates or not (target.refines or candidates[0].deviation.exact()):
-        from .refit import exportable_specs, fit_exportable
+    from .refit import exportable_specs, fit_exportable
 
-        for spec in target.renders if target.family else exportable_specs(model):
-            fitted, line = fit_exportable(model, spec=spec)
-            candidates.append(_export(target, fitted, name, header, model, line))
+    specs = []
+    if not candidates or not (target.refines or candidates[0].deviation.exact()):
+        specs = list(target.renders) if target.family else exportable_specs(model)
+    if target.refines and not (candidates and candidates[0].deviation.exact()):
+        # A target that refines its own parameters (pbrt-v4) refines the mapping's materials; the models it writes
+        # exactly (its coated diffuse beside its mix) are fitted to the source too, and the closest is written.
+        specs += [spec for spec in target.renders if spec not in specs]
+    for spec in specs:
+        fitted, line = fit_exportable(model, spec=spec)
+        candidates.append(_export(target, fitted, name, header, model, line))
     return min(candidates, key=lambda c: c.deviation.rms)
 
 
@@ -157,7 +163,8 @@ def export(model_or_result, to: str = "json", *, name: str = "material", fit: bo
         name: the material's id (Mitsuba) or name (pbrt).
         fit: for a renderer, fit the renderer's own model to the model over the hemisphere (cosine-weighted
             least squares: for Mitsuba a brdffit fit of lambert + GGX lobes, `brdffit.export.refit`, unless the
-            direct mapping is exact; for pbrt-v4 its own parameters, refined) and write the candidate closest
+            direct mapping is exact; for pbrt-v4 its own parameters, refined, and fits of the models it writes
+            exactly, its mix and its coated diffuse) and write the candidate closest
             to the model, with the achieved error in the comments; this also exports lobes with no equivalent
             (Oren-Nayar, Ward, Lafortune, ...). Ignored for JSON.
         wavelengths: for a spectral model (one channel per band), the bands in nm: a renderer is then given the
