@@ -32,7 +32,8 @@ class Target:
             target whose fit option fits `brdffit.export.refit`'s lambert + GGX families.
         renders: the brdffit models the target writes exactly with every parameter inside the ranges its own
             tools accept (no unbounded values, no blends): the candidates of a fit for the target
-            (`brdffit.select`'s ``target``, ``brdffit fit --for``); empty where none is declared yet.
+            (`brdffit.select`'s ``target``, ``brdffit fit --for``), and, for a target with a ``family`` or one that
+            ``refines``, of the fit option (`brdffit.export.export_details`); empty where none is declared yet.
     """
 
     name: str
