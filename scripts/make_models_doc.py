@@ -144,7 +144,7 @@ EQUATIONS = {
         "D = GGX of width roughness,  G = 1/(1 + Λ(ωi) + Λ(ωo)),  F: exact dielectric Fresnel\n"
         "X(μ) = ∫ f_T(ω → ω') |cos ω'| Tr(ω') dω',  Tr(ω) = exp(−0.01/|cos ω|)  (the light entering the slab)\n"
         "Y(μ): the same with pbrt-v4's power-heuristic weights at the base;  R: the interface's reflection from inside\n"
-        "X, Y at 64 cosines (32 × 32 microfacet normals), cubic between;  R by 2 × 24 cosines"
+        "X, Y at 64 cosines even in √μ (32 × 32 microfacet normals), cubic in √μ between;  R by 2 × 24 cosines"
     ),
     "roughplastic": (
         "f = specular_reflectance · F(cd; η) D G1(ωi) G1(ωo)/(4 ci co)\n"
@@ -246,10 +246,14 @@ NOTES = {
             "--to pbrt`). reflectance is a linear amplitude. Reciprocal.",
     "coateddiffuse": "pbrt-v4's `coateddiffuse` material: a rough dielectric interface (roughness with "
                      "remaproughness false, eta) over a diffuse base (reflectance), with pbrt's slab (thickness "
-                     "0.01, albedo 0, maxdepth 10). pbrt-v4 estimates it by a random walk; the lobe is that walk's "
-                     "expectation, by quadrature (within 1e-4 of a finer rule for θ up to 84°, 2e-3 at grazing) "
-                     "and checked against a transcription of the walk (tests/test_coateddiffuse.py). Not "
-                     "reciprocal, as pbrt's estimator is not; reflectance is not a linear amplitude (it enters the "
+                     "0.01, albedo 0, maxdepth 10). pbrt-v4's `f` estimates it by a random walk; the lobe is that "
+                     "walk's expectation, by quadrature (X and Y within 1e-4 of a finer rule for θ up to 84°, 2e-3 "
+                     "beyond; read between their cosines within 7e-4 of the rule from α = 0.01 on, 2 % beyond 84° "
+                     "at α = 1e-3), checked against a transcription of the walk (tests/test_coateddiffuse.py). "
+                     "pbrt-v4 samples the BSDF with another walk (`Sample_f`) whose expectation is 3-16 % lower at "
+                     "the tests' settings (pbrt-v4 issue #187): renders follow this lobe for direct light from "
+                     "point and distant lights, not for indirect light (docs/export.md). Not "
+                     "reciprocal, as pbrt's `f` is not; reflectance is not a linear amplitude (it enters the "
                      "series of bounces between base and interface). `brdffit fit --for pbrt`, `brdffit export "
                      "--to pbrt`.",
     "roughplastic": "Mitsuba 3's `roughplastic` plugin (GGX, nonlinear false): a rough dielectric interface over a "

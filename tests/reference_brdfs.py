@@ -1349,13 +1349,13 @@ def _keys_cubic_1d(values, x):
 def coateddiffuse(theta_i, phi_i, theta_o, phi_o, reflectance, roughness, eta):
     """pbrt-v4's ``coateddiffuse`` (roughness α, remaproughness false; thickness 0.01, albedo 0, maxdepth 10): the
     interface's reflection (``DielectricBxDF::f``: the pbrt reference's conductor term with k = 0) plus
-    (ρ/π) X(cosθo) Y(cosθi)/η² Σ_{k<5} (ρR)^k, X and Y computed at max(1e-6, j/63) (`coated_transmission`) and
-    read by Keys' cubic convolution, R `coated_internal_reflectance`."""
+    (ρ/π) X(cosθo) Y(cosθi)/η² Σ_{k<5} (ρR)^k, X and Y computed at max(1e-6, (j/63)²) (`coated_transmission`) and
+    read by Keys' cubic convolution in √cosθ, R `coated_internal_reflectance`."""
     pair = Pair(theta_i, phi_i, theta_o, phi_o)
     rho = _col(reflectance)
     reflection = pbrt(theta_i, phi_i, theta_o, phi_o, 0.0, 1.0, roughness, eta, 0.0)
-    x, y = coated_transmission(np.maximum(1e-6, np.linspace(0.0, 1.0, 64)), roughness, eta)
-    co, ci = (np.where(pair.above, c, 0.0) for c in (pair.co, pair.ci))  # below the horizon: masked anyway
+    x, y = coated_transmission(np.maximum(1e-6, np.linspace(0.0, 1.0, 64) ** 2), roughness, eta)
+    co, ci = (np.sqrt(np.where(pair.above, c, 0.0)) for c in (pair.co, pair.ci))  # √μ; below the horizon: masked
     through = _keys_cubic_1d(x, co) * _keys_cubic_1d(y, ci) / eta**2
     r = coated_internal_reflectance(roughness, eta)
     series = sum((rho * r) ** k for k in range(5))

@@ -20,20 +20,28 @@ roulette (unbiased). Its expectation, for ωo and ωi above the surface, is
   along the presampled ω', ph(|cos ω'|/π, p_T(ω' → ω)) for the base's cosine sample that leaves through the
   interface (p_T the density of sampling the transmission alone, ``Sample_f`` and ``PDF`` with
   ``BxDFReflTransFlags::Transmission``; ph(a, b) = a²/(a² + b²)). The two densities of the second weight are
-  densities of different variables, so the weights do not sum to 1 (taken as 1, the formula falls 7-8 % below
-  the walk);
+  densities of different variables, so the weights do not sum to 1 (taken as 1, f falls by 3-16 % at the test's
+  settings, tests/test_coateddiffuse.py);
 - R = ∫ (|cos ω2|/π) Tr(ω2) ∫ f_R^inside(ω2 → ω3) |cos ω3| Tr(ω3) dω3 dω2: the interface's reflection, from
   inside (index 1/η, total internal reflection included), of the light the base scatters, back to the base;
 - one bottom bounce every two scattering events: K = 5 for pbrt's ``maxdepth`` 10.
 
-X and Y depend on the cosine of their direction only (α is isotropic): the lobe computes both at `COSINE_NODES`
-cosines and interpolates (Keys' cubic convolution); R is an integral over the cosine of ω2, split at the
+X and Y depend on the cosine μ of their direction only (α is isotropic): the lobe computes both at `COSINE_NODES`
+cosines evenly spaced in √μ (dense towards the horizon, where they change fastest) and interpolates in √μ (Keys'
+cubic convolution); R is an integral over the cosine of ω2, split at the
 interface's critical cosine. The integrals over ω' are taken over the microfacet normal m, where
 f_T |cos ω'| dω' = T D G |ω·m| / |cos ω| dm: GGX's inverse CDF tan²θm = α² ξ/(1 − ξ) turns D cosθm dm into
 dξ dφ/(2π), and ξ = 1 − s² removes the 1/cosθm singularity at ξ → 1; Gauss-Legendre in s, the midpoint rule in φ
 over [0, π] (the integrands are even in φ), `NORMAL_NODES` each. The cut at ω·m ≤ 0, where the integrands vanish
-continuously, costs the rule its spectral convergence but not much: tests/test_coateddiffuse.py holds the lobe to
-a finer rule and to a NumPy transcription of pbrt-v4's walk.
+continuously, costs the rule its spectral convergence but not much: tests/test_coateddiffuse.py holds the rule to
+a finer one, the interpolation to the rule and the lobe to a NumPy transcription of pbrt-v4's walk.
+
+What pbrt-v4 renders is not this alone: its path tracer calls ``f`` where it samples a light, and
+``LayeredBxDF::Sample_f`` where it samples the BSDF (every indirect bounce, and part of an area or environment
+light under multiple importance sampling). ``Sample_f`` is a walk of f/pdf weights whose expectation is the physical
+layered BRDF: this formula with both weights 1 (Y = X), reciprocal and lower (pbrt-v4 issue #187, open, reports the
+disagreement). The lobe is ``f``'s expectation: a render's direct light from point and distant lights follows it
+exactly; its indirect light follows the lower one (docs/export.md).
 
 Not reciprocal (pbrt-v4's estimator treats ωo and ωi differently: X against Y). ρ enters through the geometric
 series: a nonlinear colour parameter. The slab's thickness, albedo and scattering asymmetry are pbrt-v4's defaults
@@ -217,9 +225,9 @@ def bottom_series(rho, r):
 
 
 def cosines():
-    """The cosines at which the lobe computes X and Y: j/(n − 1), the first moved to 1e-6 (X and Y have a limit at
-    the horizon, where the direction itself is undefined), n = `COSINE_NODES`."""
-    return np.maximum(1e-6, np.linspace(0.0, 1.0, COSINE_NODES))
+    """The cosines at which the lobe computes X and Y: (j/(n − 1))², evenly spaced in √μ, the first moved to 1e-6
+    (X and Y have a limit at the horizon, where the direction itself is undefined), n = `COSINE_NODES`."""
+    return np.maximum(1e-6, np.linspace(0.0, 1.0, COSINE_NODES) ** 2)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -254,7 +262,7 @@ class CoatedDiffuse(Lobe):
 
 def through_the_base(cos_o, cos_i, rho, alpha, eta, xp):
     """(ρ/π) X(cosθo) Y(cosθi)/η² Σ_{k<K} (ρR)^k, the light that reaches the base (module doc), with X and Y read
-    from their values at `cosines` (Keys' cubic convolution, `brdffit.models.cubic`).
+    from their values at `cosines` by Keys' cubic convolution in √μ (`brdffit.models.cubic`).
 
     Arguments:
         cos_o, cos_i: the cosines of ωo and ωi ``(...)``.
@@ -265,7 +273,8 @@ def through_the_base(cos_o, cos_i, rho, alpha, eta, xp):
     Returns:
         ``(..., C)`` in 1/sr.
     """
-    nodes = np.linspace(0.0, 1.0, COSINE_NODES)
+    nodes = np.linspace(0.0, 1.0, COSINE_NODES)  # √μ of `cosines`
     x, y = transmission(cosines(), alpha, eta, xp=xp)
-    through = cubic.read(x, nodes, cos_o, xp) * cubic.read(y, nodes, cos_i, xp) / (eta * eta)
+    root_o, root_i = (xp.sqrt(xp.clip(c, 0.0, 1.0)) for c in (cos_o, cos_i))
+    through = cubic.read(x, nodes, root_o, xp) * cubic.read(y, nodes, root_i, xp) / (eta * eta)
     return rho * bottom_series(rho, internal_reflectance(alpha, eta, xp=xp)) * (through / math.pi)[..., None]
