@@ -141,17 +141,10 @@ def evaluate(materials: dict, name: str, wi, wo) -> np.ndarray:
             return evaluate(materials, second, wi, wo)
         return (1.0 - amount) * evaluate(materials, first, wi, wo) + amount * evaluate(materials, second, wi, wo)
     if kind == "conductor":
-        roughness = float(mat.get("roughness", 0.0))
-        alpha = np.sqrt(roughness) if mat.get("remaproughness", True) else roughness
+        alpha = _alpha(mat)
         if alpha < 1e-3:                                  # EffectivelySmooth: a mirror, f = 0 off the delta
             return np.zeros((len(wi), 3))
-        D, Lambda = trowbridge_reitz(alpha)
-        wm = wi + wo
-        wm = wm / np.linalg.norm(wm, axis=1, keepdims=True)
-        eta, k = _rgb(mat["eta"]), _rgb(mat["k"])
-        F = fr_complex(np.abs(np.sum(wo * wm, axis=1))[:, None], eta, k)
-        G = 1.0 / (1.0 + Lambda(co) + Lambda(ci))
-        f = (D(wm[:, 2]) * G / (4.0 * ci * co))[:, None] * F
+        f = _microfacet_reflection(alpha, _rgb(mat["eta"]), _rgb(mat["k"]), wi, wo)
         return np.where(above[:, None], f, 0.0)
     if kind == "coateddiffuse":
         return np.where(above[:, None], _coated_diffuse(mat, name, wi, wo), 0.0)
@@ -168,18 +161,31 @@ def _coated_diffuse(mat: dict, name: str, wi, wo) -> np.ndarray:
         if not np.allclose(np.asarray(given, dtype=float), np.asarray(covered, dtype=float), rtol=0.0, atol=0.0):
             raise ExportError(f"pbrt material {name!r}: coateddiffuse with {key} {given}; the formulas here cover "
                               f"{key} {covered} only")
-    roughness = float(mat.get("roughness", 0.0))
-    alpha = np.sqrt(roughness) if mat.get("remaproughness", True) else roughness
+    alpha = _alpha(mat)
     eta = float(mat.get("eta", 1.5))
     if alpha < 1e-3 or not cd.MIN_ETA <= eta <= cd.MAX_ETA:
         raise ExportError(f"pbrt material {name!r}: coateddiffuse with alpha {alpha:g} and eta {eta:g}; the formulas "
                           f"here cover a rough interface (alpha >= 1e-3) of eta in [{cd.MIN_ETA:g}, {cd.MAX_ETA:g}]")
     rho = np.clip(_rgb(mat.get("reflectance", 0.5)), 0.0, 1.0)
+    reflection = _microfacet_reflection(alpha, eta, 0.0, wi, wo)  # DielectricBxDF::f: FrComplex with k = 0, η > 1
+    return reflection + cd.through_the_base(np.maximum(wo[:, 2], 0.0), np.maximum(wi[:, 2], 0.0), rho, alpha, eta, np)
+
+
+def _alpha(mat: dict) -> float:
+    """The Trowbridge-Reitz α of a material's ``float roughness`` (its square root unless ``remaproughness`` is
+    false: ``RoughnessToAlpha``)."""
+    roughness = float(mat.get("roughness", 0.0))
+    return np.sqrt(roughness) if mat.get("remaproughness", True) else roughness
+
+
+def _microfacet_reflection(alpha: float, eta, k, wi, wo) -> np.ndarray:
+    """F_complex(|ωo·h|; η + ik) D(h) G(ωo, ωi) / (4 cosθi cosθo) ``(n, C)``, C the channels of η and k:
+    ``ConductorBxDF::f``, and with k = 0 the reflection of ``DielectricBxDF::f`` (its FrDielectric for η > 1), for
+    ``wi``, ``wo`` above the surface (the cosines floored at 1e-300 elsewhere, where callers mask it)."""
     ci, co = np.maximum(wi[:, 2], 1e-300), np.maximum(wo[:, 2], 1e-300)
     D, Lambda = trowbridge_reitz(alpha)
     wm = wi + wo
     wm = wm / np.linalg.norm(wm, axis=1, keepdims=True)
-    F = fr_complex(np.abs(np.sum(wo * wm, axis=1)), eta, 0.0)  # DielectricBxDF::f's FrDielectric, η > 1
+    F = fr_complex(np.abs(np.sum(wo * wm, axis=1))[:, None], eta, k)
     G = 1.0 / (1.0 + Lambda(co) + Lambda(ci))
-    reflection = D(wm[:, 2]) * G * F / (4.0 * ci * co)
-    return reflection[:, None] + cd.through_the_base(co, ci, rho, alpha, eta, np)
+    return (D(wm[:, 2]) * G / (4.0 * ci * co))[:, None] * F
