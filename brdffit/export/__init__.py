@@ -127,10 +127,11 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
         pass
     from .refit import exportable_specs, fit_exportable
 
+    exact = bool(candidates) and candidates[0].deviation.exact()
     specs = []
-    if not candidates or not (target.refines or candidates[0].deviation.exact()):
+    if not candidates or not (target.refines or exact):
         specs = list(target.renders) if target.family else exportable_specs(model)
-    if target.refines and not (candidates and candidates[0].deviation.exact()):
+    if target.refines and not exact:
         # A target that refines its own parameters (pbrt-v4) refines the mapping's materials; the models it writes
         # exactly (its coated diffuse beside its mix) are fitted to the source too, and the closest is written.
         specs += [spec for spec in target.renders if spec not in specs]
