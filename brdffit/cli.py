@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import atexit
 import contextlib
+import gc
 import json
 import os
 import signal
@@ -29,6 +30,12 @@ EXIT_IMPLAUSIBLE = 3  # `brdffit export` refused a renderer material of an impla
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command stopped by Ctrl-C
 EXIT_TERMINATED = 143  # 128 + SIGTERM: `brdffit posterior` stopped by `kill` or a batch system, as by Ctrl-C
 DEFAULT_MODEL = "auto"
+# The cyclic garbage collector's thresholds in the console script's own process (`run`): a collection of the
+# youngest generation after 10,000 net allocations of container objects instead of Python's 700 (`gc.set_threshold`).
+# A fit allocates hundreds of thousands of small containers (pytrees, dicts, matplotlib's artists), and every
+# collection holds Python's lock, stopping the selection's threads and the report alike (docs/benchmarks.md).
+COLLECTOR_THRESHOLDS = (10_000, 10, 10)
+_own_process = False  # set by `run`: this process is the console script's, not a caller's that calls `main`
 
 
 class UsageError(Exception):
@@ -533,7 +540,7 @@ def _cmd_fit(args) -> int:
     measurements = _load(path, args)  # first: a file that cannot be read is reported before JAX is loaded
     from . import fit, io, select
 
-    enable_compilation_cache(_job(args, measurements))
+    _engine_loaded(_job(args, measurements))
     if args.report:
         _import_in_background("brdffit.report")
     selection = None
@@ -607,6 +614,18 @@ def _cmd_fit(args) -> int:
     return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
 
 
+def _engine_loaded(job: str | None = None) -> None:
+    """What a command does once the engine's modules are imported: JAX's persistent compilation cache on
+    (`enable_compilation_cache`; with ``job``, the programs of the last process with that job read in the background),
+    and, in the console script's own process (`run`), every object created so far (the modules of JAX, NumPy,
+    brdffit: a few hundred thousand) moved out of the cyclic garbage collector's reach (`gc.freeze`), so that a
+    collection traverses only what the command allocates. A caller's process that calls `main` keeps its collector as
+    it is: objects frozen there would never be collected."""
+    enable_compilation_cache(job)
+    if _own_process:
+        gc.freeze()
+
+
 def _import_in_background(module: str) -> None:
     """Import ``module`` in a daemon thread: the report's plotting modules (matplotlib, about half a second) load
     while the fit runs, mostly in XLA's compiled code without Python's lock; a later import of the same module
@@ -641,7 +660,7 @@ def _cmd_report(args) -> int:
     h5 = Path(args.result)
     measurements = io.load(h5)
     result = FitResult.load(h5, args.name)
-    enable_compilation_cache(_job(args, measurements))  # the figures' programs, as a fit's report finds them
+    _engine_loaded(_job(args, measurements))  # the figures' programs, as a fit's report finds them
     post = None
     with h5py.File(h5, "r") as f:
         chain_group = f"posteriors/{(args.name or result.spec).replace('/', '_')}/chain"
@@ -694,7 +713,7 @@ def _cmd_posterior(args) -> int:
     from . import FitResult, io
 
     with _terminate_as_interrupt():
-        enable_compilation_cache()
+        _engine_loaded()
         h5 = Path(args.result)
         measurements = io.load(h5)
         result = FitResult.load(h5, args.name)
@@ -711,7 +730,7 @@ def _cmd_synth(args) -> int:
 
     values = _parse_fixed(args.param)
     model = models.get(args.model, channels=args.channels, **values)
-    enable_compilation_cache()
+    _engine_loaded()
     m = synth.generate(model, pattern=args.pattern, n=args.n, noise=args.noise, seed=args.seed)
     io.save(m, args.out)
     if not args.quiet:
@@ -735,7 +754,7 @@ def _cmd_convert(args) -> int:
         if result.model is None or result.model.channels != 3:
             raise UsageError(f"{source}: MERL tables hold 3 channels; this fit has "
                              f"{'independent channels' if result.model is None else result.model.channels}")
-        enable_compilation_cache()
+        _engine_loaded()
         io.write_merl(result.model, target)
         if not args.quiet:
             print(f"wrote {target}: MERL tabulation of {result.spec}")
@@ -758,7 +777,7 @@ def _cmd_export(args) -> int:
               "a material that reflects more light than it receives. Refit with another model, or give --force to "
               "export it anyway", file=sys.stderr)
         return EXIT_IMPLAUSIBLE
-    enable_compilation_cache()
+    _engine_loaded()
     # A spectral fit is written for a renderer as its RGB model (brdffit.colour.rgb_model).
     wavelengths = _stored_wavelengths(args.result, result.model.channels) \
         if TARGETS[args.to].renderer and result.model is not None else None
@@ -849,7 +868,7 @@ def _cmd_render(args) -> int:
 
     path = Path(args.file)
     source, what, wavelengths = _render_source(path, args)
-    enable_compilation_cache()
+    _engine_loaded()
     lights = list(render.DEFAULT_LIGHTS)
     if args.area_light:
         key_theta, key_phi, key_intensity = lights[0]
@@ -894,7 +913,7 @@ def _cmd_select(args) -> int:
     from . import select
     from .select import DEFAULT_CANDIDATES
 
-    enable_compilation_cache(_job(args, measurements))
+    _engine_loaded(_job(args, measurements))
     candidates = [c.strip() for c in args.candidates.split(";")] if args.candidates else list(DEFAULT_CANDIDATES)
     _check_fixed(_parse_fixed(args.fixed), candidates)
     selection = select(measurements, candidates, criterion=args.criterion, folds=args.folds,
@@ -924,7 +943,7 @@ def _cmd_batch(args) -> int:
     from .select import DEFAULT_CANDIDATES
 
     _check_fixed(_parse_fixed(args.fixed), DEFAULT_CANDIDATES if args.model == "auto" else [args.model])
-    enable_compilation_cache()
+    _engine_loaded()
     client = None
     if args.scheduler:
         try:
@@ -1241,7 +1260,13 @@ def run() -> None:
     After a fit, finalisation frees the objects of JAX, XLA, SciPy and matplotlib one by one: about half a second
     of a warm default fit's wall time on the 2-core host (docs/benchmarks.md), spent after the last line is
     written. The exit handlers still run (`atexit`: logging, a Dask cluster's processes, JAX's backend) and the
-    standard streams are flushed; a process with a non-daemon thread still running exits the usual way."""
+    standard streams are flushed; a process with a non-daemon thread still running exits the usual way.
+
+    The process is the command's own, so its cyclic garbage collector runs less often (`COLLECTOR_THRESHOLDS`) and
+    skips the objects of the imports (`_engine_loaded`)."""
+    global _own_process
+    _own_process = True
+    gc.set_threshold(*COLLECTOR_THRESHOLDS)
     code = main()
     if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
         sys.exit(code)

@@ -558,6 +558,31 @@ def test_an_implausible_fit_warns_and_its_renderer_export_is_refused(tmp_path, c
     assert xml.is_file()
 
 
+def test_the_console_script_collects_garbage_less_often_and_a_callers_process_keeps_its_collector(tmp_path):
+    """The console script's own process (`brdffit.cli.run`) collects with `COLLECTOR_THRESHOLDS` and has frozen the
+    objects of the engine's imports once a command loaded it; `main` called in a caller's process changes neither
+    (objects frozen there would never be collected)."""
+    import gc
+    import subprocess
+
+    from brdffit.cli import COLLECTOR_THRESHOLDS
+
+    out = tmp_path / "s.h5"
+    program = ("import atexit, gc, sys\n"
+               "from brdffit import cli\n"
+               "atexit.register(lambda: print('gc', gc.get_threshold(), gc.get_freeze_count()))\n"
+               f"sys.argv = ['brdffit', 'synth', 'lambert', '--n', '50', '--out', {str(out)!r}, '--quiet']\n"
+               "cli.run()\n")
+    proc = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == EXIT_OK, proc.stderr
+    words = proc.stdout.split()
+    assert words[0] == "gc" and proc.stdout.startswith(f"gc {COLLECTOR_THRESHOLDS}")
+    assert int(words[-1]) > 10_000  # the modules of JAX and NumPy: far more objects than this
+    threshold, frozen = gc.get_threshold(), gc.get_freeze_count()
+    assert main(["synth", "lambert", "--n", "50", "--out", str(tmp_path / "t.h5"), "--quiet"]) == EXIT_OK
+    assert gc.get_threshold() == threshold and gc.get_freeze_count() == frozen
+
+
 @pytest.mark.parametrize("argv, code", [(["models"], EXIT_OK), (["fit", "no-such-file.h5"], EXIT_BAD_INPUT)])
 def test_the_console_script_flushes_its_output_runs_the_exit_handlers_and_keeps_the_exit_code(argv, code):
     """`brdffit.cli.run` ends the process without Python's finalisation: what `main` printed to a pipe (block
