@@ -30,6 +30,7 @@ exactly for θh < θmax(φ) = π/4 + ψ(φ)/2 (and ωi·h > 0 holds there too). 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import jax.numpy as jnp
@@ -547,14 +548,31 @@ def scan_albedo(model: Model, theta_i=PLAUSIBILITY_THETA_I, phi_i=PLAUSIBILITY_P
     With ``view``, the grid's directions are the viewer's and the integral runs over the light's:
     ∫ f_r(ωi, ωo) cosθi dωi at each ωo (`judged_at_the_view`); for a reciprocal model the two are the same.
     """
-    theta, phi = (np.asarray(x, dtype=float).reshape(-1) for x in np.meshgrid(theta_i, phi_i, indexing="ij"))
+    theta_i, phi_i = (np.asarray(x, dtype=float).reshape(-1) for x in (theta_i, phi_i))
+    fixed, wo, weight, horizon = _scan_rule(theta_i.tobytes(), phi_i.tobytes(), int(resolution))
+    f = np.asarray(evaluate_dirs(model, wo, fixed) if view else evaluate_dirs(model, fixed, wo))
+    albedo = np.einsum("bst,bstc->bc", weight, f)
+    albedo[horizon] = 0.0
+    return albedo.reshape(theta_i.size, phi_i.size, model.channels)
+
+
+@functools.lru_cache(maxsize=4)
+def _scan_rule(theta_i: bytes, phi_i: bytes, resolution: int) -> tuple:
+    """The quadrature of `scan_albedo` for its grid of incidences (the float64 bytes of its θi and φi), which no model
+    changes: computed once a process (a selection checks several candidates, then the summary and the report the
+    chosen one; the nodes took more time than the model's evaluation at them).
+
+    Returns:
+        ``(wi, wo, weight, horizon)``, read-only: the fixed direction broadcast to every node and the integrated one
+        ``(B, S, T, 3)``, the weights ``(B, S, T)`` and the incidences at or below the horizon ``(B,)``.
+    """
+    theta, phi = (x.reshape(-1) for x in np.meshgrid(np.frombuffer(theta_i), np.frombuffer(phi_i), indexing="ij"))
     t, wt = _gauss_legendre(resolution, 0.0, 1.0)
     u_half, wu_half = _gauss_legendre(resolution, -1.0, 1.0)
     u, wu = np.concatenate([u_half, u_half]), np.concatenate([wu_half, wu_half])
     centre = np.repeat([0.5 * math.pi, 1.5 * math.pi], resolution)
     wi, wo, weight = _albedo_nodes(theta, phi, t, wt, u, wu, centre, xp=np)
-    fixed = np.broadcast_to(wi, wo.shape)
-    f = np.asarray(evaluate_dirs(model, wo, fixed) if view else evaluate_dirs(model, fixed, wo))
-    albedo = np.einsum("bst,bstc->bc", weight, f)
-    albedo[np.cos(theta) <= 1e-12] = 0.0
-    return albedo.reshape(np.size(theta_i), np.size(phi_i), model.channels)
+    rule = (np.ascontiguousarray(np.broadcast_to(wi, wo.shape)), wo, weight, np.cos(theta) <= 1e-12)
+    for a in rule:
+        a.flags.writeable = False
+    return rule

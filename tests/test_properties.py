@@ -599,3 +599,24 @@ def test_albedo_is_differentiable_in_the_parameters():
     grad = jax.grad(lambda m: props.directional_albedo(m, 0.0, resolution=32).sum())(model)
     assert grad.params["ks"][0] == pytest.approx(1.0, abs=1e-9)  # a(0) = ks exactly (quadrature error 1e-13)
     assert abs(grad.params["n"]) < 1e-8
+
+
+def test_scan_albedo_keeps_its_rule_and_agrees_with_the_directional_albedo():
+    """`scan_albedo` computes its quadrature's nodes once a grid (read-only, shared by every model) and gives the
+    same albedo as `directional_albedo` (same rule, nodes computed in JAX) at each incidence, for two models in turn
+    on one kept rule."""
+    from brdffit.properties import _scan_rule, directional_albedo, scan_albedo
+
+    theta, phi = np.radians([0.0, 35.0, 70.0, 89.0]), np.radians([0.0, 90.0])
+    before = _scan_rule.cache_info()
+    for spec, values in (("lambert+ggx", {"alpha": 0.3, "ks": 0.6, "f0": 0.04}), ("lafortune", {"n_1": 20.0})):
+        model = models.get(spec, channels=1, **values)
+        scanned = scan_albedo(model, theta, phi, resolution=24)
+        for j, p in enumerate(phi):
+            direct = np.asarray(directional_albedo(model, theta, p, resolution=24))
+            np.testing.assert_allclose(scanned[:, j, :], direct.reshape(scanned[:, j, :].shape), rtol=1e-10,
+                                       atol=1e-14)
+    after = _scan_rule.cache_info()
+    assert after.misses == before.misses + 1 and after.hits == before.hits + 1
+    rule = _scan_rule(np.asarray(theta).tobytes(), np.asarray(phi).tobytes(), 24)
+    assert not any(a.flags.writeable for a in rule)
