@@ -14,7 +14,7 @@ import math
 import matplotlib
 import numpy as np
 from matplotlib.colors import LogNorm, TwoSlopeNorm
-from matplotlib.ticker import LogFormatter
+from matplotlib.ticker import LogFormatter, LogLocator
 from matplotlib.figure import Figure
 
 from ..geometry import to_half_diff
@@ -115,11 +115,15 @@ class _PlainLogFormatter(LogFormatter):
 def _plain_log_labels(axis) -> None:
     """Label a log-scaled axis in plain text ("0.01", "1e-05") rather than matplotlib's default mathtext
     ("10^{-2}" typeset by its TeX parser, `LogFormatterSciNotation`): the parser builds its grammar on first use,
-    about 0.2 s of every report, for the same numbers.
+    about 0.2 s of every report, for the same numbers. Its minor ticks are at 2, 3, 4 and 6 times each power of ten,
+    the ones that matplotlib's formatter labels on an axis spanning 0.4 to 1 decade (`LogFormatter`'s
+    ``minor_thresholds``; beyond a decade it labels none), rather than at all eight of 2-9: each tick is a set of
+    artists built at every draw, and the four unlabelled ones cost the slices' figure about a seventh of its time.
 
     Arguments:
         axis: a matplotlib ``Axis`` on a log scale (set the scale first: setting it resets the formatters).
     """
+    axis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 3.0, 4.0, 6.0)))
     axis.set_major_formatter(_PlainLogFormatter())
     axis.set_minor_formatter(_PlainLogFormatter(labelOnlyBase=False))
 
