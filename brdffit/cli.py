@@ -537,12 +537,23 @@ def _cmd_fit(args) -> int:
     out = Path(args.out) if args.out else default_out(path)
     check_writable(out)
     check_output_folder(out, args.force)
-    measurements = _load(path, args)  # first: a file that cannot be read is reported before JAX is loaded
+    worker = _drawing_worker() if args.report else None  # its imports run while this process reads and fits
+    try:
+        measurements = _load(path, args)  # first: a file that cannot be read is reported before JAX is loaded
+        return _fit_and_write(args, out, measurements, worker)
+    finally:
+        if worker is not None:
+            worker.close()
+
+
+def _fit_and_write(args, out: Path, measurements, worker) -> int:
+    """`_cmd_fit` once the data are read: fit or select, write the results folder and print the summary (its report
+    partly drawn by ``worker``, a `brdffit.report.worker.DrawingWorker`, where there is one)."""
     from . import fit, io, select
 
     _engine_loaded(_job(args, measurements))
     if args.report:
-        _import_in_background("brdffit.report")
+        _import_in_background("brdffit.report.assemble")
     selection = None
     if args.target is not None and (args.model != "auto" or args.lobes is not None):
         raise UsageError(f"--for {args.target} chooses among the models {args.target} represents exactly; give it "
@@ -593,7 +604,8 @@ def _cmd_fit(args) -> int:
             (out / FOLDER.selection).write_text(json.dumps(selection.to_dict(), indent=2) + "\n")
             files.append(out / FOLDER.selection)
         if args.report:
-            written = _write_report(out, measurements, result, post if args.posterior else None, selection, args)
+            written = _write_report(out, measurements, result, post if args.posterior else None, selection, args,
+                                    worker=worker)
             files.extend([Path(written["html"]), Path(written["md"])])
     files = [str(final / f.name) for f in files]
     if args.json:
@@ -636,13 +648,24 @@ def _import_in_background(module: str) -> None:
     threading.Thread(target=importlib.import_module, args=(module,), name=f"import {module}", daemon=True).start()
 
 
-def _write_report(out: Path, measurements, result, post, selection, args, exports=None) -> dict:
+def _write_report(out: Path, measurements, result, post, selection, args, exports=None, worker=None) -> dict:
     """The report (report.html, report.md and figures) of a fit in ``out``, with the exports recorded for it."""
     from .report import write_report
 
     run_info = {"command": "brdffit " + " ".join(sys.argv[1:]) if sys.argv[1:] else "brdffit", "seed": args.seed}
     return write_report(out, measurements, result, posterior=post, selection=selection, run_info=run_info,
-                        exports=exports)
+                        exports=exports, worker=worker)
+
+
+def _drawing_worker():
+    """In the console script's own process (`run`), a `brdffit.report.worker.DrawingWorker` started now, whose
+    imports run beside the fit and which then draws part of the report's figures on the other core; None in a
+    caller's process that calls `main` (a test suite's, say), where the report is drawn in that process."""
+    if not _own_process:
+        return None
+    from .report.worker import DrawingWorker
+
+    return DrawingWorker.start()
 
 
 def _warn(args, message: str) -> None:
@@ -651,6 +674,16 @@ def _warn(args, message: str) -> None:
 
 
 def _cmd_report(args) -> int:
+    worker = _drawing_worker()  # its imports run while this process reads the results file
+    try:
+        return _report(args, worker)
+    finally:
+        if worker is not None:
+            worker.close()
+
+
+def _report(args, worker) -> int:
+    """`_cmd_report` (``worker``: a `brdffit.report.worker.DrawingWorker` or None)."""
     import h5py
 
     from . import FitResult, io
@@ -671,7 +704,7 @@ def _cmd_report(args) -> int:
     if exports.problem:
         _warn(args, f"{exports.problem}; the report does not show the exports recorded there")
     out = Path(args.out) if args.out else h5.parent
-    written = _write_report(out, measurements, result, post, None, args, exports)
+    written = _write_report(out, measurements, result, post, None, args, exports, worker=worker)
     if not args.quiet:
         print(f"wrote {written['html']}, {written['md']} and {len(written['figures'])} figures")
     return EXIT_OK

@@ -583,6 +583,31 @@ def test_the_console_script_collects_garbage_less_often_and_a_callers_process_ke
     assert gc.get_threshold() == threshold and gc.get_freeze_count() == frozen
 
 
+def test_the_console_scripts_report_drawn_partly_by_its_worker_is_the_one_drawn_in_one_process(tmp_path):
+    """`brdffit fit` in the console script's own process hands part of its report's figures to a
+    `brdffit.report.worker.DrawingWorker`; they are byte for byte those that `brdffit report` draws in one process
+    (`main`) from the same results file, and every figure is there."""
+    import subprocess
+
+    from brdffit.report.assemble import HANDED
+
+    data, fitted, again = tmp_path / "data.h5", tmp_path / "fit", tmp_path / "again"
+    assert main(["synth", "lambert+ward", "--param", "alpha=0.2", "--noise", "relative:0.02", "--n", "600", "--out",
+                 str(data), "--quiet"]) == EXIT_OK
+    program = ("import sys\n"
+               "from brdffit import cli\n"
+               f"sys.argv = ['brdffit', 'fit', {str(data)!r}, '--model', 'lambert+ward', '--out', {str(fitted)!r}, "
+               "'--quiet']\n"
+               "cli.run()\n")
+    proc = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == EXIT_OK, proc.stderr
+    assert main(["report", str(fitted / "result.h5"), "--out", str(again), "--quiet"]) == EXIT_OK
+    names = sorted(p.name for p in fitted.glob("*.png"))
+    assert names == sorted(p.name for p in again.glob("*.png")) and {f"{n}.png" for n in HANDED} <= set(names)
+    for name in names:
+        assert (fitted / name).read_bytes() == (again / name).read_bytes(), name
+
+
 @pytest.mark.parametrize("argv, code", [(["models"], EXIT_OK), (["fit", "no-such-file.h5"], EXIT_BAD_INPUT)])
 def test_the_console_script_flushes_its_output_runs_the_exit_handlers_and_keeps_the_exit_code(argv, code):
     """`brdffit.cli.run` ends the process without Python's finalisation: what `main` printed to a pipe (block

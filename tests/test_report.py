@@ -9,6 +9,8 @@ import pytest
 import brdffit
 from brdffit.report import format_value, write_report
 from brdffit.report import figures as F
+from brdffit.report.drawing import plain_log_labels
+from brdffit.report.worker import DrawingWorker
 
 ALL_FIGURES = ("slices", "hemisphere", "residuals", "corner", "traces", "albedo", "spheres")
 POSTERIOR_FIGURES = ("corner", "traces")
@@ -192,7 +194,7 @@ def test_log_axes_are_labelled_in_plain_text():
     ax.plot([1e-3, 10.0], [1e-3, 10.0])
     ax.set_yscale("log")
     ax.set_ylim(1e-3, 10.0)
-    F._plain_log_labels(ax.yaxis)
+    plain_log_labels(ax.yaxis)
 
     def shown(minor):  # the labels of the ticks inside the view
         fig.canvas.draw()
@@ -221,3 +223,43 @@ def test_albedo_of_a_layered_renderer_model_is_its_albedo_at_each_view():
     curve = figures.albedo_curve(result)
     assert curve.max() <= 1.0 and not _albedo_warnings(curve, ["R", "G", "B"])
     assert np.asarray(directional_albedo(result.model, np.radians([89.0]))).max() > 1.1
+
+
+def test_a_drawing_worker_writes_the_same_figures_as_this_process_and_stands_in_for_itself(fitted, tmp_path):
+    """A `DrawingWorker` (a process of its own, matplotlib without JAX) writes byte for byte the PNGs that this
+    process writes from the same `Drawing`s; where its process is gone, `finish` draws them here."""
+    meas, result, _ = fitted
+    drawings = {"slices": F.slices_drawing(meas, result), "residuals": F.residual_drawing(meas, result),
+                "albedo": F.albedo_drawing(result, channels=meas.channels),
+                "spheres": F.spheres_drawing(meas, result), "hemisphere": F.hemisphere_drawing(result)}
+    here, there, fallback = (tmp_path / name for name in ("here", "there", "fallback"))
+    for folder in (here, there, fallback):
+        folder.mkdir()
+    for name, drawing in drawings.items():
+        drawing(here / f"{name}.png")
+    with DrawingWorker.start() as worker:
+        for name, drawing in drawings.items():
+            worker.send(there / f"{name}.png", drawing)
+        assert worker.finish() == [str(there / f"{name}.png") for name in drawings]
+    with DrawingWorker.start() as gone:
+        gone._process.kill()
+        gone._process.wait()
+        for name, drawing in drawings.items():
+            gone.send(fallback / f"{name}.png", drawing)
+        gone.finish()
+    for name in drawings:
+        expected = (here / f"{name}.png").read_bytes()
+        assert (there / f"{name}.png").read_bytes() == expected, name
+        assert (fallback / f"{name}.png").read_bytes() == expected, name
+
+
+def test_the_drawing_worker_loads_matplotlib_not_jax():
+    """The worker's process imports the drawing module alone: not JAX, whose import would double its start."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "import brdffit.report.drawing\n"
+            "print('jax' in sys.modules, 'matplotlib' in sys.modules)\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.stdout.split() == ["False", "True"], proc.stderr

@@ -1,27 +1,22 @@
 r"""The report's figures: one function per figure, each takes data objects and a path and writes one PNG.
 
-Every figure is drawn on a bare `matplotlib.figure.Figure` (no pyplot, no global backend: the Agg renderer is
-used by ``savefig``), so that making a report never opens a window nor changes the caller's matplotlib state.
-Every figure has a fixed size in pixels (`FIGSIZE` inches times `DPI`), a title, axis labels with units and a
-legend or colour bar; angles are shown in degrees, f_r in 1/sr. Files are written atomically
-(`brdffit.io._common.atomic_path`). docs/report.md says how each figure is computed.
+What a figure shows is computed here (the model's values, renders and residuals); each ``*_drawing`` function
+returns it as a `brdffit.report.drawing.Drawing`, which `brdffit.report.drawing` draws with matplotlib alone (in
+this process, or in a helper process of its own: `brdffit.report.worker`), and each ``plot_*`` function does both.
+docs/report.md says how each figure is computed.
 """
 
 from __future__ import annotations
 
 import math
 
-import matplotlib
 import numpy as np
-from matplotlib.colors import LogNorm, TwoSlopeNorm
-from matplotlib.ticker import LogFormatter, LogLocator
-from matplotlib.figure import Figure
 
 from ..geometry import to_half_diff
-from ..io._common import atomic_path
 from ..properties import directional_albedo, judged_at_the_view, scan_albedo
 from ..colour import ColourError, spectral_colour
 from ..render import difference, render_sphere, tonemap
+from .drawing import DPI, FIGSIZE, Drawing, drawing_style, new_figure, save
 
 __all__ = [
     "drawing_style",
@@ -37,43 +32,6 @@ __all__ = [
     "plot_spheres",
 ]
 
-# Resolution of every PNG and the size of each figure in inches: a figure of size (w, h) is w*DPI x h*DPI pixels.
-DPI = 100
-FIGSIZE = {
-    "slices": (11.0, 8.0),
-    "hemisphere": (12.0, 4.4),
-    "residuals": (12.0, 4.4),
-    "corner": (10.0, 10.0),
-    "traces": (10.0, 12.0),
-    "albedo": (7.0, 4.8),
-    "spheres": (12.0, 4.4),
-    "renderer": (12.0, 4.4),
-    "spectra": (12.0, 4.4),
-}
-
-# The height of the panels' titles (matplotlib's axes.titley; 1 is the top of the axes), given so that matplotlib
-# does not place them itself: it measures every tick label of the axes to clear them, at each draw (about a third
-# of the in-plane slices figure's drawing), for figures that have no tick label above their axes (`drawing_style`).
-TITLE_Y = 1.0
-
-# zlib's level for the PNGs: 1 writes them several times faster than PIL's default (6), for files about a third
-# larger; a report's figures are read once, on the same machine or attached to a message.
-PNG_COMPRESSION = 1
-
-# Each figure's subplot parameters (fractions of the figure), as matplotlib's tight_layout chose them on the shipped
-# materials' reports (RGB, one to three lobes), the left margin widened for longer tick labels: tight_layout drew
-# every figure once more to measure it, a sizeable share of a report's time. The posterior figures, whose grids grow
-# with the parameters, keep tight_layout.
-LAYOUT = {
-    "slices": dict(left=0.08, right=0.986, bottom=0.133, top=0.889, wspace=0.17, hspace=0.3),
-    "hemisphere": dict(left=0.073, right=0.898, bottom=0.059, top=0.846, wspace=0.373),
-    "residuals": dict(left=0.052, right=0.868, bottom=0.133, top=0.803, wspace=0.22),
-    "albedo": dict(left=0.1, right=0.966, bottom=0.122, top=0.879),
-    "spheres": dict(left=0.013, right=0.94, bottom=0.034, top=0.897, wspace=0.042),
-    "renderer": dict(left=0.013, right=0.987, bottom=0.034, top=0.86, wspace=0.042),
-    "spectra": dict(left=0.07, right=0.98, bottom=0.14, top=0.86, wspace=0.28),
-}
-
 # Largest number of parameters shown in the corner and trace plots (the first ones of the posterior).
 MAX_POSTERIOR_PARAMS = 8
 
@@ -82,61 +40,8 @@ MAX_POSTERIOR_PARAMS = 8
 THETA_I_WINDOW = math.radians(5.0)
 PLANE_WINDOW = math.radians(7.5)
 
-_RGB = {"r": "tab:red", "g": "tab:green", "b": "tab:blue", "red": "tab:red", "green": "tab:green",
-        "blue": "tab:blue"}
-
 
 # ------------------------------------------------------------------------------------------------ helpers
-def drawing_style():
-    """The settings the report draws its figures under (a context manager): the panels' titles at `TITLE_Y`."""
-    return matplotlib.rc_context({"axes.titley": TITLE_Y})
-
-
-def _new_figure(name: str) -> Figure:
-    fig = Figure(figsize=FIGSIZE[name], dpi=DPI)
-    if name in LAYOUT:
-        fig.subplots_adjust(**LAYOUT[name])
-    return fig
-
-
-def _save(fig: Figure, path) -> str:
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, format="png", dpi=DPI, pil_kwargs={"compress_level": PNG_COMPRESSION})
-    return str(path)
-
-
-class _PlainLogFormatter(LogFormatter):
-    """matplotlib's `LogFormatter` (which ticks get a label) writing each value as ``%g``: "0.01", "2", "1e-05"."""
-
-    def _num_to_string(self, x, vmin, vmax):
-        return f"{x:g}"
-
-
-def _plain_log_labels(axis) -> None:
-    """Label a log-scaled axis in plain text ("0.01", "1e-05") rather than matplotlib's default mathtext
-    ("10^{-2}" typeset by its TeX parser, `LogFormatterSciNotation`): the parser builds its grammar on first use,
-    about 0.2 s of every report, for the same numbers. Its minor ticks are at 2, 3, 4 and 6 times each power of ten,
-    the ones that matplotlib's formatter labels on an axis spanning 0.4 to 1 decade (`LogFormatter`'s
-    ``minor_thresholds``; beyond a decade it labels none), rather than at all eight of 2-9: each tick is a set of
-    artists built at every draw, and the four unlabelled ones cost the slices' figure about a seventh of its time.
-
-    Arguments:
-        axis: a matplotlib ``Axis`` on a log scale (set the scale first: setting it resets the formatters).
-    """
-    axis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 3.0, 4.0, 6.0)))
-    axis.set_major_formatter(_PlainLogFormatter())
-    axis.set_minor_formatter(_PlainLogFormatter(labelOnlyBase=False))
-
-
-def _channel_colours(channels) -> list:
-    names = [str(c).lower() for c in channels]
-    if len(names) <= 4 and all(n in _RGB for n in names):
-        return [_RGB[n] for n in names]
-    cycle = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:grey",
-             "tab:olive", "tab:cyan"]
-    return [cycle[i % len(cycle)] for i in range(len(names))]
-
-
 def _specs(fit_result):
     return fit_result.models[0].param_specs
 
@@ -239,10 +144,12 @@ def plot_slices(path, measurements, fit_result, posterior=None, theta_i=None) ->
     Returns:
         ``path`` as a string.
     """
+    return slices_drawing(measurements, fit_result, posterior, theta_i)(path)
+
+
+def slices_drawing(measurements, fit_result, posterior=None, theta_i=None) -> Drawing:
+    """What `plot_slices` draws (arguments the same, but the path), as a `Drawing`."""
     angles = slice_angles(measurements) if theta_i is None else np.atleast_1d(np.asarray(theta_i, float))[:4]
-    colours = _channel_colours(measurements.channels)
-    fig = _new_figure("slices")
-    axes = fig.subplots(2, 2).ravel()
     signed = np.radians(np.linspace(-89.0, 89.0, 357))
     curve_to = np.abs(signed)
     curve_po = np.where(signed >= 0, math.pi, 0.0)  # φi = 0: the mirror side is φo = π
@@ -259,45 +166,19 @@ def plot_slices(path, measurements, fit_result, posterior=None, theta_i=None) ->
     mirror_side = np.cos(dphi) < 0
     values = np.asarray(measurements.values)
     positive = values[np.isfinite(values) & (values > 0)]
-    for k, ax in enumerate(axes):
-        if k >= len(angles):
-            ax.set_visible(False)
-            continue
-        a = angles[k]
-        model = fit_result.predict(np.full_like(signed, a), 0.0, curve_to, curve_po)
+    panels = []
+    for k, a in enumerate(angles):
         near = (np.abs(ti - a) <= THETA_I_WINDOW) & (off_plane <= PLANE_WINDOW)
-        x_data = np.degrees(np.where(mirror_side, to, -to))[near]
-        for c, name in enumerate(measurements.channels):
-            if bands is not None:
-                rows = slice(k * len(signed), (k + 1) * len(signed))
-                ax.fill_between(np.degrees(signed), bands[2.5][rows, c], bands[97.5][rows, c], color=colours[c],
-                                alpha=0.12, lw=0, label="95 % band" if c == 0 else None)
-                ax.fill_between(np.degrees(signed), bands[16][rows, c], bands[84][rows, c], color=colours[c],
-                                alpha=0.25, lw=0, label="68 % band" if c == 0 else None)
-            ax.plot(np.degrees(signed), model[:, c], color=colours[c], lw=1.4, label=f"fit {name}")
-            y = values[near, c]
-            ok = np.isfinite(y) & (y > 0)
-            ax.plot(x_data[ok], y[ok], "o", ms=3.5, mfc="none", color=colours[c], alpha=0.8,
-                    label=f"data {name}")
-        ax.axvline(np.degrees(a), color="0.5", ls=":", lw=1, label="mirror direction")
-        ax.axvline(0.0, color="0.8", lw=0.8)
-        ax.set_yscale("log")
-        _plain_log_labels(ax.yaxis)
-        if positive.size:
-            ax.set_ylim(max(positive.min() * 0.5, 1e-6), positive.max() * 2.0)
-        ax.set_xlim(-90, 90)
-        ax.set_title(f"θi = {np.degrees(a):.0f}°  ({int(near.sum())} samples within "
-                     f"±{math.degrees(THETA_I_WINDOW):.0f}° "
-                     f"of θi and {math.degrees(PLANE_WINDOW):.1f}° of the plane)", fontsize=9)
-        ax.set_xlabel("signed θo (°): < 0 towards the light, > 0 mirror side")
-        ax.set_ylabel("f_r (1/sr)")
-        ax.grid(True, which="major", alpha=0.3)
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.suptitle(f"In-plane BRDF slices: data vs fitted {fit_result.spec}"
-                 + (" with posterior 68/95 % bands (shaded; may be thinner than the line)" if bands is not None
-                    else ""), fontsize=11)
-    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 9), fontsize=8, frameon=False)
-    return _save(fig, path)
+        rows = slice(k * len(signed), (k + 1) * len(signed))
+        panels.append({"model": fit_result.predict(np.full_like(signed, a), 0.0, curve_to, curve_po),
+                       "x": np.degrees(np.where(mirror_side, to, -to))[near], "y": values[near],
+                       "count": int(near.sum()),
+                       "bands": None if bands is None else {q: np.asarray(bands[q])[rows]
+                                                            for q in (2.5, 16, 84, 97.5)}})
+    ylim = (max(positive.min() * 0.5, 1e-6), positive.max() * 2.0) if positive.size else None
+    return Drawing("draw_slices", dict(spec=fit_result.spec, channels=list(measurements.channels),
+                                       angles=np.degrees(angles), signed=np.degrees(signed), panels=panels, ylim=ylim,
+                                       windows=(math.degrees(THETA_I_WINDOW), math.degrees(PLANE_WINDOW))))
 
 
 # --------------------------------------------------------------------------------------- 2. hemisphere
@@ -319,6 +200,12 @@ def plot_hemisphere(path, fit_result, theta_i: float = math.radians(30.0), chann
     Returns:
         ``path`` as a string.
     """
+    return hemisphere_drawing(fit_result, theta_i, channels, resolution)(path)
+
+
+def hemisphere_drawing(fit_result, theta_i: float = math.radians(30.0), channels=None,
+                       resolution: int = 161) -> Drawing:
+    """What `plot_hemisphere` draws (arguments the same, but the path), as a `Drawing`."""
     u = np.linspace(-1.0, 1.0, resolution)
     x, y = np.meshgrid(u, u)
     r = np.hypot(x, y)
@@ -332,34 +219,14 @@ def plot_hemisphere(path, fit_result, theta_i: float = math.radians(30.0), chann
     weighted = f * np.cos(to[inside])[:, None]
     pos = weighted[weighted > 0]
     vmax = float(pos.max()) if pos.size else 1.0
-    norm = LogNorm(vmin=max(vmax * 1e-2, float(pos.min()) if pos.size else vmax * 1e-2), vmax=vmax)
-    fig = _new_figure("hemisphere")
-    axes = fig.subplots(1, len(shown), squeeze=False)[0]
-    image = None
-    for ax, c in zip(axes, shown):
+    vmin = max(vmax * 1e-2, float(pos.min()) if pos.size else vmax * 1e-2)
+    grids = []
+    for c in shown:
         grid = np.full(x.shape, np.nan)
-        grid[inside] = np.maximum(weighted[:, c], norm.vmin)
-        image = ax.imshow(grid, origin="lower", extent=(-1, 1, -1, 1), norm=norm, cmap="inferno")
-        t = np.linspace(0, 2 * math.pi, 200)
-        for deg in (30, 60):
-            ax.plot(np.sin(np.radians(deg)) * np.cos(t), np.sin(np.radians(deg)) * np.sin(t), color="0.6", lw=0.6)
-            ax.text(np.sin(np.radians(deg)) * 0.72, np.sin(np.radians(deg)) * 0.72, f"θo={deg}°", color="white",
-                    fontsize=7, ha="center", va="center", bbox=dict(fc="0.2", alpha=0.6, lw=0, pad=1))
-        ax.plot([-np.sin(theta_i)], [0.0], "c+", ms=10, mew=1.5, label="mirror direction")
-        ax.plot([np.sin(theta_i)], [0.0], "wx", ms=7, mew=1.5, label="light (ωi)")
-        ax.set_title(f"channel {names[c]}", fontsize=10)
-        ax.set_xlabel("sinθo cosφo")
-        ax.set_ylabel("sinθo sinφo")
-        ax.set_aspect("equal")
-        ax.set_facecolor("0.85")
-        ax.legend(fontsize=7, loc="lower left", facecolor="0.45", labelcolor="white")
-    fig.suptitle(f"Fitted {fit_result.spec}: f_r cosθo over the outgoing hemisphere, "
-                 f"θi = {np.degrees(theta_i):.0f}°, "
-                 "φi = 0° (orthographic projection, rim = horizon)", fontsize=11)
-    cax = fig.add_axes((0.93, 0.15, 0.015, 0.7))
-    fig.colorbar(image, cax=cax, label="f_r cosθo (1/sr), log scale")
-    _plain_log_labels(cax.yaxis)
-    return _save(fig, path)
+        grid[inside] = np.maximum(weighted[:, c], vmin)
+        grids.append(grid)
+    return Drawing("draw_hemisphere", dict(spec=fit_result.spec, theta_i=float(theta_i), grids=grids,
+                                           names=[names[c] for c in shown], vmin=vmin, vmax=vmax))
 
 
 # ----------------------------------------------------------------------------------------- 3. residuals
@@ -396,30 +263,14 @@ def plot_residual_map(path, measurements, fit_result, bins: int = 18) -> str:
     Returns:
         ``path`` as a string.
     """
+    return residual_drawing(measurements, fit_result, bins)(path)
+
+
+def residual_drawing(measurements, fit_result, bins: int = 18) -> Drawing:
+    """What `plot_residual_map` draws (arguments the same, but the path), as a `Drawing`."""
     eh, ed, mean, count = residual_map(measurements, fit_result, bins)
-    shown = list(range(min(mean.shape[0], 3)))
-    finite = np.abs(mean[np.isfinite(mean)])
-    lim = float(np.percentile(finite, 98)) if finite.size else 1.0
-    lim = lim if lim > 0 else 1e-3
-    norm = TwoSlopeNorm(vcenter=0.0, vmin=-lim, vmax=lim)
-    fig = _new_figure("residuals")
-    axes = fig.subplots(1, len(shown), squeeze=False)[0]
-    image = None
-    for ax, c in zip(axes, shown):
-        image = ax.imshow(np.clip(mean[c], -lim, lim), origin="lower", extent=(eh[0], eh[-1], ed[0], ed[-1]),
-                          norm=norm, cmap="RdBu_r", aspect="auto")
-        ax.set_facecolor("0.8")
-        n = count[c].sum()
-        rms = float(np.sqrt(np.nanmean(mean[c] ** 2))) if np.isfinite(mean[c]).any() else float("nan")
-        ax.set_title(f"channel {measurements.channels[c]}: {int(n)} samples, RMS of bin means {rms:.2g}",
-                     fontsize=9)
-        ax.set_xlabel("θh, half-vector angle (°)")
-        ax.set_ylabel("θd, difference angle (°)")
-    fig.suptitle(f"Relative residual (model − data)/data of {fit_result.spec}, mean per {90 / bins:.0f}° bin "
-                 "(grey: no data)", fontsize=11)
-    cax = fig.add_axes((0.89, 0.15, 0.015, 0.7))
-    fig.colorbar(image, cax=cax, label="(model − data) / data")
-    return _save(fig, path)
+    return Drawing("draw_residuals", dict(spec=fit_result.spec, channels=list(measurements.channels), edges_h=eh,
+                                          edges_d=ed, mean=mean, count=count, bins=bins))
 
 
 # --------------------------------------------------------------------------------------- 4-5. posterior
@@ -443,7 +294,7 @@ def plot_corner(path, posterior, fit_result=None) -> str:
     labels = [param_axis_label(fit_result, n) if fit_result is not None else n for n in names]
     fits = [posterior.fit_values.get(n, np.nan) for n in names]
     k = len(cols)
-    fig = _new_figure("corner")
+    fig = new_figure("corner")
     axes = fig.subplots(k, k, squeeze=False)
     for i in range(k):
         for j in range(k):
@@ -480,7 +331,7 @@ def plot_corner(path, posterior, fit_result=None) -> str:
                  + (f" (first {k} of {len(posterior.names)} parameters)" if k < len(posterior.names) else ""),
                  fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def plot_traces(path, posterior, fit_result=None) -> str:
@@ -496,7 +347,7 @@ def plot_traces(path, posterior, fit_result=None) -> str:
     cols = _posterior_columns(posterior)
     chain = np.asarray(posterior.chain)
     tau = list(posterior.diagnostics.get("tau", [np.nan] * chain.shape[2]))
-    fig = _new_figure("traces")
+    fig = new_figure("traces")
     axes = fig.subplots(len(cols), 1, squeeze=False, sharex=True)[:, 0]
     steps = np.arange(chain.shape[0])
     for ax, i in zip(axes, cols):
@@ -515,7 +366,7 @@ def plot_traces(path, posterior, fit_result=None) -> str:
                  f"max τ {d.get('tau_max', float('nan')):.1f} steps; shaded: burn-in ({posterior.burn} steps)",
                  fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # ------------------------------------------------------------------------------------------- 6. albedo
@@ -539,28 +390,15 @@ def plot_albedo(path, fit_result, channels=None, n: int = 46, albedo: np.ndarray
     Returns:
         ``path`` as a string.
     """
+    return albedo_drawing(fit_result, channels, n, albedo)(path)
+
+
+def albedo_drawing(fit_result, channels=None, n: int = 46, albedo: np.ndarray | None = None) -> Drawing:
+    """What `plot_albedo` draws (arguments the same, but the path), as a `Drawing`."""
     albedo = albedo_curve(fit_result, n) if albedo is None else np.asarray(albedo)
-    theta = np.radians(np.linspace(0.0, 89.0, len(albedo)))
     names = list(channels) if channels is not None else [f"c{i}" for i in range(albedo.shape[1])]
-    colours = _channel_colours(names)
-    fig = _new_figure("albedo")
-    ax = fig.subplots()
-    for c in range(albedo.shape[1]):
-        ax.plot(np.degrees(theta), albedo[:, c], color=colours[c], lw=1.5, label=f"channel {names[c]}")
-    ax.axhline(1.0, color="k", ls="--", lw=1, label="energy conservation (a = 1)")
-    top = max(1.1, float(np.nanmax(albedo)) * 1.05)
-    ax.set_ylim(0.0, top)
-    ax.set_xlim(0, 90)
-    if _at_the_view(fit_result):  # the albedo the plausibility check judges (`_fit_albedo`)
-        ax.set_xlabel("θo, viewing angle (°)")
-        ax.set_ylabel("albedo at the view a(θo) = ∫ f_r cosθi dωi (1)")
-    else:
-        ax.set_xlabel("θi, incidence angle (°)")
-        ax.set_ylabel("directional albedo a(θi) (1)")
-    ax.set_title(f"Directional albedo of the fitted {fit_result.spec}\nmax {float(np.nanmax(albedo)):.3f}")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="lower left")
-    return _save(fig, path)
+    return Drawing("draw_albedo", dict(spec=fit_result.spec, albedo=albedo, names=names,
+                                       at_the_view=_at_the_view(fit_result)))
 
 
 def spectral_axis(measurements, channels: int):
@@ -599,7 +437,7 @@ def plot_spectra(path, fit_result, wavelengths) -> str:
     """
     specs = fit_result.models[0].param_specs
     names = spectral_parameters(fit_result)
-    fig = _new_figure("spectra")
+    fig = new_figure("spectra")
     axes = fig.subplots(1, len(names), squeeze=False)[0]
     for ax, name in zip(axes, names):
         value = np.asarray(fit_result.params[name], dtype=float)
@@ -614,7 +452,7 @@ def plot_spectra(path, fit_result, wavelengths) -> str:
         ax.legend(fontsize=8)
     fig.suptitle(f"Fitted {fit_result.spec}: amplitudes per band ({len(wavelengths)} bands, "
                  f"{wavelengths.min():g}–{wavelengths.max():g} nm), stderr {fit_result.stderr_kind}", fontsize=11)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 # ------------------------------------------------------------------------------------------ 7. spheres
@@ -640,7 +478,7 @@ def plot_renderer_view(path, measurements, free_result, target_result, target: s
                f"free: {free_result.spec}\nheld-out error {errors[0]:.4g}"),
               (_as_srgb(_render_fit(target_result, resolution), measurements),
                f"for {target}: {target_result.spec}\nheld-out error {errors[1]:.4g} ({errors[1] / errors[0]:.2f}x)")]
-    fig = _new_figure("renderer")
+    fig = new_figure("renderer")
     for ax, (img, title) in zip(fig.subplots(1, 3), images):
         shown = _display(img, 1.0)
         ax.imshow(shown, cmap="gray" if shown.ndim == 2 else None, vmin=0, vmax=1)
@@ -648,7 +486,7 @@ def plot_renderer_view(path, measurements, free_result, target_result, target: s
         ax.set_xticks([]), ax.set_yticks([])
     fig.suptitle(f"The renderer's view ({resolution}×{resolution} px, key/fill/rim lights, Reinhard tone map): "
                  f"the data, the best free model and the best model {target} represents", fontsize=11)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def sphere_images(measurements, fit_result, resolution: int = 160):
@@ -673,20 +511,12 @@ def plot_spheres(path, measurements, fit_result, resolution: int = 160) -> str:
     Returns:
         ``path`` as a string.
     """
+    return spheres_drawing(measurements, fit_result, resolution)(path)
+
+
+def spheres_drawing(measurements, fit_result, resolution: int = 160) -> Drawing:
+    """What `plot_spheres` draws (arguments the same, but the path), as a `Drawing`."""
     data, fitted, diff = sphere_images(measurements, fit_result, resolution)
-    fig = _new_figure("spheres")
-    axes = fig.subplots(1, 3)
-    for ax, img, title in ((axes[0], data, "measurement (k-NN interpolated)"), (axes[1], fitted, "fit")):
-        shown = _display(img, 1.0)
-        ax.imshow(shown, cmap="gray" if shown.ndim == 2 else None, vmin=0, vmax=1)
-        ax.set_title(title, fontsize=10)
-        ax.set_xticks([]), ax.set_yticks([])
     lit = diff[np.asarray(data).sum(axis=-1) > 0] if np.ndim(data) == 3 else diff
-    vmax = float(np.percentile(lit, 99)) if lit.size else 1.0
-    image = axes[2].imshow(diff, cmap="magma", vmin=0.0, vmax=max(vmax, 1e-3))
-    axes[2].set_title(f"relative difference (median {float(np.median(lit)) if lit.size else 0:.2g})", fontsize=10)
-    axes[2].set_xticks([]), axes[2].set_yticks([])
-    fig.colorbar(image, ax=axes[2], fraction=0.046, pad=0.04, label="|Y_fit − Y_data| / Y_data")
-    fig.suptitle(f"Sphere previews ({resolution}×{resolution} px, key/fill/rim lights, Reinhard tone map): "
-                 f"data vs fitted {fit_result.spec}", fontsize=11)
-    return _save(fig, path)
+    return Drawing("draw_spheres", dict(spec=fit_result.spec, data=_display(data, 1.0), fitted=_display(fitted, 1.0),
+                                        diff=diff, lit=np.asarray(lit), resolution=resolution))
