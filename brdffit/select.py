@@ -17,7 +17,6 @@ import re
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
-import jax
 import numpy as np
 
 from .blas_threads import one_blas_thread
@@ -27,10 +26,11 @@ from .fitting.api import COARSE_ATOL, COARSE_RTOL, fit
 from .fitting.outcome import Status
 from .fitting.result import FitResult
 from .fitting.solvers import coarse_solver
-from .fitting.losses import loss_epsilon
-from .models.model import evaluate_dirs
+from .fitting.losses import get_loss, loss_epsilon
+from .arrays import to_device
+from .models.model import EVALUATION_ROWS, evaluate_dirs, evaluation_program
 from .fitting.progressive import new_lobe_candidates
-from .fitting.problem import Problem, make_fit_data, residuals_at
+from .fitting.problem import make_fit_data
 from .fitting.status import information_criteria
 from .progress import Progress
 
@@ -216,8 +216,9 @@ class Selection:
 
 
 def _loss_residuals(result: FitResult, measurements):
-    """The fit's loss residuals on every sample ``(N, C)``, NaN where the data are missing (one compiled program
-    per model and data size serves the full-data cost and any rows' held-out error).
+    """The fit's loss residuals on every sample ``(N, C)``, NaN where the data are missing: the model evaluated by
+    `brdffit.evaluate_dirs` (one compiled program per model structure, the one that the plausibility checks and the
+    report run too) and the loss formed on the host (`brdffit.fitting.losses`, in NumPy).
 
     Arguments:
         result: a fit with a model.
@@ -227,26 +228,26 @@ def _loss_residuals(result: FitResult, measurements):
         ``(residuals, evaluation)``: ``evaluation`` is what `_cost_ns` times.
     """
     model = result.model
-    problem = Problem(lobes=model.lobes, channels=model.channels, free=(), loss=result.loss, robust=None,
-                      solver=None, max_steps=0)
-    data = make_fit_data(measurements, {}, loss_epsilon(result.loss, measurements.values), pad=True)
-    params = dict(model.params)
-    r = np.asarray(residuals_at(problem, params, data))[:measurements.n]
-    return np.where(np.asarray(data.mask)[:measurements.n], r, np.nan), (problem, params, data)
+    data = make_fit_data(measurements, {}, loss_epsilon(result.loss, measurements.values), device=False)
+    f = evaluate_dirs(model, data.pair.wi, data.pair.wo)
+    r = get_loss(result.loss).residuals(f, data.values, data.cos_i, data.sqrt_weight, data.sigma, data.eps)
+    return np.where(data.mask, r, np.nan), (model, data.pair.wi, data.pair.wo)
 
 
 def _cost_ns(evaluation) -> float:
     """The evaluation cost of a `_loss_residuals` ``evaluation`` in nanoseconds per sample: the best of
-    `_COST_REPEATS` further calls of its compiled program (the model's evaluation dominates it: a selection's
-    ``cost_ns``, measured without tracing and compiling another program for each candidate). Called while no other
-    candidate is being fitted."""
-    problem, params, data = evaluation
+    `_COST_REPEATS` calls of the compiled program that evaluated it (`brdffit.models.model.evaluation_program`, on
+    its samples repeated or cut to one call's `EVALUATION_ROWS`; a selection's ``cost_ns``, measured without
+    compiling another program for each candidate). Called while no other candidate is being fitted."""
+    model, wi, wo = evaluation
+    run = evaluation_program(model)
+    block = [to_device(np.resize(a, (EVALUATION_ROWS, 3))) for a in (wi, wo)]
     best = math.inf
     for _ in range(_COST_REPEATS):
         t0 = time.perf_counter()
-        jax.block_until_ready(residuals_at(problem, params, data))
+        np.asarray(run(*block))
         best = min(best, time.perf_counter() - t0)
-    return 1e9 * best / int(np.shape(data.values)[0])
+    return 1e9 * best / EVALUATION_ROWS
 
 
 def _rms(r: np.ndarray) -> float:

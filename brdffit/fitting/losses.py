@@ -69,8 +69,9 @@ def _log_weight(f_data, cos_i, sqrt_weight, sigma, eps):
 
 
 def _log_residual(f_model, f_data, cos_i, sqrt_weight):
+    xp = np if isinstance(f_model, np.ndarray) else jnp  # NumPy on the host (a selection's held-out errors)
     c = cos_i[:, None]
-    return (jnp.log1p(f_model * c) - jnp.log1p(f_data * c)) * sqrt_weight[:, None]
+    return (xp.log1p(f_model * c) - xp.log1p(f_data * c)) * sqrt_weight[:, None]
 
 
 _REGISTRY = (

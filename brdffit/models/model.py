@@ -17,7 +17,7 @@ from ..geometry import LocalPair, spherical_to_vector
 from ..params import ParamSpec, ParamTable
 from .layout import Layout, layout
 
-__all__ = ["Model", "evaluate", "evaluate_dirs", "evaluate_pair"]
+__all__ = ["Model", "evaluate", "evaluate_dirs", "evaluate_pair", "evaluation_program", "EVALUATION_ROWS"]
 
 
 class Model(eqx.Module):
@@ -140,6 +140,13 @@ def evaluate_dirs(model: Model, wi, wo):
     (f,) = padded_columns(lambda *rows: _evaluate_rows(model, *rows), wi.reshape(-1, 3), wo.reshape(-1, 3),
                           chunk=EVALUATION_ROWS, least=EVALUATION_ROWS)
     return f.reshape(wi.shape[:-1] + (model.channels,))
+
+
+def evaluation_program(model: Model):
+    """``run(wi, wo)``: the compiled program that `evaluate_dirs` calls for ``model``, on `EVALUATION_ROWS` pairs of
+    unit vectors ``(EVALUATION_ROWS, 3)`` already on the device, without `evaluate_dirs`' padding and copies on the
+    host: the model's evaluation alone, for timing it."""
+    return lambda wi, wo: _evaluate_rows(model, wi, wo)
 
 
 def evaluate_pair(model: Model, pair: LocalPair):
