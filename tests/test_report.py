@@ -227,7 +227,8 @@ def test_albedo_of_a_layered_renderer_model_is_its_albedo_at_each_view():
 
 def test_a_drawing_worker_writes_the_same_figures_as_this_process_and_stands_in_for_itself(fitted, tmp_path):
     """A `DrawingWorker` (a process of its own, matplotlib without JAX) writes byte for byte the PNGs that this
-    process writes from the same `Drawing`s; where its process is gone, `finish` draws them here."""
+    process writes from the same `Drawing`s, given one at a time or all at once (the caller then draws those the
+    worker has not taken); where its process is gone, `finish` draws them here."""
     meas, result, _ = fitted
     drawings = {"slices": F.slices_drawing(meas, result), "residuals": F.residual_drawing(meas, result),
                 "albedo": F.albedo_drawing(result, channels=meas.channels),
@@ -238,9 +239,15 @@ def test_a_drawing_worker_writes_the_same_figures_as_this_process_and_stands_in_
     for name, drawing in drawings.items():
         drawing(here / f"{name}.png")
     with DrawingWorker.start() as worker:
-        for name, drawing in drawings.items():
+        for name, drawing in drawings.items():  # one at a time: the worker is given each (the caller takes none)
             worker.send(there / f"{name}.png", drawing)
-        assert worker.finish() == [str(there / f"{name}.png") for name in drawings]
+            worker.finish()
+        assert worker.given == len(drawings)
+    with DrawingWorker.start() as shared:  # all at once: the worker is given the first, the caller takes the others
+        for name, drawing in drawings.items():
+            shared.send(tmp_path / f"shared-{name}.png", drawing)
+        shared.finish()
+        assert shared.given >= 1
     with DrawingWorker.start() as gone:
         gone._process.kill()
         gone._process.wait()
@@ -250,6 +257,7 @@ def test_a_drawing_worker_writes_the_same_figures_as_this_process_and_stands_in_
     for name in drawings:
         expected = (here / f"{name}.png").read_bytes()
         assert (there / f"{name}.png").read_bytes() == expected, name
+        assert (tmp_path / f"shared-{name}.png").read_bytes() == expected, name
         assert (fallback / f"{name}.png").read_bytes() == expected, name
 
 

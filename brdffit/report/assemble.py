@@ -409,9 +409,9 @@ def _write_text(path: Path, text: str) -> None:
         Path(tmp).write_text(text, encoding="utf-8")
 
 
-# The figures a `brdffit.report.worker.DrawingWorker` draws, where the report has one: about half of the drawing
+# The figures queued for a `brdffit.report.worker.DrawingWorker`, where the report has one: about half of the drawing
 # time of a fit's report (the slices take a third of it, the residuals and the albedo curve a quarter together), the
-# other half being drawn here while the worker draws.
+# other half being drawn here meanwhile; those the worker has not taken by then are drawn here too.
 HANDED = frozenset({"slices", "residuals", "albedo"})
 
 
@@ -434,7 +434,8 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
             recorded exports of this fit with their achieved error, and a log that could not be read is named
             under Warnings. Without it, the section shows the direct mappings only.
         worker: an optional `brdffit.report.worker.DrawingWorker` (started earlier, so that its imports are done):
-            it draws the figures of `HANDED` while this process computes and draws the others.
+            the figures of `HANDED` are queued for it while this process computes and draws the others (those it
+            has not taken by then are drawn here).
 
     Returns:
         ``{"html": path, "md": path, "figures": [paths]}`` (strings).
