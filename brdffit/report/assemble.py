@@ -467,8 +467,8 @@ def write_report(out_dir, measurements, fit_result, *, posterior=None, selection
         rows = {row["spec"]: row for row in selection.table}
         free = selection.results[selection.chosen_by_criterion]
         errors = (rows[selection.chosen_by_criterion]["heldout_error"], rows[selection.chosen]["heldout_error"])
-        jobs.append(("renderer", lambda: lambda p: F.plot_renderer_view(p, measurements, free, fit_result,
-                                                                        selection.target, errors)))
+        jobs.append(("renderer", lambda: F.renderer_drawing(measurements, free, fit_result, selection.target,
+                                                            errors)))
     drawn = []
     with F.drawing_style():
         for name, make in jobs:  # each gives a `Drawing`, or a function that draws the figure

@@ -25,7 +25,7 @@ from matplotlib.ticker import LogFormatter, LogLocator
 from ..io._common import atomic_path
 
 __all__ = ["Drawing", "drawing_style", "DPI", "FIGSIZE", "draw_slices", "draw_hemisphere", "draw_residuals",
-           "draw_albedo", "draw_spheres"]
+           "draw_albedo", "draw_spheres", "draw_renderer_view"]
 
 # Resolution of every PNG and the size of each figure in inches: a figure of size (w, h) is w*DPI x h*DPI pixels.
 DPI = 100
@@ -288,10 +288,8 @@ def draw_spheres(path, *, spec: str, data, fitted, diff, lit, resolution: int) -
     ``lit``."""
     fig = new_figure("spheres")
     axes = fig.subplots(1, 3)
-    for ax, shown, title in ((axes[0], data, "measurement (k-NN interpolated)"), (axes[1], fitted, "fit")):
-        ax.imshow(shown, cmap="gray" if shown.ndim == 2 else None, vmin=0, vmax=1)
-        ax.set_title(title, fontsize=10)
-        ax.set_xticks([]), ax.set_yticks([])
+    _sphere_panel(axes[0], data, "measurement (k-NN interpolated)")
+    _sphere_panel(axes[1], fitted, "fit")
     vmax = float(np.percentile(lit, 99)) if lit.size else 1.0
     image = axes[2].imshow(diff, cmap="magma", vmin=0.0, vmax=max(vmax, 1e-3))
     axes[2].set_title(f"relative difference (median {float(np.median(lit)) if lit.size else 0:.2g})", fontsize=10)
@@ -300,3 +298,21 @@ def draw_spheres(path, *, spec: str, data, fitted, diff, lit, resolution: int) -
     fig.suptitle(f"Sphere previews ({resolution}×{resolution} px, key/fill/rim lights, Reinhard tone map): "
                  f"data vs fitted {spec}", fontsize=11)
     return save(fig, path)
+
+
+def draw_renderer_view(path, *, target: str, images, titles, resolution: int) -> str:
+    """The renderer's view (`brdffit.report.figures.plot_renderer_view`): the displayable sphere images of the data,
+    the free fit and the target's fit, with their titles."""
+    fig = new_figure("renderer")
+    for ax, shown, title in zip(fig.subplots(1, 3), images, titles):
+        _sphere_panel(ax, shown, title)
+    fig.suptitle(f"The renderer's view ({resolution}×{resolution} px, key/fill/rim lights, Reinhard tone map): "
+                 f"the data, the best free model and the best model {target} represents", fontsize=11)
+    return save(fig, path)
+
+
+def _sphere_panel(ax, shown, title: str) -> None:
+    """A sphere preview in ``ax``: a displayable image (RGB, or grey ``(R, R)``, in [0, 1]), titled, no axes."""
+    ax.imshow(shown, cmap="gray" if shown.ndim == 2 else None, vmin=0, vmax=1)
+    ax.set_title(title, fontsize=10)
+    ax.set_xticks([]), ax.set_yticks([])

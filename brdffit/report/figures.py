@@ -1,8 +1,10 @@
 r"""The report's figures: one function per figure, each takes data objects and a path and writes one PNG.
 
-What a figure shows is computed here (the model's values, renders and residuals); each ``*_drawing`` function
-returns it as a `brdffit.report.drawing.Drawing`, which `brdffit.report.drawing` draws with matplotlib alone (in
-this process, or in a helper process of its own: `brdffit.report.worker`), and each ``plot_*`` function does both.
+What a figure shows is computed here (the model's values, renders and residuals); for the figures of every report
+(slices, hemisphere, residuals, albedo, spheres) and the renderer's view, a ``*_drawing`` function returns it as a
+`brdffit.report.drawing.Drawing`, which `brdffit.report.drawing` draws with matplotlib alone (in this process, or in
+a helper process of its own: `brdffit.report.worker`), and the ``plot_*`` function does both; the posterior's
+figures and the spectra are drawn here.
 docs/report.md says how each figure is computed.
 """
 
@@ -472,21 +474,19 @@ def plot_renderer_view(path, measurements, free_result, target_result, target: s
     Returns:
         ``path`` as a string.
     """
-    images = [(_as_srgb(render_sphere(measurements, resolution=resolution), measurements),
-               "measurement (k-NN interpolated)"),
-              (_as_srgb(_render_fit(free_result, resolution), measurements),
-               f"free: {free_result.spec}\nheld-out error {errors[0]:.4g}"),
-              (_as_srgb(_render_fit(target_result, resolution), measurements),
-               f"for {target}: {target_result.spec}\nheld-out error {errors[1]:.4g} ({errors[1] / errors[0]:.2f}x)")]
-    fig = new_figure("renderer")
-    for ax, (img, title) in zip(fig.subplots(1, 3), images):
-        shown = _display(img, 1.0)
-        ax.imshow(shown, cmap="gray" if shown.ndim == 2 else None, vmin=0, vmax=1)
-        ax.set_title(title, fontsize=10)
-        ax.set_xticks([]), ax.set_yticks([])
-    fig.suptitle(f"The renderer's view ({resolution}×{resolution} px, key/fill/rim lights, Reinhard tone map): "
-                 f"the data, the best free model and the best model {target} represents", fontsize=11)
-    return save(fig, path)
+    return renderer_drawing(measurements, free_result, target_result, target, errors, resolution)(path)
+
+
+def renderer_drawing(measurements, free_result, target_result, target: str, errors: tuple,
+                     resolution: int = 160) -> Drawing:
+    """What `plot_renderer_view` draws (arguments the same, but the path), as a `Drawing`."""
+    images = [_as_srgb(render_sphere(measurements, resolution=resolution), measurements),
+              _as_srgb(_render_fit(free_result, resolution), measurements),
+              _as_srgb(_render_fit(target_result, resolution), measurements)]
+    titles = ["measurement (k-NN interpolated)", f"free: {free_result.spec}\nheld-out error {errors[0]:.4g}",
+              f"for {target}: {target_result.spec}\nheld-out error {errors[1]:.4g} ({errors[1] / errors[0]:.2f}x)"]
+    return Drawing("draw_renderer_view", dict(target=target, images=[_display(img, 1.0) for img in images],
+                                              titles=titles, resolution=resolution))
 
 
 def sphere_images(measurements, fit_result, resolution: int = 160):
