@@ -224,10 +224,16 @@ def bottom_series(rho, r):
     return total
 
 
+def cosine_roots():
+    """√μ of the cosines μ at which the lobe computes X and Y: j/(n − 1), n = `COSINE_NODES` (the nodes of their
+    interpolation, `through_the_base`)."""
+    return np.linspace(0.0, 1.0, COSINE_NODES)
+
+
 def cosines():
-    """The cosines at which the lobe computes X and Y: (j/(n − 1))², evenly spaced in √μ, the first moved to 1e-6
-    (X and Y have a limit at the horizon, where the direction itself is undefined), n = `COSINE_NODES`."""
-    return np.maximum(1e-6, np.linspace(0.0, 1.0, COSINE_NODES) ** 2)
+    """The cosines at which the lobe computes X and Y: `cosine_roots` squared, evenly spaced in √μ, the first moved
+    to 1e-6 (X and Y have a limit at the horizon, where the direction itself is undefined)."""
+    return np.maximum(1e-6, cosine_roots() ** 2)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -273,7 +279,7 @@ def through_the_base(cos_o, cos_i, rho, alpha, eta, xp):
     Returns:
         ``(..., C)`` in 1/sr.
     """
-    nodes = np.linspace(0.0, 1.0, COSINE_NODES)  # √μ of `cosines`
+    nodes = cosine_roots()
     x, y = transmission(cosines(), alpha, eta, xp=xp)
     root_o, root_i = (xp.sqrt(xp.clip(c, 0.0, 1.0)) for c in (cos_o, cos_i))
     through = cubic.read(x, nodes, root_o, xp) * cubic.read(y, nodes, root_i, xp) / (eta * eta)
