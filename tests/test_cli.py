@@ -558,22 +558,28 @@ def test_an_implausible_fit_warns_and_its_renderer_export_is_refused(tmp_path, c
     assert xml.is_file()
 
 
+def _console_script(argv, *, at_exit: str | None = None, after: str = "", timeout: float = 120):
+    """`brdffit.cli.run`, the console script's entry point, in a new process with ``argv``: ``at_exit`` an
+    expression that an exit handler registered first prints, ``after`` code after the call (never reached)."""
+    import subprocess
+
+    lines = ["import atexit, gc, sys", "from brdffit import cli"]
+    if at_exit is not None:
+        lines.append(f"atexit.register(lambda: print({at_exit}))")
+    lines += [f"sys.argv = ['brdffit'] + {[str(a) for a in argv]!r}", "cli.run()", after]
+    return subprocess.run([sys.executable, "-c", "\n".join(lines)], capture_output=True, text=True, timeout=timeout)
+
+
 def test_the_console_script_collects_garbage_less_often_and_a_callers_process_keeps_its_collector(tmp_path):
     """The console script's own process (`brdffit.cli.run`) collects with `COLLECTOR_THRESHOLDS` and has frozen the
     objects of the engine's imports once a command loaded it; `main` called in a caller's process changes neither
     (objects frozen there would never be collected)."""
     import gc
-    import subprocess
 
     from brdffit.cli import COLLECTOR_THRESHOLDS
 
-    out = tmp_path / "s.h5"
-    program = ("import atexit, gc, sys\n"
-               "from brdffit import cli\n"
-               "atexit.register(lambda: print('gc', gc.get_threshold(), gc.get_freeze_count()))\n"
-               f"sys.argv = ['brdffit', 'synth', 'lambert', '--n', '50', '--out', {str(out)!r}, '--quiet']\n"
-               "cli.run()\n")
-    proc = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120)
+    proc = _console_script(["synth", "lambert", "--n", "50", "--out", tmp_path / "s.h5", "--quiet"],
+                           at_exit="'gc', gc.get_threshold(), gc.get_freeze_count()")
     assert proc.returncode == EXIT_OK, proc.stderr
     words = proc.stdout.split()
     assert words[0] == "gc" and proc.stdout.startswith(f"gc {COLLECTOR_THRESHOLDS}")
@@ -587,19 +593,12 @@ def test_the_console_scripts_report_drawn_partly_by_its_worker_is_the_one_drawn_
     """`brdffit fit` in the console script's own process hands part of its report's figures to a
     `brdffit.report.worker.DrawingWorker`; they are byte for byte those that `brdffit report` draws in one process
     (`main`) from the same results file, and every figure is there."""
-    import subprocess
-
     from brdffit.report.assemble import HANDED
 
     data, fitted, again = tmp_path / "data.h5", tmp_path / "fit", tmp_path / "again"
     assert main(["synth", "lambert+ward", "--param", "alpha=0.2", "--noise", "relative:0.02", "--n", "600", "--out",
                  str(data), "--quiet"]) == EXIT_OK
-    program = ("import sys\n"
-               "from brdffit import cli\n"
-               f"sys.argv = ['brdffit', 'fit', {str(data)!r}, '--model', 'lambert+ward', '--out', {str(fitted)!r}, "
-               "'--quiet']\n"
-               "cli.run()\n")
-    proc = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=300)
+    proc = _console_script(["fit", data, "--model", "lambert+ward", "--out", fitted, "--quiet"], timeout=300)
     assert proc.returncode == EXIT_OK, proc.stderr
     assert main(["report", str(fitted / "result.h5"), "--out", str(again), "--quiet"]) == EXIT_OK
     names = sorted(p.name for p in fitted.glob("*.png"))
@@ -613,15 +612,7 @@ def test_the_console_script_flushes_its_output_runs_the_exit_handlers_and_keeps_
     """`brdffit.cli.run` ends the process without Python's finalisation: what `main` printed to a pipe (block
     buffered, so lost without the flush) reaches the reader, an exit handler registered before it still runs
     (after the output), and the process exits with `main`'s code."""
-    import subprocess
-
-    program = ("import atexit, sys\n"
-               "from brdffit import cli\n"
-               "atexit.register(lambda: print('exit handler ran'))\n"
-               f"sys.argv = ['brdffit'] + {argv!r}\n"
-               "cli.run()\n"
-               "print('not reached')\n")
-    proc = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120)
+    proc = _console_script(argv, at_exit="'exit handler ran'", after="print('not reached')")
     assert proc.returncode == code, proc.stderr
     assert proc.stdout.rstrip().endswith("exit handler ran") and "not reached" not in proc.stdout
     if code == EXIT_OK:
