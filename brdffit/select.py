@@ -27,6 +27,7 @@ from .fitting.outcome import Status
 from .fitting.result import FitResult
 from .fitting.solvers import coarse_solver
 from .fitting.losses import get_loss, loss_epsilon
+from .fitting.normal_equations import SLOT_ROWS
 from .arrays import to_device
 from .models.model import EVALUATION_ROWS, evaluate_dirs, evaluation_program
 from .fitting.progressive import new_lobe_candidates
@@ -64,8 +65,9 @@ SELECT_THREADS = min(4, os.cpu_count() or 1)
 # there are twice as many), and only those that can still be chosen are refitted to all the data. A subsample optimum costs the full data about
 # k (n/n_s − 1) more in the criterion's units for a well-specified model (the excess χ² of an estimate with n/n_s
 # times the full-data covariance); SCREEN_SLACK times k n/n_s bounds it for misspecified ones too
-# (docs/model-selection.md, and the measurement there).
-SCREEN_SAMPLES = 4096
+# (docs/model-selection.md, and the measurement there). As many as a slot of the passes (`SLOT_ROWS`): the screen's
+# polish of four starts and the refit of one point on four times as many rows run one compiled pass.
+SCREEN_SAMPLES = SLOT_ROWS
 # A measurement with more channels than this (a spectrum: 31 bands) is compared on this many averages of
 # contiguous channels, and only the chosen model is then fitted to every channel. With the shape shared by the
 # channels (the default channel mode), an average of channels is the same sum of lobes with those channels'

@@ -6,8 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdffit import models, synth
-from brdffit.fitting import api
+from brdffit import models, programs, synth
+from brdffit.fitting import api, normal_equations
 from brdffit.fitting.normal_equations import accumulate, chunks
 from brdffit.fitting.problem import flatten_free, make_fit_data, physical_params, residual_fn
 
@@ -116,3 +116,49 @@ def test_padding_to_a_bucket_changes_no_sum():
     with_pad, without = fit_metrics(model, data, pair=padded.pair), fit_metrics(model, data)
     for name in without:
         np.testing.assert_allclose(with_pad[name], without[name], rtol=1e-12)
+
+
+def test_four_points_on_slots_give_each_point_its_own_sums():
+    # Four points of one material on at most SLOT_ROWS samples (a polish's starts) run on the slotted pass, each
+    # slot a point on all the rows: each point's sums equal the dense Jacobian's at that point.
+    problem, physical, data = _setup("lambert+lafortune(lobes=2)")
+    assert normal_equations._slots((1, normal_equations.SLOTS), chunks(data), None) == "points"
+    points = [physical, dict(physical, n_1=jnp.asarray(3.0)), dict(physical, cxy_2=jnp.asarray(0.5)),
+              dict(physical, rho_d=jnp.asarray([0.1, 0.2, 0.3]))]
+    trees = {k: np.stack([np.asarray(p[k]) for p in points])[None] for k in problem.free}
+    got = accumulate(problem, trees, chunks(data))
+    for s, point in enumerate(points):
+        for g, w in zip(got.at_point(0, s), _dense(problem, point, data)):
+            np.testing.assert_allclose(g, w, rtol=1e-9, atol=1e-12 * np.max(np.abs(w)))
+
+
+def test_one_point_on_four_slices_runs_the_program_of_four_points(monkeypatch):
+    # One point on SLOTS × L samples runs on SLOTS slices of L (a selection's refit on four times its screen's
+    # rows): the program that four points on L samples compiled, nothing more; its sums are the plain pass's on
+    # the whole data, and the model values and tangents it keeps come back in the samples' order.
+    problem, physical, data = _setup("lambert+cook-torrance", n=2048)
+    quarter = jax.tree_util.tree_map(lambda a: a[:512] if np.ndim(a) and np.shape(a)[0] == 2048 else a, data)
+    assert normal_equations._slots((1, 1), chunks(data), None) == "rows"
+    compiled = []  # every signature a program compiles or loads (it is then kept in memory)
+    original = programs.Program._path
+
+    def counting(self, signature):
+        compiled.append(self._name)
+        return original(self, signature)
+
+    monkeypatch.setattr(programs.Program, "_path", counting)
+    four = {k: np.broadcast_to(np.asarray(v), (1, 4) + np.shape(v)) for k, v in physical.items()}
+    accumulate(problem, four, chunks(quarter))
+    before = list(compiled)
+    one = {k: np.asarray(v)[None, None] for k, v in physical.items()}
+    got, kept = accumulate(problem, one, chunks(data), values=True)
+    assert compiled == before, compiled[len(before):]
+    monkeypatch.setattr(normal_equations, "_slots", lambda *args: None)
+    plain, plain_kept = accumulate(problem, one, chunks(data), values=True)
+    for g, w in zip(got, plain):
+        if w is not None:
+            np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-15 * np.max(np.abs(w)))
+    for (a, f), (a0, f0) in zip(kept, plain_kept):
+        assert a.shape == a0.shape and f.shape == f0.shape
+        np.testing.assert_allclose(a, a0, rtol=1e-12, atol=1e-15 * np.max(np.abs(a0)))
+        np.testing.assert_allclose(np.asarray(f), np.asarray(f0), rtol=1e-12, atol=0)

@@ -152,7 +152,9 @@ class Marquardt:
 
 # A single start on this many samples or more is solved alone, not padded to POLISH_STARTS (`polish_width`). A
 # selection screens on a subsample of 4,096 rows from twice that many on (`brdffit.select.SCREEN_SAMPLES`); below,
-# its refits run on the screen's own data shape and share its padded programs.
+# its refits run on the screen's own data shape and share its padded programs. Alone, a start on up to four times
+# the screen's rows runs on slices of them (`brdffit.fitting.normal_equations.SLOTS`), the screen's program where
+# the slices are as long as the screen's rows.
 SINGLE_START_SAMPLES = 8192
 
 
@@ -160,7 +162,7 @@ def polish_width(count: int, samples: int) -> int:
     """The number of points a solve of ``count`` starts on ``samples`` samples runs: the next multiple of
     `POLISH_STARTS` (one compiled pass for a search's starts, a given start and the hold rounds), but a single
     start on `SINGLE_START_SAMPLES` or more samples alone: there every padding copy costs a pass over the data at
-    each step, and no search of a smaller subsample shares its shape."""
+    each step (its pass then runs on slices of the samples, `brdffit.fitting.normal_equations.SLOTS`)."""
     if count == 1 and samples >= SINGLE_START_SAMPLES:
         return 1
     return -(-count // POLISH_STARTS) * POLISH_STARTS

@@ -27,17 +27,27 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import on_host
+from ..arrays import on_device, on_host
 from ..metrics import MODEL_FLOOR, NOISE_MIN_COS, metric_sums
 from ..models.model import evaluate_pair
 from .losses import get_loss
-from .problem import BUCKET_CHUNK, FitData, Problem, physical_params, residuals_of, sample_pieces
+from .problem import BUCKET_CHUNK, PER_SAMPLE, FitData, Problem, physical_params, residuals_of, sample_pieces
 from ..programs import Program
+from .search import POLISH_STARTS
 
 __all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "timed_first_calls",
-           "shape_key", "metric_sums_of", "meat_of", "noise_grams_of", "NOISE_FORMS", "CHUNK_SAMPLES"]
+           "shape_key", "metric_sums_of", "meat_of", "noise_grams_of", "NOISE_FORMS", "CHUNK_SAMPLES", "SLOTS",
+           "SLOT_ROWS"]
 
 CHUNK_SAMPLES = BUCKET_CHUNK  # padded data then splits into whole chunks
+# A pass over one material's data of at most SLOTS × SLOT_ROWS samples runs on SLOTS slots of rows (`_slots`): the
+# polish's SLOTS starts each on all the rows (at most SLOT_ROWS), or one point on SLOTS equal slices of its rows.
+# Both are one compiled shape when the rows agree: a selection screens its candidates on SLOT_ROWS rows
+# (`brdffit.select.SCREEN_SAMPLES`) and refits the one it chooses from one point on all of them, which for an
+# RGL-EPFL file's 16,384 pairs is four slices of SLOT_ROWS: the refit runs the screen's program instead of compiling
+# the largest program of the selection at its end (the chosen three Lafortune lobes: a second of CPU).
+SLOTS = POLISH_STARTS
+SLOT_ROWS = 4096
 # The noise forms whose weighted Gram matrices an answer's pass forms (`noise_grams_of`): ``loss``, the residuals'
 # own (JᵀJ per channel, the Laplace covariance's), then the candidates of `brdffit.fitting.noise`.
 NOISE_FORMS = ("loss", "absolute", "relative", "signal", "cosine", "sigma")
@@ -126,27 +136,35 @@ _COMPILE_SECONDS = threading.local()  # per thread: `brdffit.select` fits candid
 
 @functools.lru_cache(maxsize=64)
 def pass_program(structure: Problem):
-    """The jitted pass of a problem structure (`Problem.structure`): ``fn(trees, data, materials=None) -> (A, f)``
-    with ``trees`` free name -> value ``(M, S) + shape`` (materials, points of each), ``data`` a `FitData` with a
-    leading material axis, ``A`` ``(M, S, C, Q + 1, N)`` the tangents and residuals of `_tangents` and ``f``
-    ``(M, S, N, C)`` the model values. With ``materials`` (integer indices ``(M,)``), row i of ``trees`` is
-    evaluated on material ``materials[i]`` of ``data``, gathered inside the program: the data of a batch stay on
-    the device, and a compact polish's passes move only the points and their indices (a host gather of the data
-    at every step cost a sizeable share of a `fit_many`). The first call of each shape compiles; the seconds are
-    added to `compile_seconds`."""
-    per_material = jax.vmap(jax.vmap(lambda tree, data: _tangents(structure, tree, data), in_axes=(0, None)),
-                            in_axes=(0, 0))
+    """The jitted pass of a problem structure (`Problem.structure`):
+    ``fn(trees, data, materials=None, slotted=False) -> (A, f)`` with ``trees`` free name -> value ``(M, S) + shape``
+    (materials, points of each), ``data`` a `FitData` with a leading material axis, ``A`` ``(M, S, C, Q + 1, N)``
+    the tangents and residuals of `_tangents` and ``f`` ``(M, S, N, C)`` the model values. With ``materials``
+    (integer indices ``(M,)``), row i of ``trees`` is evaluated on material ``materials[i]`` of ``data``, gathered
+    inside the program: the data of a batch stay on the device, and a compact polish's passes move only the points
+    and their indices (a host gather of the data at every step cost a sizeable share of a `fit_many`). With
+    ``slotted``, every leaf of ``data`` has a slot axis after the material axis, of length S: point s is evaluated
+    on slot s of the data (`_slots`). The first call of each shape compiles; the seconds are added to
+    `compile_seconds`."""
+    def point(tree, data):
+        return _tangents(structure, tree, data)
+
+    per_material = jax.vmap(jax.vmap(point, in_axes=(0, None)), in_axes=(0, 0))
     programs = (Program(per_material, f"pass {structure!r}"),
                 Program(lambda trees, data, index: per_material(trees, jax.tree_util.tree_map(lambda a: a[index],
                                                                                               data)),
-                        f"gathered pass {structure!r}"))
+                        f"gathered pass {structure!r}"),
+                Program(jax.vmap(jax.vmap(point, in_axes=(0, 0)), in_axes=(0, 0)), f"slotted pass {structure!r}"))
 
-    def fn(trees, data, materials=None):
+    def fn(trees, data, materials=None, slotted=False):
+        if slotted:
+            return programs[2](trees, data)
         if materials is None:
             return programs[0](trees, data)
         return programs[1](trees, data, np.asarray(materials, dtype=np.int32))
 
-    return timed_first_calls(fn, lambda trees, data, materials=None: shape_key(trees, data) + (materials is None,))
+    return timed_first_calls(fn, lambda trees, data, materials=None, slotted=False:
+                             shape_key(trees, data) + (materials is None, slotted))
 
 
 def shape_key(trees: dict, data: FitData) -> tuple:
@@ -313,14 +331,24 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
     fn = pass_program(problem.structure)
     q = len(problem.free)
     gram, kept = 0.0, []
+    slots = _slots(batch, pieces, materials)
     # A diverged solver (undamped Gauss-Newton far away) can overflow the products: inf/NaN then reach the
     # covariance as infinite standard errors, which is what they mean, without a warning per chunk.
     with np.errstate(over="ignore", invalid="ignore"):
         for piece in pieces:
             # The per-channel Gram matrices on the host: faster on the CPU than the same reductions in XLA (see
             # `_grams`), and a (M, S, C, Q + 1, N) transfer per chunk on a GPU.
-            a, f = fn(trees, piece, materials)
-            a = np.asarray(a)
+            if slots is None:
+                a, f = fn(trees, piece, materials)
+                a = np.asarray(a)
+            else:
+                a, f = fn({k: np.broadcast_to(v, (1, SLOTS) + np.shape(v)[2:]) for k, v in trees.items()},
+                          _slotted(piece, slots), None, True)
+                a = np.asarray(a)
+                if slots == "rows":  # the slices joined again in the samples' order: (1, 1, C, Q + 1, N), (1, 1, N, C)
+                    joined = np.ascontiguousarray(np.moveaxis(a, 1, -2))
+                    a = joined.reshape(a.shape[:1] + (1,) + a.shape[2:-1] + (-1,))
+                    f = jnp.reshape(f, (1, 1, -1, f.shape[-1]))
             kept.append((a, f))
             gram = gram + _grams(a)  # (M, S, C, Q+1, Q+1): tangents and residuals
         grams = noise_grams_of(problem, [a for a, _ in kept], [f for _, f in kept], pieces, materials,
@@ -336,6 +364,48 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
                                             else None),
                                noise_grams=grams)
     return (sums, kept) if values else sums
+
+
+def _slots(batch: tuple, pieces: list[FitData], materials) -> str | None:
+    """How a pass lays out a batch of one material on `SLOTS` slots (`SLOT_ROWS`), or None for the plain pass:
+    ``"points"`` for SLOTS points on one piece of at most SLOT_ROWS samples (each slot a point, on all the rows),
+    ``"rows"`` for one point on one piece of at most SLOTS × SLOT_ROWS samples (each slot a slice of the rows)."""
+    if materials is not None or len(pieces) != 1 or batch[0] != 1:
+        return None
+    rows = pieces[0].values.shape[1]
+    if batch[1] == SLOTS and rows <= SLOT_ROWS:
+        return "points"
+    if batch[1] == 1 and rows % SLOTS == 0 and rows <= SLOTS * SLOT_ROWS:
+        return "rows"
+    return None
+
+
+_SLOTTED = threading.local()  # per thread: the last pieces laid out on slots, with the pieces themselves
+
+
+def _slotted(piece: FitData, slots: str) -> FitData:
+    """``piece`` (one material) with a slot axis of `SLOTS` after its material axis, on the device: every slot the
+    same rows (``"points"``) or consecutive slices of them (``"rows"``); the per-material fields repeated. The
+    last few are kept per thread (a solver passes over the same pieces at every step)."""
+    cache = getattr(_SLOTTED, "pieces", None)
+    if cache is None:
+        cache = _SLOTTED.pieces = {}
+    held, out = cache.get((id(piece), slots), (None, None))
+    if held is piece:
+        return out
+    fields = on_host(piece._asdict())
+
+    def laid(name, a):
+        if name in PER_SAMPLE and slots == "rows":
+            return a.reshape((1, SLOTS, a.shape[1] // SLOTS) + a.shape[2:])
+        return np.broadcast_to(a[:, None], (1, SLOTS) + a.shape[1:])
+
+    out = FitData(**on_device({name: jax.tree_util.tree_map(lambda a, name=name: laid(name, a), value)
+                               for name, value in fields.items()}))
+    if len(cache) >= 4:
+        cache.pop(next(iter(cache)))
+    cache[(id(piece), slots)] = (piece, out)
+    return out
 
 
 def _grams(a: np.ndarray) -> np.ndarray:

@@ -23,9 +23,10 @@ from ..programs import Program
 
 __all__ = ["Problem", "FitData", "make_fit_data", "bucket", "BUCKET_CHUNK", "physical_params", "residual_fn", "residuals_at", "stack_data",
            "sample_pieces", "take_materials", "take_samples",
-           "flatten_free"]
+           "flatten_free", "PER_SAMPLE"]
 
-_PER_SAMPLE = ("pair", "values", "mask", "cos_i", "sqrt_weight", "sigma")
+# The fields of a `FitData` with a sample axis (the others hold one value per material).
+PER_SAMPLE = ("pair", "values", "mask", "cos_i", "sqrt_weight", "sigma")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -196,7 +197,7 @@ def _sample_fields(values, theta_i, phi_i, theta_o, phi_o, weights, sigma):
 def _per_sample(data: FitData) -> dict:
     """The per-sample fields of ``data``, which a subsample cuts (the others, ε, the robust scale and the fixed
     values, are a few numbers a material)."""
-    return {k: getattr(data, k) for k in _PER_SAMPLE}
+    return {k: getattr(data, k) for k in PER_SAMPLE}
 
 
 def take_samples(data: FitData, rows) -> FitData:
@@ -254,7 +255,7 @@ def sample_pieces(data: FitData, size: int) -> list[FitData]:
         return np.concatenate([part, np.zeros((a.shape[0], width - part.shape[1]) + a.shape[2:], a.dtype)], axis=1)
 
     return [FitData(**on_device(dict(fields, **{k: jax.tree_util.tree_map(lambda a: cut(a, start), fields[k])
-                                                 for k in _PER_SAMPLE})))
+                                                 for k in PER_SAMPLE})))
             for start in range(0, max(n, 1), width)]
 
 
