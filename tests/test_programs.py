@@ -56,8 +56,8 @@ def f(model, x, data):
     return jnp.cos(x) * data["a"] + jnp.sum(data["b"]) + model.params["rho_d"][0]
 program = Program(f, "test program")
 x = jnp.linspace(0.0, 1.0, 9)
-# A Model among the arguments: a pytree with custom nodes (equinox's), whose pickled tree does not unflatten in
-# another process; the kept executable takes the arguments' leaves.
+# A Model among the arguments: a pytree with custom nodes (a registered dataclass), whose pickled tree does not
+# unflatten in another process; the kept executable takes the arguments' leaves.
 model = brdffit.models.get("lambert", rho_d=0.0)
 out = program(model, x, {{"a": 3.0 * jnp.ones(9), "b": jnp.arange(9.0)}})
 print(json.dumps({{"traced": len(traced), "out": np.asarray(out).tolist()}}))

@@ -1,7 +1,7 @@
 """The parameter layout of a sum of lobes, computed once per structure.
 
 Every piece of code that maps a lobe's own parameter names to the model's, flattens parameter values into a
-vector, or labels the entries ``name`` / ``name[i]`` asks the `Layout` (as equinox computes a pytree's structure
+vector, or labels the entries ``name`` / ``name[i]`` asks the `Layout` (as JAX computes a pytree's structure
 once). `layout(lobes, channels)` is cached, so asking costs nothing after the first time.
 
 Model-level names: the k-th lobe declaring a name gets ``name_k``, unless another lobe declares that name itself

@@ -1,12 +1,16 @@
 """The model: a sum of lobes with its parameter values, as a JAX pytree.
 
 A `Model` can be passed straight into `jax.jit`, `jax.vmap` and `jax.grad`: its parameter values are the leaves,
-the lobes and channel count are static structure.
+the lobes and channel count are static structure. It is a frozen dataclass registered with JAX
+(``jax.tree_util.register_dataclass``), not an equinox Module: equinox (and jaxtyping with it) took 0.15-0.2 s to
+import at the start of every fit, and only an optimistix solver needs it.
 """
 
 from __future__ import annotations
 
-import equinox as eqx
+import dataclasses
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -20,7 +24,9 @@ from .layout import Layout, layout
 __all__ = ["Model", "evaluate", "evaluate_dirs", "evaluate_pair", "evaluation_program", "EVALUATION_ROWS"]
 
 
-class Model(eqx.Module):
+@functools.partial(jax.tree_util.register_dataclass, data_fields=["params"], meta_fields=["lobes", "channels"])
+@dataclasses.dataclass(frozen=True, eq=False)
+class Model:
     """A BRDF model: a sum of lobes and the values of their parameters.
 
     Build one with `brdffit.models.get`; evaluate it with `brdffit.evaluate` or `brdffit.evaluate_dirs`.
@@ -32,8 +38,8 @@ class Model(eqx.Module):
     """
 
     params: dict
-    lobes: tuple = eqx.field(static=True)
-    channels: int = eqx.field(static=True)
+    lobes: tuple
+    channels: int
 
     @property
     def spec(self) -> str:

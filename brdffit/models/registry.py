@@ -30,7 +30,7 @@ from .sheen import CharlieSheen, Sheen
 from .toon import ToonDiffuse, ToonSpecular
 from .ward import Ward, WardAniso, WardDuer
 
-# The composed Model (equinox, JAX) is loaded when a model is built, not when the registry is read.
+# The composed Model (JAX) is loaded when a model is built, not when the registry is read.
 _model = module("brdffit.models.model")
 _arrays = module("brdffit.arrays")  # NumPy, loaded with the model: reading the registry loads neither
 
