@@ -146,15 +146,16 @@ def pass_program(structure: Problem):
     ``slotted``, every leaf of ``data`` has a slot axis after the material axis, of length S: point s is evaluated
     on slot s of the data (`_slots`). The first call of each shape compiles; the seconds are added to
     `compile_seconds`."""
-    def point(tree, data):
+    def point_tangents(tree, data):  # the programs' name in JAX's logs and profiles
         return _tangents(structure, tree, data)
 
-    per_material = jax.vmap(jax.vmap(point, in_axes=(0, None)), in_axes=(0, 0))
+    per_material = jax.vmap(jax.vmap(point_tangents, in_axes=(0, None)), in_axes=(0, 0))
     programs = (Program(per_material, f"pass {structure!r}"),
                 Program(lambda trees, data, index: per_material(trees, jax.tree_util.tree_map(lambda a: a[index],
                                                                                               data)),
                         f"gathered pass {structure!r}"),
-                Program(jax.vmap(jax.vmap(point, in_axes=(0, 0)), in_axes=(0, 0)), f"slotted pass {structure!r}"))
+                Program(jax.vmap(jax.vmap(point_tangents, in_axes=(0, 0)), in_axes=(0, 0)),
+                        f"slotted pass {structure!r}"))
 
     def fn(trees, data, materials=None, slotted=False):
         if slotted:
