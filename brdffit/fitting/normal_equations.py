@@ -341,15 +341,14 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
             # `_grams`), and a (M, S, C, Q + 1, N) transfer per chunk on a GPU.
             if slots is None:
                 a, f = fn(trees, piece, materials)
-                a = np.asarray(a)
             else:
                 a, f = fn({k: np.broadcast_to(v, (1, SLOTS) + np.shape(v)[2:]) for k, v in trees.items()},
                           _slotted(piece, slots), None, True)
-                a = np.asarray(a)
-                if slots == "rows":  # the slices joined again in the samples' order: (1, 1, C, Q + 1, N), (1, 1, N, C)
-                    joined = np.ascontiguousarray(np.moveaxis(a, 1, -2))
-                    a = joined.reshape(a.shape[:1] + (1,) + a.shape[2:-1] + (-1,))
-                    f = jnp.reshape(f, (1, 1, -1, f.shape[-1]))
+            a = np.asarray(a)
+            if slots == "rows":  # the slices joined again in the samples' order: (1, 1, C, Q + 1, N), (1, 1, N, C)
+                joined = np.ascontiguousarray(np.moveaxis(a, 1, -2))
+                a = joined.reshape(a.shape[:1] + (1,) + a.shape[2:-1] + (-1,))
+                f = jnp.reshape(f, (1, 1, -1, f.shape[-1]))
             kept.append((a, f))
             gram = gram + _grams(a)  # (M, S, C, Q+1, Q+1): tangents and residuals
         grams = noise_grams_of(problem, [a for a, _ in kept], [f for _, f in kept], pieces, materials,
