@@ -7,19 +7,19 @@ gathered, `_COMPACT_POINTS`) is one compiled pass over the data
 JᵀJ, Jᵀr and the cost at the point, J in the physical free parameters. Because the residuals are affine in the
 amplitudes, those sums give the cost as a function of the amplitudes exactly: each pass first moves the amplitudes
 to their bounded optimum for the current outer parameters (the projection of `brdffit.fitting.separable`, here
-from the pass's own sums: cost(a') = cost + 2 gᵀΔ + Δᵀ G Δ, Δ = a' − a, with the same exact active-set solve; a
-second pass at the moved point where rounding may have spoilt that prediction, `_TRUSTED_SPREAD`, and, for a kept
-trial, where Δ jumped off a bound or beyond the amplitude's own size or changed the cost by more than
-`_TRUSTED_CHANGE`, so that the outer tangents are those of the projected point), then takes a
-Levenberg-Marquardt step
+from the pass's own sums: cost(a') = cost + 2 gᵀΔ + Δᵀ G Δ, Δ = a' − a, with the same exact active-set solve; no
+move where rounding may have spoilt that prediction, `_TRUSTED_SPREAD`, so that every cost the solver compares is
+measured or exactly predicted; and, for a kept trial, a second pass at the moved point where Δ jumped off a bound or
+beyond the amplitude's own size or changed the cost by more than `_TRUSTED_CHANGE`, so that the outer tangents are
+those of the projected point), then takes a Levenberg-Marquardt step
 
     (JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr        (Marquardt 1963, Eq. 29's scaling)
 
 over the outer parameters, in their unconstrained variables (`brdffit.params`; the chain rule maps their
 columns), and the amplitudes off their bounds: Kaufman's joint step (BIT 15, 1975). A step is accepted only if
-the projected cost does not increase; λ then shrinks tenfold if the step achieved at least `GAIN_RATIO` of the
-decrease its model predicted and stays otherwise (Moré 1978), and a rejected step grows it tenfold. A
-point has converged when its next step and its amplitude change are below ``rtol·|x| + atol`` (optimistix's
+the projected cost does not increase (at a kept trial's second pass too); λ then shrinks tenfold if the step
+achieved at least `GAIN_RATIO` of the decrease its model predicted and stays otherwise (Moré 1978), and a rejected
+step grows it tenfold. A point has converged when its next step and its amplitude change are below ``rtol·|x| + atol`` (optimistix's
 Cauchy test on the variables) with λ ≤ 1, so that damping cannot fake a small step, or with its last trial
 changing the cost by at most ``rtol·cost + atol`` (the Cauchy test on the cost: at the optimum, rounding rejects
 every trial and λ grows). It stops at ``max_steps``, or when λ exceeds 1e12 (no step of any length lowers the
@@ -105,10 +105,15 @@ EXACT_MOVE = 1e-6
 # arithmetic, where its terms are bounded by the cost: the quadratic is a sum of squares, nonnegative along the whole
 # line through Δ, so (gᵀΔ)² <= c ΔᵀGΔ, and as the projection does not raise the cost, |2gᵀΔ| + ΔᵀGΔ <= 9c. Its
 # rounding is of the order of 1e-16 N times the magnitude of its products, at most 2|g|ᵀ|Δ| + (Σ √G_kk |Δ_k|)²
-# (the spread). Where the spread exceeds this many times the pass's own cost, the prediction is not trusted and a
-# second pass evaluates the moved point before the solver uses its cost: a lobe whose Gram matrix is near 0 can jump
-# to 1e53 with a predicted cost that rounding made meaningless (Lambert + 3 Lafortune lobes on Ward data, 2,000
-# half-difference samples: the solve then "converged" at a cost of 3.2 that was 1.8e108, and the fit ended there).
+# (the spread). Where the spread exceeds this many times the smaller of the pass's own cost and the predicted one,
+# the prediction is not trusted: the point is not moved and keeps the cost its pass measured (`_Batch._project`). A
+# lobe whose Gram matrix is near 0 can jump to 1e53 with a predicted cost that rounding made meaningless (Lambert + 3
+# Lafortune lobes on Ward data, 2,000 half-difference samples: the solve "converged" at a cost of 3.2 that was
+# 1.8e108, and the fit ended there; a second pass at the moved point predicted 3.4 from a cost of 5e75 again). The
+# predicted cost is the one compared, so the spread is measured against it too: a trial whose pass cost 2.5e29 (a
+# Lafortune lobe of exponent 1.7e5 on a sample at its peak) with a spread of 7.6e29, 3 times that cost, predicted by
+# cancellation a cost below 0 (clipped to 0) where the moved point costs 70, and the step was taken from a cost of
+# 39.9 (Lambert + 2 Lafortune lobes on anisotropic GGX data, 500 samples).
 _TRUSTED_SPREAD = 1e6
 # A projection that changed the cost by more than this fraction, or that jumped an amplitude (`_REPASS`), has made
 # the outer parameters' tangents stale: an accepted trial is passed over again (`_Batch.refresh`).
@@ -291,12 +296,13 @@ class _Batch:
     def evaluate(self, x, base: "_State | None" = None, points=None, refresh: bool = True) -> _State:
         """A pass at ``x`` with the amplitudes then moved to their optimum. The sums predict the cost at the moved
         amplitudes exactly in exact arithmetic; where rounding may have made that prediction meaningless (a lobe
-        that sees almost no sample has a Gram matrix near 0, whose solve can jump to 1e118: `_TRUSTED_SPREAD`), a
-        second pass evaluates the moved point at once. With ``refresh``, so does every point whose tangents the
-        move made stale (`refresh`); the solver asks for that only for the trials it accepts, since a rejected
-        trial's tangents are never used (a sizeable share of those second passes of a Lambert + GGX `fit_many`).
-        Each point's second pass is its own: whether one point is evaluated again never changes another's path (a
-        fit's answer does not depend on the other starts and materials of its batch).
+        that sees almost no sample has a Gram matrix near 0, whose solve can jump to 1e118: `_TRUSTED_SPREAD`), the
+        point is not moved and keeps the cost its pass measured (`_project`). With ``refresh``, a second pass
+        evaluates every point whose tangents the move made stale (`refresh`); the solver asks for that only for
+        the trials it accepts, since a rejected trial's tangents are never used (a sizeable share of those second
+        passes of a Lambert + GGX `fit_many`). Each point's second pass is its own: whether one point is evaluated
+        again never changes another's path (a fit's answer does not depend on the other starts and materials of its
+        batch).
 
         Arguments:
             x: physical values ``(M, S, P)``.
@@ -310,9 +316,7 @@ class _Batch:
         if points is None:
             points = np.ones(x.shape[:2], bool)
         state = self._project(x, base, points)
-        with np.errstate(invalid="ignore"):  # a point whose pass was not finite has nothing to evaluate again
-            untrusted = np.isfinite(state.evaluated) & ~(state.spread <= _TRUSTED_SPREAD * np.abs(state.evaluated))
-        again = points & (untrusted | (self._stale(state) if refresh else False))
+        again = points & self._stale(state) if refresh else np.zeros(points.shape, bool)
         return self._project(state.x, state, again) if again.any() else state
 
     def refresh(self, state: _State, points) -> _State:
@@ -333,11 +337,17 @@ class _Batch:
             return moved | (np.abs(state.sums.cost - state.evaluated) > _TRUSTED_CHANGE * np.abs(state.evaluated))
 
     def _project(self, x, base: "_State | None", points) -> _State:
-        """`_pass` at the selected ``points`` of ``x``, each followed by its projection; the other points are
-        ``base``'s."""
+        """`_pass` at the selected ``points`` of ``x``, each followed by its projection, but for a point whose
+        projection's prediction rounding may have spoilt (`_TRUSTED_SPREAD`): that point stays where the pass
+        evaluated it, with the pass's own sums, whose cost is measured. The other points are ``base``'s."""
         sums, values = self._pass(x, base, points)
-        return self._projected(x, sums, values) if base is None or points.all() else \
-            self._projected(x, sums, values).where(points, base)
+        state = self._projected(x, sums, values)
+        with np.errstate(invalid="ignore"):  # a point whose pass was not finite has nothing to project
+            scale = np.minimum(np.abs(state.evaluated), state.sums.cost)
+            untrusted = np.isfinite(state.evaluated) & ~(state.spread <= _TRUSTED_SPREAD * scale)
+        if untrusted.any():
+            state = _State(x, sums, np.zeros(x.shape), values=values).where(untrusted, state)
+        return state if base is None or points.all() else state.where(points, base)
 
     def _pass(self, x, base: "_State | None", points):
         """The pass's sums (and, when the solve keeps them, arrays) at the ``points`` of ``x``: over the whole
@@ -579,9 +589,13 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
                                                axis=-1)
         better = (active & ~silencing & np.isfinite(candidate.sums.cost)
                   & (candidate.sums.cost <= state.sums.cost))
+        # The second pass of a kept trial (`_Batch.refresh`) measures the moved point itself: where it costs more than
+        # the current point after all, the trial is rejected, so that no step raises the cost.
+        candidate = batch.refresh(candidate, better)
+        better &= np.isfinite(candidate.sums.cost) & (candidate.sums.cost <= state.sums.cost)
         with np.errstate(invalid="ignore", divide="ignore"):
             poor = (candidate.sums.cost - state.sums.cost) / predicted < GAIN_RATIO
-        state = batch.refresh(candidate, better).where(better, state)
+        state = candidate.where(better, state)
         on_bound |= snap & better[..., None]
         barred |= snap & ((active & ~better & (lam >= 1.0)) | silencing)[..., None]
         lam = np.where(better, np.where(poor, lam, np.maximum(lam / 10.0, _MIN_DAMPING)),
