@@ -713,3 +713,34 @@ def test_a_declared_peak_is_where_the_lobe_is_large(name):
         at_peak = float(np.asarray(models.evaluate_dirs(model, wi, centre)).sum())
         assert at_peak > background, (peak, at_peak, background)
         assert 0.0 < peak.width <= 1.0 and peak.lobe == name
+
+
+@pytest.mark.parametrize("anisotropic", [False, True])
+def test_lafortune_spike_candidates_keep_the_band_of_incidence_their_attenuation_says(anisotropic):
+    """`Lafortune.sub_lobe_candidates`: cxy = −cz (1 + ε) with n ε = g. At the mirror direction of incidence θ the
+    normalised lobe (the NumPy transcription of Lafortune et al. 1997, Eq. 3 with Ngan et al.'s normalisation,
+    `reference_brdfs.lafortune`) is ((1 + ε sin²θ)/(1 + ε))^n for ε > 0 and (1 + ε sin²θ)^n for ε < 0, which for
+    large n is exp(−g cos²θ) and exp(g sin²θ)."""
+    lobe = models.get("lafortune", lobes=2, anisotropic=anisotropic).lobes[0]
+    # cz at its declared value 1: the transcription forms dot^n and max(|c|)^n apart, which underflow for cz < 1.
+    params = {"ks_2": 1.0, "cz_2": 1.0, "n_2": 10.0, "cxy_2": -1.0, "cx_2": -1.0, "cy_2": -1.0}
+    candidates = lobe.sub_lobe_candidates("ks_2", params)
+    assert len(candidates) == 20
+    theta = np.radians([5.0, 30.0, 60.0, 80.0])
+    phi = np.radians([0.0, 40.0, 130.0, 250.0])
+    for c in candidates:
+        n = c["n_2"]
+        xy = (c["cx_2"], c["cy_2"]) if anisotropic else (c["cxy_2"], c["cxy_2"])
+        assert xy[0] == xy[1]
+        eps = -xy[0] - 1.0
+        g = n * eps
+        assert any(abs(g - a) <= 1e-9 * abs(a) for a in (-30.0, 10.0, 30.0, 100.0, 300.0)), g
+        value = ref.lafortune(theta, phi, theta, phi + np.pi, [{"ks": np.ones(1), "cx": xy[0], "cy": xy[1],
+                                                                 "cz": 1.0, "n": n}])[:, 0]
+        s2 = np.sin(theta) ** 2
+        expected = ((1 + eps * s2) / (1 + eps)) ** n if eps > 0 else (1 + eps * s2) ** n
+        np.testing.assert_allclose(value * 2 * np.pi / (n + 2), expected, rtol=1e-9, atol=1e-300)
+        if g * g / n <= 0.01:  # the limit's exponent is off by about g² sin⁴θ / 2n
+            limit = np.exp(-g * np.cos(theta) ** 2) if eps > 0 else np.exp(g * s2)
+            np.testing.assert_allclose(expected, limit, rtol=0.02)
+    assert lobe.sub_lobe_candidates("ks_2", dict(params, cz_2=0.0)) == []

@@ -115,31 +115,33 @@ def _to_unit(value, spec) -> float:
     return float(np.clip((value - lo) / (hi - lo), 0.0, 1.0))
 
 
-def _grid_units(d: int, seed: int) -> np.ndarray:
-    """Points of the unit cube: a centred grid of up to 32 points per axis within `MAX_CANDIDATES` (one to three
-    dimensions), else scrambled Sobol points, which cover more dimensions better than 4 or fewer levels per axis."""
-    per_axis = min(32, int(math.floor(MAX_CANDIDATES ** (1.0 / d) + 1e-9)))
+def _grid_units(d: int, seed: int, count: int = MAX_CANDIDATES) -> np.ndarray:
+    """Points of the unit cube: a centred grid of up to 32 points per axis within ``count`` points (one to three
+    dimensions), else ``count`` scrambled Sobol points, which cover more dimensions better than 4 or fewer levels per
+    axis."""
+    per_axis = min(32, int(math.floor(count ** (1.0 / d) + 1e-9)))
     if per_axis >= 5:
         axes = [(np.arange(per_axis) + 0.5) / per_axis for _ in range(d)]
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
     from scipy.stats import qmc  # here, not at import: scipy.stats is slow to import
 
-    return qmc.Sobol(d, scramble=True, seed=seed).random(MAX_CANDIDATES)
+    return qmc.Sobol(d, scramble=True, seed=seed).random(count)
 
 
-def grid(specs: list, seed: int) -> list[dict]:
+def grid(specs: list, seed: int, count: int = MAX_CANDIDATES) -> list[dict]:
     """Settings of the named scalars on the search's grid over their search ranges (`_grid_units`).
 
     Arguments:
         specs: the `ParamSpec`s of the searched scalars.
         seed: seed of the Sobol points (four or more scalars).
+        count: the most points.
 
     Returns:
         A list of dicts name -> physical value (empty for no scalars).
     """
     if not specs:
         return []
-    return [{s.name: _from_unit(u[k], s) for k, s in enumerate(specs)} for u in _grid_units(len(specs), seed)]
+    return [{s.name: _from_unit(u[k], s) for k, s in enumerate(specs)} for u in _grid_units(len(specs), seed, count)]
 
 
 def _lobe_candidates(problem: Problem, names: set, seed: int) -> list[dict]:

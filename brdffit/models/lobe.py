@@ -90,6 +90,13 @@ class Lobe(abc.ABC):
         its grid. Lobes with several similar sub-lobes use this to start them apart. Default: none."""
         return []
 
+    def sub_lobe_candidates(self, amplitude: str, params: dict) -> list[dict]:
+        """Settings of the shape of the sub-lobe scaled by ``amplitude`` (local names, of its
+        `amplitude_partners`) worth trying when a fit searches that sub-lobe again with the rest of the model held
+        (`brdffit.fitting.api`'s lobe re-search), at the lobe's current ``params`` (local names): shapes that a
+        grid over each parameter's range cannot hit. Default: none."""
+        return []
+
     def amplitude_partners(self, amplitude: str) -> tuple[str, ...]:
         """Local names of the parameters that act only through the amplitude ``amplitude`` (its sub-lobe's shape):
         when the amplitude is 0 they are undetermined. Default: every other parameter of the lobe, or none for a
