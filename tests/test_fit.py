@@ -266,6 +266,8 @@ def test_bad_arguments_give_clear_errors(plastic):
         fit(data, "lambert", solver="newton-raphson")
     with pytest.raises(ValueError, match="channel_mode"):
         fit(data, "lambert", channel_mode="mixed")
+    with pytest.raises(ValueError, match="lobe_search must be True or False, got 'yes'"):
+        fit(data, "lambert", lobe_search="yes")
     with pytest.raises(KeyError, match="no parameter"):
         fit(data, "lambert", fixed={"alpha": 0.1})
     with pytest.raises(ValueError, match="sigma"):

@@ -58,11 +58,11 @@ COARSE_RESIDUALS = 150_000
 COARSE_SAMPLES = 10_000
 COARSE_RTOL, COARSE_ATOL = 1e-5, 1e-8
 # A sub-lobe searched again (`_revive`): its best separated settings are polished for PROBE_STEPS steps, and the
-# lowest of them, where it is still moving and already below the answer, goes on alone up to REVIVE_STEPS steps in
-# all. The probe tells the new basins apart (a spike that catches the samples at the mirror peak is below the
-# answer within 16 steps where it ends below it) at a quarter of a full revival's passes; the polishes it follows
-# converge in 20-60 steps from the search's starts, a spike's exponent in up to 100, and a revival that does not
-# converge is discarded (its steps are lost time).
+# lowest of them, where it is still moving and already REVIVE_GAIN below the answer, goes on alone up to
+# REVIVE_STEPS steps in all. The probe tells the new basins apart (a spike that catches the samples at the mirror
+# peak is below the answer within 16 steps where it ends below it) at a quarter of a full revival's passes; the
+# polishes it follows converge in 20-60 steps from the search's starts, a spike's exponent in up to 100, and a
+# revival that does not converge is discarded (its steps are lost time).
 PROBE_STEPS = 16
 REVIVE_STEPS = 128
 # The least relative gain for which a revival replaces the answer (and a probe goes on): the precision to which a
@@ -351,13 +351,14 @@ def _revive(problem: Problem, solve_problem: Problem, kept: SolveOutcome, search
     """Search sub-lobes' shapes again, the rest of one material's answer held: a grid over each one's shape
     parameters (`search.grid`) and the lobe's own suggestions for it (`Lobe.sub_lobe_candidates`, e.g. a Lafortune
     spike on the mirror direction), every amplitude re-solved at each setting, the best separated settings
-    polished with everything free. This is the nested search of Lafortune et al. (1997) and Ngan et al. (2005),
-    who add lobes one after another, done for the sub-lobes whose amplitudes all went to 0 (``dead``), or for every
-    sub-lobe of a model with two or more shaped sub-lobes: a polish of all lobes at once can end with one lobe dead while another place for it lowers the cost (three Lafortune lobes
-    on Cook-Torrance data: 0.7 % lower), or with a lobe in one of the many minima of a sum of lobes that the
-    first search's joint grid could not tell apart (two Lafortune lobes on anisotropic GGX data of some seeds:
-    6.8 % above the optimum, with the sharp lobe at the mirror missed; three on Blinn-Phong data: 5.9 %). With a
-    single shaped sub-lobe the first search was already such a search.
+    polished with everything free (`PROBE_STEPS`, then the lowest alone up to `REVIVE_STEPS`). This is the nested
+    search of Lafortune et al. (1997) and Ngan et al. (2005), who add lobes one after another, done for the
+    sub-lobes whose amplitudes all went to 0 (``dead``), or for every sub-lobe of a model with two or more shaped
+    sub-lobes: a polish of all lobes at once can end with one lobe dead while another place for it lowers the cost
+    (three Lafortune lobes on Cook-Torrance data: 0.7 % lower), or with a lobe in one of the many minima of a sum
+    of lobes that the first search's joint grid could not tell apart (two Lafortune lobes on anisotropic GGX data
+    of one seed: 6.8 % above the optimum, the sharp lobe at the mirror missed). With a single shaped sub-lobe the
+    first search was already such a search.
 
     Arguments:
         problem, solve_problem: the `Problem` and the one that polishes (a looser solver on a coarse stage).
@@ -373,8 +374,8 @@ def _revive(problem: Problem, solve_problem: Problem, kept: SolveOutcome, search
             more.
 
     Returns:
-        ``(outcome, compile_seconds, run_seconds)``: the best revived outcome, with a note, when it converged
-        below ``kept``'s cost, else None; and the seconds the polish spent either way.
+        ``(outcome, compile_seconds, run_seconds)``: the best revived outcome, with a note, when it converged at
+        least `REVIVE_GAIN` below ``kept``'s cost, else None; and the seconds the polish spent either way.
     """
     groups = _shape_groups(problem, kept.params, dead)
     if not groups or not dead and len(groups) < 2:
@@ -738,6 +739,8 @@ def _pipeline(items: list, model, *, loss, solver, init, fixed, free, multistart
         rtol=rtol, atol=atol)
     if not isinstance(multistart, int) or isinstance(multistart, bool) or multistart < 0:
         raise ValueError(f"multistart must be a non-negative integer, got {multistart!r}")
+    if not isinstance(lobe_search, bool):
+        raise ValueError(f"lobe_search must be True or False, got {lobe_search!r}")
     eps = [loss_epsilon(loss, m.values) for m in items]
     two_stage = bool(problem.outer) and _use_coarse(coarse, items[0])
     strategy = f"coarse ({COARSE_SAMPLES} samples) + refine" if two_stage else "full"
