@@ -191,6 +191,12 @@ def test_a_rounded_projection_cannot_end_a_solve_with_a_cost_it_did_not_reach():
     assert min(start["cost"] for start in result.starts) >= result.cost * (1 - 1e-6), result.starts
 
 
+def anisotropic_ggx_data(seed: int):
+    """Half-diff samples of the anisotropic-GGX truth as `truth_and_data` makes them, with another noise seed."""
+    truth = models.get("lambert+ggx(anisotropic=true)", **TRUTHS["lambert+ggx(anisotropic=true)"])
+    return synth.generate(truth, pattern="half-diff", n=N_SAMPLES, noise="relative:0.01", seed=seed)
+
+
 def test_no_step_raises_the_cost_where_the_predicted_cost_cancels():
     """Two Lafortune lobes on anisotropic-GGX data of another seed (500 samples): one start reaches 39.91 by step 12,
     then a trial pushes a lobe to an exponent of 1.7e5 on a sample at its peak, whose pass costs 2.5e29; the
@@ -199,8 +205,7 @@ def test_no_step_raises_the_cost_where_the_predicted_cost_cancels():
     optimum the reference finds (39.94; `tests/brute_force.py`). The spread is now measured against the predicted
     cost as well, and a kept trial whose second pass costs more than its current point is rejected: the fit reaches
     39.91, at or below the reference."""
-    truth = models.get("lambert+ggx(anisotropic=true)", **TRUTHS["lambert+ggx(anisotropic=true)"])
-    data = synth.generate(truth, pattern="half-diff", n=N_SAMPLES, noise="relative:0.01", seed=14)
+    data = anisotropic_ggx_data(14)
     result = brdffit.fit(data, "lambert+lafortune(lobes=2)")
     assert result.status == "converged", result.summary()
     np.testing.assert_allclose(result.cost, bf.cost_of(data, result.model), rtol=1e-6)
@@ -215,8 +220,7 @@ def test_each_sub_lobe_is_searched_again(lobe_search):
     both lobes starts none near the optimum's sharp lobe (n = 1.4e4 near the mirror direction), and the polish stops
     at two broad lobes, 6.8 % above the reference (`tests/brute_force.py`). The second search of each sub-lobe with
     the other held (`brdffit.fit`'s ``lobe_search``, on by default) finds it; without it the fit stays above."""
-    truth = models.get("lambert+ggx(anisotropic=true)", **TRUTHS["lambert+ggx(anisotropic=true)"])
-    data = synth.generate(truth, pattern="half-diff", n=N_SAMPLES, noise="relative:0.01", seed=13)
+    data = anisotropic_ggx_data(13)
     result = brdffit.fit(data, "lambert+lafortune(lobes=2)", lobe_search=lobe_search)
     brute_cost, _ = bf.brute_force_optimum(data, "lambert+lafortune(lobes=2)")
     if lobe_search:
@@ -230,9 +234,7 @@ def test_fit_many_searches_each_sub_lobe_as_fit_does():
     """`fit_many` runs the second search of each sub-lobe material by material: on the three anisotropic-GGX data
     sets of the tests above (seeds 13, 17 and 14, where it or the solver's guard decides the answer) each
     material's cost is the one `fit` reaches on it alone."""
-    truth = models.get("lambert+ggx(anisotropic=true)", **TRUTHS["lambert+ggx(anisotropic=true)"])
-    data = [synth.generate(truth, pattern="half-diff", n=N_SAMPLES, noise="relative:0.01", seed=seed)
-            for seed in (13, 17, 14)]
+    data = [anisotropic_ggx_data(seed) for seed in (13, 17, 14)]
     batch = brdffit.fit_many(data, "lambert+lafortune(lobes=2)")
     for one_data, from_batch in zip(data, batch):
         alone = brdffit.fit(one_data, "lambert+lafortune(lobes=2)")

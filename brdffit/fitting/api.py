@@ -286,7 +286,7 @@ def _to_hold(problem: Problem, params: dict) -> dict:
         if near.any():
             nearest = np.where(np.abs(value - spec.lower) <= np.abs(value - spec.upper), spec.lower, spec.upper)
             held[name] = np.where(near, nearest, np.nan)
-    for names in _dead_shapes(problem, params):
+    for _, _, names in _shape_groups(problem, params, dead=True):
         held.update({name: np.asarray(params[name], dtype=float) for name in names})
     return held
 
@@ -303,12 +303,6 @@ def _shape_groups(problem: Problem, params: dict, dead: bool) -> list[tuple[int,
                 if names:
                     groups.append((j, slot.local, names))
     return groups
-
-
-def _dead_shapes(problem: Problem, params: dict) -> list[tuple[str, ...]]:
-    """For each projected amplitude whose values all went to 0, the outer names that act only through it
-    (`Layout.partners`), where there are any."""
-    return [names for _, _, names in _shape_groups(problem, params, dead=True)]
 
 
 def _next_holds(problem: Problem, held: dict, params: dict, jtr) -> dict:
@@ -393,9 +387,10 @@ def _revive(problem: Problem, solve_problem: Problem, kept: SolveOutcome, search
     outcomes, compile_time, run_time = _polish(solve_problem, found, polish_data, metrics=metrics,
                                                max_steps=min(solve_problem.max_steps, PROBE_STEPS))
     revived = _best(outcomes[0])
-    if revived.max_steps and revived.cost < kept.cost * (1.0 - REVIVE_GAIN):
+    left = min(solve_problem.max_steps, REVIVE_STEPS) - revived.steps
+    if revived.max_steps and left > 0 and revived.cost < kept.cost * (1.0 - REVIVE_GAIN):
         more, more_compile, more_run = _polish(solve_problem, [[revived.params]], polish_data, metrics=metrics,
-                                               max_steps=min(solve_problem.max_steps, REVIVE_STEPS) - revived.steps)
+                                               max_steps=left)
         compile_time, run_time = compile_time + more_compile, run_time + more_run
         revived = dataclasses.replace(more[0][0], steps=more[0][0].steps + revived.steps)
     # Only a converged answer replaces one: a lower point still moving after REVIVE_STEPS lies in a flat valley

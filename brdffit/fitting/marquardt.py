@@ -15,15 +15,15 @@ those of the projected point), then takes a Levenberg-Marquardt step
 
     (JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr        (Marquardt 1963, Eq. 29's scaling)
 
-over the outer parameters, in their unconstrained variables (`brdffit.params`; the chain rule maps their
-columns), and the amplitudes off their bounds: Kaufman's joint step (BIT 15, 1975). A step is accepted only if
-the projected cost does not increase (at a kept trial's second pass too); λ then shrinks tenfold if the step
-achieved at least `GAIN_RATIO` of the decrease its model predicted and stays otherwise (Moré 1978), and a rejected
-step grows it tenfold. A point has converged when its next step and its amplitude change are below ``rtol·|x| + atol`` (optimistix's
-Cauchy test on the variables) with λ ≤ 1, so that damping cannot fake a small step, or with its last trial
-changing the cost by at most ``rtol·cost + atol`` (the Cauchy test on the cost: at the optimum, rounding rejects
-every trial and λ grows). It stops at ``max_steps``, or when λ exceeds 1e12 (no step of any length lowers the
-cost: a kink, or the optimum itself); the pipeline's Karush-Kuhn-Tucker test (`brdffit.fitting.status`) then
+over the outer parameters, in their unconstrained variables (`brdffit.params`; the chain rule maps their columns),
+and the amplitudes off their bounds: Kaufman's joint step (BIT 15, 1975). A step is accepted only if the projected
+cost does not increase (at a kept trial's second pass too); λ then shrinks tenfold if the step achieved at least
+`GAIN_RATIO` of the decrease its model predicted and stays otherwise (Moré 1978), and a rejected step grows it
+tenfold. A point has converged when its next step and its amplitude change are below ``rtol·|x| + atol``
+(optimistix's Cauchy test on the variables) with λ ≤ 1, so that damping cannot fake a small step, or with its last
+trial changing the cost by at most ``rtol·cost + atol`` (the Cauchy test on the cost: at the optimum, rounding
+rejects every trial and λ grows). It stops at ``max_steps``, or when λ exceeds 1e12 (no step of any length lowers
+the cost: a kink, or the optimum itself); the pipeline's Karush-Kuhn-Tucker test (`brdffit.fitting.status`) then
 tells a stall from an optimum. A problem without outer parameters (Lambert) converges after one projection.
 Parameters the pipeline holds (on a bound, or where a dead lobe left them) simply do not move.
 
@@ -316,8 +316,7 @@ class _Batch:
         if points is None:
             points = np.ones(x.shape[:2], bool)
         state = self._project(x, base, points)
-        again = points & self._stale(state) if refresh else np.zeros(points.shape, bool)
-        return self._project(state.x, state, again) if again.any() else state
+        return self.refresh(state, points) if refresh else state
 
     def refresh(self, state: _State, points) -> _State:
         """``state`` with a second pass at those of ``points`` whose projection moved an amplitude off a bound or
