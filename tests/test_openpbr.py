@@ -204,7 +204,7 @@ def test_fuzz_alone_reflects_its_fitted_albedo():
     response E_z D_LTC is f cosθi (module doc of brdffit.models.openpbr). At normal, oblique and grazing views
     and three roughnesses, to the quadrature's accuracy (1e-3 relative; a missing cosine or a wrong frame is off by
     tens of percent)."""
-    from brdffit.models.openpbr import zeltner_sheen_fit
+    from brdffit.models.sheen import zeltner_sheen_fit
 
     theta_o = np.radians([0.0, 45.0, 80.0])
     for rough in (0.1, 0.4, 0.9):

@@ -72,11 +72,12 @@ from . import fresnel as fr
 from .lobe import Lobe
 from .microfacet import ggx_correlated
 from .peaks import Peak, scalar
+from .sheen import zeltner_sheen
 from .specs import MIN_ROUGHNESS
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["OpenPBR", "ggx_albedo_fit", "zeltner_sheen_fit", "EPS"]
+__all__ = ["OpenPBR", "ggx_albedo_fit", "EPS"]
 
 EPS = 1e-8  # MaterialX's M_FLOAT_EPS (libraries/stdlib/genglsl/lib/mx_math.glsl)
 # MaterialX's rational fit of the GGX directional albedo (mx_ggx_dir_albedo_analytic): r = Σ_k c_k m_k(μ, α) over
@@ -131,47 +132,6 @@ def _oren_nayar(pair: LocalPair, mu_i, mu_o, colour, rough):
     weight = (jnp.maximum(EPS, 1.0 - _fujii_albedo(mu_o, rough, a))
               * jnp.maximum(EPS, 1.0 - _fujii_albedo(mu_i, rough, a)) / jnp.maximum(EPS, 1.0 - mean))
     return single + multi_colour * weight[..., None]
-
-
-def zeltner_sheen_fit(mu, rough, xp=None):
-    """MaterialX's fits of Zeltner et al.'s sheen at view cosine ``mu`` and roughness ``rough``: ``(E, a, b)``, the
-    directional albedo (a Gaussian in μ plus an offset, ``mx_zeltner_sheen_dir_albedo``) and the inverse LTC
-    matrix's entries (``mx_zeltner_sheen_ltc_aInv``, ``mx_zeltner_sheen_ltc_bInv``), as the GLSL computes them.
-
-    Arguments:
-        mu: cosine of the viewing direction; rough: the fuzz roughness in [0.01, 1] (broadcastable).
-        xp: the array module (default ``jax.numpy``).
-    """
-    xp = jnp if xp is None else xp
-    x, y = mu, rough
-    s = y * (0.0206607 + 1.58491 * y) / (0.0379424 + y * (1.32227 + y))
-    m = y * (-0.193854 + y * (-1.14885 + y * (1.7932 - 0.95943 * y * y))) / (0.046391 + y)
-    o = y * (0.000654023 + (-0.0207818 + 0.119681 * y) * y) / (1.26264 + y * (-1.92021 + y))
-    albedo = xp.exp(-0.5 * ((x - m) / s) ** 2) / (s * math.sqrt(2.0 * math.pi)) + o
-    a = (2.58126 * x + 0.813703 * y) * y / (1.0 + 0.310327 * x * x + 2.60994 * x * y)
-    b = xp.sqrt(xp.maximum(1.0 - x, 0.0)) * (y - 1.0) * y ** 3 / (0.0000254053 + 1.71228 * x - 1.71506 * x * y
-                                                                   + 1.34174 * y * y)
-    return albedo, a, b
-
-
-def _fuzz(pair: LocalPair, mu_o, rough):
-    """Zeltner's sheen at the pair: ``(E_z(μo), E_z D_LTC(ωi)/μi)``, its albedo and its f without the colour (module
-    doc; ``mx_sheen_bsdf`` in ``zeltner`` mode, MaterialX's clamps)."""
-    rough = jnp.clip(rough, 0.01, 1.0)
-    albedo, a, b = zeltner_sheen_fit(mu_o, rough)  # unclamped, as the GLSL leaves it in this mode
-    wi, wo = pair.wi, pair.wo
-    # ωi in the LTC's frame: X along ωo's tangential part (any frame where ωo = n: there b = 0 and D_LTC depends
-    # on the tangential length alone).
-    tangential = safe_sqrt(wo[..., 0] ** 2 + wo[..., 1] ** 2, tiny=0.0)
-    ok = tangential > 0.0
-    scale = jnp.where(ok, 1.0 / jnp.where(ok, tangential, 1.0), 0.0)
-    x_i = jnp.where(ok, (wi[..., 0] * wo[..., 0] + wi[..., 1] * wo[..., 1]) * scale, wi[..., 0])
-    y_i = jnp.where(ok, (wo[..., 0] * wi[..., 1] - wo[..., 1] * wi[..., 0]) * scale, wi[..., 1])
-    z_i = wi[..., 2]
-    ox, oy = a * x_i + b * z_i, a * y_i
-    length2 = ox * ox + oy * oy + z_i * z_i
-    ltc = jnp.maximum(z_i, 0.0) / jnp.pi * (a / length2) ** 2
-    return albedo, albedo * ltc / pair.cos_i
 
 
 def _mix(bg, fg, amount):
@@ -310,7 +270,8 @@ class OpenPBR(Lobe):
         if not self.fuzz:
             return base_f
         fuzz_weight = params["fuzz_weight"]
-        sheen_albedo, sheen = _fuzz(pair, mu_o, params["fuzz_roughness"])
+        # MaterialX clamps the roughness to [0.01, 1] and leaves the fitted albedo unclamped in this mode.
+        sheen_albedo, sheen = zeltner_sheen(pair, mu_o, jnp.clip(params["fuzz_roughness"], 0.01, 1.0))
         return (fuzz_weight * params["fuzz_color"] * sheen[..., None]
                 + (1.0 - fuzz_weight * sheen_albedo)[..., None] * base_f)
 

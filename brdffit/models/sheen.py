@@ -1,5 +1,5 @@
 """Sheen lobes for cloth and felt: Burley's Schlick-shaped sheen and the "Charlie" microfacet sheen of Estevez and
-Kulla."""
+Kulla; and the maths of Zeltner et al.'s microfibre sheen, which the OpenPBR and Blender models layer over a base."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import dataclasses
 import math
 
 from .._lazy import module
-from ..geometry import TINY, LocalPair
+from ..geometry import TINY, LocalPair, safe_sqrt
 from ..params import ParamSpec
 from .fresnel import schlick_weight
 from .lobe import Lobe
@@ -15,7 +15,8 @@ from .specs import KS
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["Sheen", "CharlieSheen", "charlie_lambda", "charlie_distribution", "charlie_visibility"]
+__all__ = ["Sheen", "CharlieSheen", "charlie_lambda", "charlie_distribution", "charlie_visibility",
+           "zeltner_sheen_fit", "zeltner_sheen"]
 
 # Estevez & Kulla (2017), Table 1: the coefficients (a, b, c, d, e) of their fit of the Charlie distribution's
 # log Λ, at r = (1 − α)² = 0 and at r = 1 (linearly interpolated between).
@@ -115,3 +116,58 @@ class CharlieSheen(Lobe):
         alpha = params["alpha"]
         value = charlie_distribution(pair.cos_h, alpha) * charlie_visibility(pair.cos_i, pair.cos_o, alpha)
         return params["ks"] * value[..., None]
+
+
+def zeltner_sheen_fit(mu, rough, xp=None):
+    """MaterialX's fits of Zeltner et al.'s (2022) sheen at view cosine ``mu`` and roughness ``rough``: ``(E, a, b)``,
+    the directional albedo (a Gaussian in μ plus an offset, ``mx_zeltner_sheen_dir_albedo``) and the inverse LTC
+    matrix's entries (``mx_zeltner_sheen_ltc_aInv``, ``mx_zeltner_sheen_ltc_bInv`` in MaterialX's
+    ``libraries/pbrlib/genglsl/lib/mx_microfacet_sheen.glsl``), as the GLSL computes them.
+
+    Arguments:
+        mu: cosine of the viewing direction; rough: the sheen roughness in [0.01, 1] (broadcastable).
+        xp: the array module (default ``jax.numpy``).
+
+    Returns:
+        (E, a, b), each of the broadcast shape.
+    """
+    xp = jnp if xp is None else xp
+    x, y = mu, rough
+    s = y * (0.0206607 + 1.58491 * y) / (0.0379424 + y * (1.32227 + y))
+    m = y * (-0.193854 + y * (-1.14885 + y * (1.7932 - 0.95943 * y * y))) / (0.046391 + y)
+    o = y * (0.000654023 + (-0.0207818 + 0.119681 * y) * y) / (1.26264 + y * (-1.92021 + y))
+    albedo = xp.exp(-0.5 * ((x - m) / s) ** 2) / (s * math.sqrt(2.0 * math.pi)) + o
+    a = (2.58126 * x + 0.813703 * y) * y / (1.0 + 0.310327 * x * x + 2.60994 * x * y)
+    b = xp.sqrt(xp.maximum(1.0 - x, 0.0)) * (y - 1.0) * y ** 3 / (0.0000254053 + 1.71228 * x - 1.71506 * x * y
+                                                                   + 1.34174 * y * y)
+    return albedo, a, b
+
+
+def zeltner_sheen(pair: LocalPair, mu_o, rough):
+    """Zeltner et al.'s sheen at the pair, with MaterialX's fits (`zeltner_sheen_fit`): ``(E(μo), E D_LTC(ωi)/μi)``,
+    its albedo at the view and its f without the colour. D_LTC is the linearly transformed cosine of the view: in
+    the frame with X along ωo's projection on the surface and Y = n × X, ω = (ωi·X, ωi·Y, μi) maps to
+    ω' = (a ω_x + b μi, a ω_y, μi) and D_LTC = (ω'_z/π) (a/|ω'|²)² (``mx_zeltner_sheen_brdf``; Cycles'
+    ``bsdf_sheen_eval`` has the same form). D_LTC integrates to 1 over the hemisphere.
+
+    Arguments:
+        pair: the direction pairs; mu_o: the view cosines (clamped as the caller's renderer does).
+        rough: the sheen roughness, clamped as the caller's renderer does.
+
+    Returns:
+        (E, f), each of the pairs' shape.
+    """
+    albedo, a, b = zeltner_sheen_fit(mu_o, rough)
+    wi, wo = pair.wi, pair.wo
+    # ωi in the LTC's frame: X along ωo's tangential part (any frame where ωo = n: there b = 0 and D_LTC depends
+    # on the tangential length alone).
+    tangential = safe_sqrt(wo[..., 0] ** 2 + wo[..., 1] ** 2, tiny=0.0)
+    ok = tangential > 0.0
+    scale = jnp.where(ok, 1.0 / jnp.where(ok, tangential, 1.0), 0.0)
+    x_i = jnp.where(ok, (wi[..., 0] * wo[..., 0] + wi[..., 1] * wo[..., 1]) * scale, wi[..., 0])
+    y_i = jnp.where(ok, (wo[..., 0] * wi[..., 1] - wo[..., 1] * wi[..., 0]) * scale, wi[..., 1])
+    z_i = wi[..., 2]
+    ox, oy = a * x_i + b * z_i, a * y_i
+    length2 = ox * ox + oy * oy + z_i * z_i
+    ltc = jnp.maximum(z_i, 0.0) / jnp.pi * (a / length2) ** 2
+    return albedo, albedo * ltc / pair.cos_i
