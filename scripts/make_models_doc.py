@@ -116,7 +116,10 @@ EQUATIONS = {
         "s: Cycles' table ggx_gen_schlick_ior_s (16³ nodes, trilinear), computed by quadrature\n"
         "coat=true: f_coat = w F_dielectric(cd; coat_ior) D_c G2_c/(4 ci co)\n"
         "    + clamp(1 − w F_dielectric(co; coat_ior), 0, 1) mix(1, coat_tint^(1/cosθt), w) f,\n"
-        "w = coat_weight,  α_c = coat_roughness²,  cosθt = √(1 − (1 − co²)/coat_ior²)"
+        "w = coat_weight,  α_c = coat_roughness²,  cosθt = √(1 − (1 − co²)/coat_ior²)\n"
+        "sheen=true: f_sheen = w_s t_s E(co, r_s) D_LTC(ωi)/ci + clamp(1 − max(w_s t_s) E(co, r_s), 0, 1) f,\n"
+        "w_s = sheen_weight,  t_s = sheen_tint,  r_s = sheen_roughness,  E and D_LTC: Zeltner's sheen by MaterialX's "
+        "fits (Cycles: its table)"
     ),
     "openpbr": (
         "f = (1 − base_metalness) [specular_color F(cd; η') D G2/(4 ci co) K(F) + (1 − E(co; F0') K(F)) f_on]\n"
@@ -221,7 +224,10 @@ NOTES = {
     "blender": "Blender's Principled BSDF (4.2+) with the GGX distribution, as Cycles evaluates it "
                "(intern/cycles/kernel/svm/closure.h): the inputs Base Color, Metallic, Roughness and IOR, the others "
                "neutral; with `coat=true` also Coat Weight, Coat Roughness and Coat IOR (Coat Tint held white unless "
-               "freed), the coat layered over the rest as Cycles 4.2 layers it. The diffuse layer is attenuated by Cycles' estimate of the specular layer's albedo at the "
+               "freed), the coat layered over the rest as Cycles 4.2 layers it; with `sheen=true` also Sheen Weight and "
+               "Sheen Roughness (Sheen Tint held white unless freed), Zeltner's microfibre sheen over everything, "
+               "whose albedo and LTC Cycles reads from a table that bpy does not ship and the model takes from "
+               "MaterialX's fits: an approximation of Cycles' (docs/export.md measures it). The diffuse layer is attenuated by Cycles' estimate of the specular layer's albedo at the "
                "viewing direction, so the model is not reciprocal, as Cycles' is not; its table is computed again by "
                "quadrature and agrees with Cycles' to 1e-4. `brdffit fit --for blender`, `brdffit export --to "
                "blender`; tests/test_export_blender.py renders the export in Cycles against brdffit's render.",
@@ -297,7 +303,7 @@ VARIANTS = {
     "ggx": [{"fresnel": "dielectric"}, {"fresnel": "conductor"}, {"anisotropic": True}],
     "lafortune": [{"anisotropic": True}],
     "openpbr": [{"coat": True}, {"fuzz": True}],
-    "blender": [{"coat": True}],
+    "blender": [{"coat": True}, {"sheen": True}],
 }
 
 

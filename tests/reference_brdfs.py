@@ -892,7 +892,7 @@ def _lookup3(table, x, y, z):
 
 @_quiet
 def blender(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, ior, coat_weight=0.0,
-            coat_roughness=0.1, coat_ior=1.5, coat_tint=1.0):
+            coat_roughness=0.1, coat_ior=1.5, coat_tint=1.0, sheen_weight=0.0, sheen_tint=1.0, sheen_roughness=0.5):
     """Blender's Principled BSDF with distribution GGX as Cycles evaluates it (intern/cycles/kernel/svm/closure.h,
     kernel/closure/bsdf_microfacet.h): with V = ωo (the view), L = ωi, α = roughness²,
 
@@ -906,7 +906,10 @@ def blender(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, ior
     of coat_ior and no energy compensation (4.2's bsdf_microfacet_setup_fresnel_dielectric); the layers beneath
     weighted by closure_layering_weight = clamp(1 − w F_dielectric(N·V), 0, 1) (bsdf_albedo: the closure's weight
     times the smooth-surface Fresnel term at the view, bsdf_microfacet_estimate_albedo) and by
-    mix(1, coat_tint^(1/cosNT), w), cosNT = √(1 − (1 − (N·V)²)/η²)."""
+    mix(1, coat_tint^(1/cosNT), w), cosNT = √(1 − (1 − (N·V)²)/η²). A sheen of weight w_s (closure.h's first
+    layer, over everything, bsdf_sheen.h): w_s sheen_tint E D_LTC(L)/(N·L) with the layers beneath weighted by
+    clamp(1 − max(w_s sheen_tint) E, 0, 1), E and the LTC's coefficients here MaterialX's fits (`_zeltner_sheen`),
+    where Cycles reads its table (not shipped by bpy)."""
     pair = Pair(theta_i, phi_i, theta_o, phi_o)
     base = _col(base_color)
     a2 = roughness ** 4
@@ -944,6 +947,11 @@ def blender(theta_i, phi_i, theta_o, phi_o, base_color, metallic, roughness, ior
         layering = np.clip(1.0 - coat_weight * fresnel_v, 0.0, 1.0)
         tint = 1.0 + coat_weight * (_col(coat_tint) ** (1.0 / cos_nt)[:, None] - 1.0)
         response = coat[:, None] + (layering[:, None] * tint) * response
+    if sheen_weight > 1e-5:  # CLOSURE_WEIGHT_CUTOFF
+        sheen, sheen_albedo = _zeltner_sheen(pair, pair.co, sheen_roughness)
+        colour = sheen_weight * _col(sheen_tint)
+        layering = np.clip(1.0 - np.max(colour) * sheen_albedo, 0.0, 1.0)  # closure_layering_weight
+        response = colour * (sheen / pair.ci)[:, None] + layering[:, None] * response
     return _masked(pair, response)
 
 
@@ -1381,7 +1389,7 @@ REFERENCES = {
     "sheen": lambda ti, pi_, to, po, p: sheen(ti, pi_, to, po, p["ks"]),
     "principled": lambda ti, pi_, to, po, p: principled(ti, pi_, to, po, **p),
     "gltf": lambda ti, pi_, to, po, p: gltf(ti, pi_, to, po, **p),
-    "blender": lambda ti, pi_, to, po, p, coat=False: blender(ti, pi_, to, po, **p),
+    "blender": lambda ti, pi_, to, po, p, coat=False, sheen=False: blender(ti, pi_, to, po, **p),
     "openpbr": lambda ti, pi_, to, po, p, coat=False, fuzz=False: openpbr(ti, pi_, to, po, **p),
     "pbrt": lambda ti, pi_, to, po, p: pbrt(ti, pi_, to, po, **p),
     "roughplastic": lambda ti, pi_, to, po, p: roughplastic(ti, pi_, to, po, **p),

@@ -1,7 +1,7 @@
 r"""Blender's Principled BSDF as Cycles evaluates an opaque one with the GGX distribution (Blender 4.2+).
 
 Cycles' principled closure (``intern/cycles/kernel/svm/closure.h``) with no transmission, subsurface, sheen, coat
-(but see the option below) or emission, and ``Specular Tint`` white, is a sum of three layers. With
+(but see the options below) or emission, and ``Specular Tint`` white, is a sum of three layers. With
 h = normalize(ωi + ωo), α = roughness², ωo the direction to the viewer (Cycles' ``sd->wi``) and c = ωi·h:
 
 - metal: metallic · F_S(c; base_color) · D G2 / (4 ci co), F_S Schlick's term with f0 = base_color (Cycles' F82-tint
@@ -31,6 +31,15 @@ estimate for a dielectric Fresnel term is the smooth surface's, ``bsdf_microface
 tint along the refracted view, mix(1, Coat Tint^(1/cosθt), w) with cosθt = √(1 − (1 − co²)/η_c²) (Beer's law,
 Cycles' approximation). ``Coat Tint`` is held white unless a fit frees it (it scales the base as Base Color does,
 but for its dependence on the view).
+
+With ``sheen=True`` the node's sheen (``Sheen Weight`` w_s, ``Sheen Tint`` t_s, ``Sheen Roughness`` r_s) lies over
+everything else, coat included (closure.h's first layer): Zeltner et al.'s (2022) microfibre sheen, a linearly
+transformed cosine (``kernel/closure/bsdf_sheen.h``), f_s = w_s t_s E(μo, r_s) D_LTC(ωi)/μi, and the layers beneath
+weighted by ``closure_layering_weight``, clamp(1 − max(w_s t_s) E(μo, r_s), 0, 1), E the sheen's albedo at the view.
+Cycles reads E and the LTC's two coefficients from a 32 × 32 table over (μo, r_s) that the ``bpy`` package does not
+ship; this model evaluates MaterialX's fits to the same quantities (`brdffit.models.sheen.zeltner_sheen`), so the
+sheen is an approximation of Cycles' by the fits' error (measured in Cycles' renders: docs/export.md).
+``Sheen Tint`` is held white unless a fit frees it (w_s and t_s enter as their product).
 """
 
 from __future__ import annotations
@@ -48,6 +57,7 @@ from .lobe import Lobe
 from .lookup import multilinear
 from .microfacet import ggx_correlated
 from .peaks import Peak, scalar
+from .sheen import zeltner_sheen
 from .specs import base_color, metallic, perceptual_roughness
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
@@ -58,6 +68,8 @@ TABLE_SIZE = 16
 # Gauss-Legendre nodes of the table's quadrature: in u, the GGX distribution's own CDF variable of θh, and in φh.
 _U_NODES, _PHI_NODES = 96, 64
 _MAX_IOR = 3.0
+# The sheen roughness where MaterialX's fits of Zeltner's LTC start (MaterialX clamps to it); Cycles takes [0, 1].
+_MIN_SHEEN_ROUGHNESS = 0.01
 
 
 @functools.lru_cache(maxsize=1)
@@ -107,13 +119,17 @@ def layering_table() -> np.ndarray:
 @dataclasses.dataclass(frozen=True)
 class BlenderPrincipled(Lobe):
     """Blender's Principled BSDF with the GGX distribution as Cycles evaluates it (module doc): Base Color,
-    Metallic, Roughness and IOR (and the coat's inputs where the option adds them), the other inputs at their
-    neutral values (Specular IOR Level 0.5, Specular Tint white, no subsurface, sheen, transmission or emission).
+    Metallic, Roughness and IOR (and the coat's and the sheen's inputs where the options add them), the other
+    inputs at their neutral values (Specular IOR Level 0.5, Specular Tint white, no subsurface, transmission or
+    emission).
 
     Options:
         coat: add the node's coat (Coat Weight, Coat Roughness, Coat IOR; Coat Tint held white unless freed), a
             dielectric layer over the rest, for lacquer and varnish (module doc). With coat_weight 0 it is the
             model without coat.
+        sheen: add the node's sheen (Sheen Weight, Sheen Roughness; Sheen Tint held white unless freed), Zeltner's
+            microfibre sheen over the rest, for cloth and felt (module doc; an approximation of Cycles' table).
+            With sheen_weight 0 it is the model without sheen.
     """
 
     name = "blender"
@@ -124,10 +140,12 @@ class BlenderPrincipled(Lobe):
     offset = True
 
     coat: bool = False
+    sheen: bool = False
 
     def __post_init__(self):
-        if not isinstance(self.coat, bool):
-            raise ValueError(f"blender: coat must be True or False, got {self.coat!r}")
+        for option in ("coat", "sheen"):
+            if not isinstance(getattr(self, option), bool):
+                raise ValueError(f"blender: {option} must be True or False, got {getattr(self, option)!r}")
 
     def param_specs(self):
         return (
@@ -135,7 +153,7 @@ class BlenderPrincipled(Lobe):
             metallic("Metallic: blends the dielectric layers into the metal"),
             perceptual_roughness("Roughness: GGX α = roughness²"),
             ParamSpec("ior", 1.5, 1.0, _MAX_IOR, doc="IOR: the dielectric specular layer's index of refraction"),
-        ) + (self._coat_specs() if self.coat else ())
+        ) + (self._coat_specs() if self.coat else ()) + (self._sheen_specs() if self.sheen else ())
 
     @staticmethod
     def _coat_specs():
@@ -146,6 +164,15 @@ class BlenderPrincipled(Lobe):
             ParamSpec("coat_ior", 1.5, 1.0, _MAX_IOR, doc="Coat IOR: the coat's index of refraction"),
             ParamSpec("coat_tint", 1.0, 0.0, 1.0, colour=True, fixed=True,
                       doc="Coat Tint: the coat's colour at normal incidence (Beer's law along the refracted view)"),
+        )
+
+    @staticmethod
+    def _sheen_specs():
+        return (
+            ParamSpec("sheen_weight", 0.5, 0.0, 1.0, doc="Sheen Weight: the sheen's presence"),
+            ParamSpec("sheen_tint", 1.0, 0.0, 1.0, colour=True, fixed=True, doc="Sheen Tint: the sheen's colour"),
+            ParamSpec("sheen_roughness", 0.5, _MIN_SHEEN_ROUGHNESS, 1.0,
+                      doc="Sheen Roughness: the roughness of Zeltner's sheen (the fits' range starts at 0.01)"),
         )
 
     def peaks(self, params):
@@ -165,7 +192,8 @@ class BlenderPrincipled(Lobe):
         albedo = f0 + (1.0 - f0) * s
         diffuse = jnp.clip(1.0 - albedo, 0.0, 1.0)[..., None] * base / jnp.pi
         beneath = metallic * metal + (1.0 - metallic) * (specular[..., None] + diffuse)
-        return self._coated(params, pair, beneath) if self.coat else beneath
+        beneath = self._coated(params, pair, beneath) if self.coat else beneath
+        return self._sheened(params, pair, beneath) if self.sheen else beneath
 
     @staticmethod
     def _coated(params, pair: LocalPair, beneath):
@@ -176,3 +204,11 @@ class BlenderPrincipled(Lobe):
         refracted = jnp.sqrt(1.0 - (1.0 - pair.cos_o * pair.cos_o) / (eta * eta))
         tint = 1.0 + weight * (params["coat_tint"] ** (1.0 / refracted)[..., None] - 1.0)
         return coat[..., None] + layer[..., None] * tint * beneath
+
+    @staticmethod
+    def _sheened(params, pair: LocalPair, beneath):
+        """The sheen over ``beneath`` as Cycles layers it (module doc)."""
+        colour = params["sheen_weight"] * params["sheen_tint"]
+        albedo, sheen = zeltner_sheen(pair, pair.cos_o, params["sheen_roughness"])
+        layer = jnp.clip(1.0 - jnp.max(colour, axis=-1) * albedo, 0.0, 1.0)
+        return colour * sheen[..., None] + layer[..., None] * beneath
