@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from .registry import EXPORT_FORMATS, FIT_TARGETS, TARGETS, ExportError, Target
+from .registry import APPROXIMATE_GAIN, EXPORT_FORMATS, FIT_TARGETS, TARGETS, ExportError, Target
 
 __all__ = ["EXPORT_FORMATS", "FIT_TARGETS", "TARGETS", "Target", "Export", "ExportError", "export", "export_details",
            "f0_to_eta"]
@@ -138,7 +138,14 @@ def export_details(model_or_result, to: str, *, name: str = "material", fit: boo
     for spec in specs:
         fitted, line = fit_exportable(model, spec=spec)
         candidates.append(_export(target, fitted, name, header, model, line))
-    return min(candidates, key=lambda c: c.deviation.rms)
+    best = min(candidates, key=lambda c: c.deviation.rms)
+    if target.approximates and not best.deviation.exact():
+        fits = (fit_exportable(model, spec=spec) for spec in target.approximates)
+        approximate = min((_export(target, fitted, name, header, model, line) for fitted, line in fits),
+                          key=lambda c: c.deviation.rms)
+        if approximate.deviation.rms <= APPROXIMATE_GAIN * best.deviation.rms:
+            return approximate
+    return best
 
 
 def _export(target: Target, model, name: str, header: list, source, fitted: str | None = None) -> Export:
@@ -165,8 +172,9 @@ def export(model_or_result, to: str = "json", *, name: str = "material", fit: bo
         fit: for a renderer, fit the renderer's own model to the model over the hemisphere (cosine-weighted
             least squares: for Mitsuba a brdffit fit of lambert + GGX lobes, `brdffit.export.refit`, unless the
             direct mapping is exact; for pbrt-v4 its own parameters, refined, and fits of the models it writes
-            exactly, its mix and its coated diffuse) and write the candidate closest
-            to the model, with the achieved error in the comments; this also exports lobes with no equivalent
+            exactly, its mix and its coated diffuse; for a target with a family of its own, its forms) and write
+            the candidate closest to the model, with the achieved error in the comments (a form the target
+            evaluates approximately, `Target.approximates`, only where it deviates markedly less); this also exports lobes with no equivalent
             (Oren-Nayar, Ward, Lafortune, ...). Ignored for JSON.
         wavelengths: for a spectral model (one channel per band), the bands in nm: a renderer is then given the
             model's linear sRGB equivalent (`brdffit.colour.rgb_model`: exact where every per-band parameter is an

@@ -5,7 +5,12 @@ from __future__ import annotations
 import dataclasses
 import importlib
 
-__all__ = ["ExportError", "Target", "TARGETS", "EXPORT_FORMATS", "FIT_TARGETS"]
+__all__ = ["ExportError", "Target", "TARGETS", "EXPORT_FORMATS", "FIT_TARGETS", "APPROXIMATE_GAIN"]
+
+# An approximate form (`Target.approximates`) replaces the best exact one under the fit option only where its
+# deviation is at most this fraction of that one's: the approximate forms nest the exact ones, so they always
+# deviate a little less, and a trace of sheen is not worth a material that the renderer evaluates otherwise.
+APPROXIMATE_GAIN = 0.9
 
 
 class ExportError(ValueError):
@@ -34,6 +39,9 @@ class Target:
             tools accept (no unbounded values, no blends): the candidates of a fit for the target
             (`brdffit.select`'s ``target``, ``brdffit fit --for``), and, for a target with a ``family`` or one that
             ``refines``, of the fit option (`brdffit.export.export_details`); empty where none is declared yet.
+        approximates: the brdffit models the target writes in its ranges but evaluates approximately (each export
+            of one states the approximation): not candidates of a fit for the target, but of the fit option, where
+            one is written only if its deviation is below `APPROXIMATE_GAIN` times the best exact form's.
     """
 
     name: str
@@ -43,6 +51,7 @@ class Target:
     refines: bool = False
     family: str = ""
     renders: tuple = ()
+    approximates: tuple = ()
 
     def load(self):
         """The target's module (imported on first use)."""
@@ -58,7 +67,8 @@ TARGETS = {t.name: t for t in (
                    "sphere",
            "gltf", family="gltf", renders=("gltf",)),
     Target("blender", "a Python script that builds the material (Principled BSDF, GGX) with bpy, Blender 4.2+",
-           "blender", family="blender", renders=("blender", "blender(coat=true)")),
+           "blender", family="blender", renders=("blender", "blender(coat=true)"),
+           approximates=("blender(coat=true, sheen=true)",)),
     Target("materialx", "a MaterialX 1.39 document: the glTF material (gltf_pbr) and its OpenPBR Surface and "
            "Standard Surface counterparts", "materialx", family="gltf", renders=("gltf",)),
     Target("openpbr", "a MaterialX 1.39 document with one OpenPBR Surface (open_pbr_surface) as MaterialX evaluates "
