@@ -174,8 +174,8 @@ def export(model_or_result, to: str = "json", *, name: str = "material", fit: bo
             direct mapping is exact; for pbrt-v4 its own parameters, refined, and fits of the models it writes
             exactly, its mix and its coated diffuse; for a target with a family of its own, its forms) and write
             the candidate closest to the model, with the achieved error in the comments (a form the target
-            evaluates approximately, `Target.approximates`, only where it deviates markedly less); this also exports lobes with no equivalent
-            (Oren-Nayar, Ward, Lafortune, ...). Ignored for JSON.
+            evaluates approximately, `Target.approximates`, only where it deviates markedly less); this also
+            exports lobes with no equivalent (Oren-Nayar, Ward, Lafortune, ...). Ignored for JSON.
         wavelengths: for a spectral model (one channel per band), the bands in nm: a renderer is then given the
             model's linear sRGB equivalent (`brdffit.colour.rgb_model`: exact where every per-band parameter is an
             amplitude), and the conversion is stated in the opening comments. Ignored for JSON, which keeps the
