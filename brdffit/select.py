@@ -30,7 +30,9 @@ from .fitting.losses import get_loss, loss_epsilon
 from .fitting.normal_equations import SLOT_ROWS
 from .arrays import to_device
 from .models.model import EVALUATION_ROWS, evaluate_dirs, evaluation_program
+from .models.registry import get as get_model
 from .fitting.progressive import new_lobe_candidates
+from .fitting.search import grid
 from .fitting.problem import make_fit_data
 from .fitting.status import information_criteria
 from .progress import Progress
@@ -283,14 +285,54 @@ def _smaller_lafortune(spec: str):
     return (f"{base}+{lobe}" if base else lobe), k
 
 
+def _layer_starts(previous: FitResult, model, values: dict) -> list[dict]:
+    """Start candidates of a one-lobe model from the fit of the form it contains one layer fewer (``previous``):
+    that fit's shape with the layer off (``values``: its weight at 0), where the cost is that fit's, so the
+    model's fit ends no higher; the same with the layer's parameters at their defaults; and the search's grid over
+    the model's free shape parameters, so the global search is not lost."""
+    declared = model.param_specs
+    specs = [s for s in declared if not s.linear and not s.fixed]
+    kept = {name: np.asarray(value) for name, value in previous.params.items()
+            if name in declared.names and not declared[name].linear}
+    added = {s.name: s.default for s in specs if s.name not in kept}
+    layer_on = dict(kept, **added)
+    return [dict(layer_on, **values), layer_on] + [dict(kept, **g) for g in grid(specs, 0)]
+
+
+def _contained(spec: str, earlier) -> tuple[str | None, object]:
+    """The earlier candidate that ``spec`` contains and the starts of ``spec`` from its fit: ``(smaller,
+    starts)``, ``starts(previous_fit)`` giving `brdffit.fit`'s ``init``; ``(None, None)`` where there is none.
+
+    Two kinds: a Lafortune sum of K lobes contains the same sum of K − 1 (`_smaller_lafortune`; the new-lobe
+    starts of `brdffit.fitting.progressive`), and a one-lobe model with a layer option on contains the lobe
+    without it (`brdffit.models.lobe.Lobe.nested`; `_layer_starts`)."""
+    smaller, k = _smaller_lafortune(spec)
+    if smaller is not None:
+        anisotropic = "anisotropic=true" in spec.replace(" ", "").lower()
+        return smaller, lambda previous: new_lobe_candidates(previous, k, anisotropic)
+    try:
+        model = get_model(spec)
+        canonical = {get_model(other).spec: other for other in earlier}
+    except ValueError:
+        return None, None
+    if len(model.lobes) != 1:
+        return None, None
+    for form, values in model.lobes[0].nested():
+        if form.token() in canonical:
+            return canonical[form.token()], lambda previous, values=values: _layer_starts(previous, model, values)
+    return None, None
+
+
 def _each_candidate(candidates, work, bar, message, when_idle=None):
     """``work(spec, init)`` for every candidate, `SELECT_THREADS` at a time, where ``init`` is ``"auto"`` or, for
-    a Lafortune sum whose one-lobe-smaller spec is also a candidate, the new-lobe starts from that one's fit
-    (`brdffit.fitting.progressive`). ``work`` returns a pair whose first element is the candidate's `FitResult`.
+    a candidate that contains an earlier one (`_contained`: a Lafortune sum with one lobe more, a renderer's
+    material with one layer more), starts from that one's fit; where its cost still ends above that fit's (both
+    fit the same rows), the first of those starts, the contained fit's own point, is polished alone and the lower
+    kept. ``work`` returns a pair whose first element is the candidate's `FitResult`.
 
-    A chain of such sums (one lobe, two, three) is one task, its members fitted in turn, and the longest chains
-    are started first: the chain is the selection's critical path (each member waits for the one before), and a
-    member in a pool slot of its own would hold that slot idle while it waits.
+    A chain of such candidates (one lobe, two, three; no coat, a coat) is one task, its members fitted in turn,
+    and the longest chains are started first: the chain is the selection's critical path (each member waits for
+    the one before), and a member in a pool slot of its own would hold that slot idle while it waits.
 
     Arguments:
         when_idle: ``when_idle(finished)``, run in the first pool slot that the candidates leave idle (once every
@@ -303,9 +345,10 @@ def _each_candidate(candidates, work, bar, message, when_idle=None):
         without it).
     """
     chains: dict[str, list[str]] = {}  # the chain's first spec -> its specs in order
-    head = {}
-    for spec in candidates:
-        smaller, _ = _smaller_lafortune(spec)
+    head, contained = {}, {}
+    for i, spec in enumerate(candidates):
+        contained[spec] = _contained(spec, candidates[:i])
+        smaller = contained[spec][0]
         head[spec] = head[smaller] if smaller in head else spec
         chains.setdefault(head[spec], []).append(spec)
     finished = {}  # every chain's outputs so far, for `when_idle`
@@ -313,11 +356,15 @@ def _each_candidate(candidates, work, bar, message, when_idle=None):
     def run(chain):
         out = {}
         for spec in chain:
-            init = "auto"
-            smaller, k = _smaller_lafortune(spec)
-            if smaller in out and out[smaller][0].model is not None:
-                init = new_lobe_candidates(out[smaller][0], k, "anisotropic=true" in spec.replace(" ", "").lower())
-            out[spec] = finished[spec] = work(spec, init)
+            smaller, starts = contained[spec]
+            previous = out[smaller][0] if smaller in out and out[smaller][0].model is not None else None
+            output = work(spec, "auto" if previous is None else starts(previous))
+            if previous is not None and output[0].cost > previous.cost * (1.0 + 1e-9):
+                # The search kept other starts than the contained fit's own point: polish that one too, so that a
+                # candidate never fits its rows worse than the one it contains.
+                again = work(spec, starts(previous)[:1])
+                output = again if again[0].cost < output[0].cost else output
+            out[spec] = finished[spec] = output
         return out
 
     def idle():  # queued after every chain: it starts when a slot has no chain left to start

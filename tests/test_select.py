@@ -392,3 +392,46 @@ def test_the_advised_bounded_fit_passes_the_specular_check_where_the_free_one_fa
     assert free.plausibility()["specular"].level == "implausible" and np.max(free.params["ks"]) > 1
     assert np.max(bounded.params["ks"]) <= 1 + 1e-9
     assert bounded.plausibility()["specular"].level == "ok", bounded.plausibility().lines()
+
+
+def test_a_candidate_with_one_layer_more_starts_from_the_one_without():
+    """`_contained` pairs a renderer's material with the same material one layer fewer (a coat, a sheen, a fuzz of
+    weight 0 is the form without it) and a Lafortune sum with the one a lobe smaller; `_layer_starts` begins with the
+    contained fit's own point, the layer at weight 0."""
+    from types import SimpleNamespace
+
+    sel = importlib.import_module("brdffit.select")
+    assert sel._contained("blender(coat=true)", ["lambert", "blender"])[0] == "blender"
+    assert sel._contained("blender(coat=true, sheen=true)", ["blender", "blender(coat=true)"])[0] == \
+        "blender(coat=true)"
+    assert sel._contained("openpbr(fuzz=true)", ["openpbr"])[0] == "openpbr"
+    assert sel._contained("lambert+lafortune(lobes=2)", ["lambert+lafortune"])[0] == "lambert+lafortune"
+    assert sel._contained("blender(coat=true)", ["lambert"]) == (None, None)
+    assert sel._contained("lambert+ggx", ["lambert"]) == (None, None)  # a sum of lobes: not a layer
+    plain = models.get("blender", base_color=[0.5, 0.2, 0.1], metallic=0.2, roughness=0.4, ior=1.6)
+    _, starts = sel._contained("blender(sheen=true)", ["blender"])
+    first = starts(SimpleNamespace(params=plain.params))[0]
+    assert first["sheen_weight"] == 0.0 and "base_color" not in first  # a linear amplitude: solved, not started
+    for name in ("metallic", "roughness", "ior"):
+        assert float(first[name]) == pytest.approx(float(plain.params[name]))
+
+
+def test_a_nested_candidate_never_ends_above_the_one_it_contains():
+    """Where the search's starts end above the contained fit, its own point is polished alone and the lower kept
+    (`_each_candidate`); the fits are stood in for by costs."""
+    from types import SimpleNamespace
+
+    sel = importlib.import_module("brdffit.select")
+    calls = []
+
+    def work(spec, init):
+        calls.append((spec, init if isinstance(init, str) else len(init)))
+        cost = {"blender": 2.0, "blender(coat=true)": 3.0 if len(calls) == 2 else 1.5}[spec]
+        params = models.get("blender").params
+        return (SimpleNamespace(cost=cost, model=object(), params=params),)
+
+    bar = SimpleNamespace(update=lambda *args: None)
+    outputs, _ = sel._each_candidate(["blender", "blender(coat=true)"], work, bar, str)
+    assert [o[0].cost for o in outputs] == [2.0, 1.5]
+    assert calls[0] == ("blender", "auto") and calls[1][0] == calls[2][0] == "blender(coat=true)"
+    assert calls[1][1] > 1 and calls[2][1] == 1  # the search's starts, then the contained fit's point alone

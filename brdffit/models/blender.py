@@ -138,6 +138,7 @@ class BlenderPrincipled(Lobe):
                  "kernel/closure/bsdf_microfacet.h, app/cycles_precompute.cpp")
     reciprocal = False
     offset = True
+    layers = {"coat": "coat_weight", "sheen": "sheen_weight"}
 
     coat: bool = False
     sheen: bool = False

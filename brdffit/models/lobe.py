@@ -42,7 +42,9 @@ class Lobe(abc.ABC):
     - ``param_specs()``: the parameter declarations, in order;
     - ``__call__(params, pair)``: the BRDF value in 1/sr, without the cosine factor;
     - ``peaks(params)``, where the lobe has highlights: where they are (`brdffit.models.peaks.Peak`); none for a
-      diffuse lobe.
+      diffuse lobe;
+    - ``layers``: for a lobe with options that add a layer (a coat, a sheen), each such option's name and the
+      parameter whose value 0 removes the layer, which then leaves the lobe without that option (`nested`).
 
     Every lobe has two options of its own, declared here once (`COMMON_OPTIONS`):
 
@@ -60,6 +62,7 @@ class Lobe(abc.ABC):
     reciprocal: ClassVar[bool] = True
     offset: ClassVar[bool] = False
     stand_in: ClassVar[str | None] = None
+    layers: ClassVar[dict[str, str]] = {}
 
     share: str = ""
     bounded: bool = False
@@ -84,6 +87,13 @@ class Lobe(abc.ABC):
         options = sorted(self.options().items(), key=lambda item: item[0] == "share")
         changed = [f"{k}={v}" for k, v in options if getattr(defaults, k) != v]
         return self.name + (f"({', '.join(changed)})" if changed else "")
+
+    def nested(self) -> list[tuple[Lobe, dict]]:
+        """The forms of this lobe that it contains, one layer fewer each: ``(form, values)`` for every layer option
+        that is on (`layers`), ``values`` the local parameter values (the layer's weight at 0) at which this lobe
+        is that form. A fit of this lobe can start from a fit of the form (`brdffit.select`)."""
+        return [(dataclasses.replace(self, **{option: False}), {weight: 0.0})
+                for option, weight in self.layers.items() if getattr(self, option)]
 
     def start_candidates(self) -> list[dict]:
         """Starting values of shape parameters (local names) worth trying first; the initial guess adds them to

@@ -186,6 +186,7 @@ class OpenPBR(Lobe):
                  "oren_nayar_diffuse_bsdf, layer, mix)")
     reciprocal = False
     offset = True
+    layers = {"coat": "coat_weight", "fuzz": "fuzz_weight"}
 
     coat: bool = False
     fuzz: bool = False
