@@ -748,3 +748,25 @@ def test_lafortune_spike_candidates_keep_the_band_of_incidence_their_attenuation
             limit = np.exp(-g * np.cos(theta) ** 2) if eps > 0 else np.exp(g * s2)
             np.testing.assert_allclose(expected, limit, rtol=0.02)
     assert lobe.sub_lobe_candidates("ks_2", dict(params, cz_2=0.0)) == []
+
+
+# Every layer a lobe declares (`Lobe.layers`), with all of its lobe's layers on: (spec, the form one layer fewer,
+# the values that make it that form).
+LAYERS = [(models.get(name, **{option: True for option in cls.layers}), form, values)
+          for name in models.names() for cls in [models.lobe_class(name)] if cls.layers
+          for form, values in models.get(name, **{option: True for option in cls.layers}).lobes[0].nested()]
+
+
+@pytest.mark.parametrize("full, form, values", LAYERS,
+                         ids=[f"{full.spec}->{form.token()}" for full, form, _ in LAYERS])
+def test_a_layer_of_weight_zero_is_the_form_without_it(full, form, values):
+    """`Lobe.nested`: each form one layer fewer is the lobe with that layer's weight at 0, at random directions
+    (what `brdffit.select` relies on when it starts a layered candidate from the form without the layer)."""
+    rng = np.random.default_rng(6)
+    angles = (rng.uniform(0, 1.5, 300), rng.uniform(-3, 3, 300), rng.uniform(0, 1.5, 300), rng.uniform(-3, 3, 300))
+    layered = models.get(full, **values)
+    reduced = models.get(form.token(), **{k: v for k, v in layered.params.items()
+                                          if k in models.get(form.token()).params})
+    assert not (set(full.lobes[0].layers) - set(full.lobes[0].options())), "a layer names an option the lobe lacks"
+    np.testing.assert_allclose(np.asarray(brdffit.evaluate(layered, *angles)),
+                               np.asarray(brdffit.evaluate(reduced, *angles)), rtol=1e-12, atol=0.0)
