@@ -312,12 +312,18 @@ def _contained(spec: str, earlier) -> tuple[str | None, object]:
         return smaller, lambda previous: new_lobe_candidates(previous, k, anisotropic)
     try:
         model = get_model(spec)
-        canonical = {get_model(other).spec: other for other in earlier}
-    except ValueError:
+    except (ValueError, KeyError):  # an unknown spec: its fit says so
         return None, None
-    if len(model.lobes) != 1:
+    forms = model.lobes[0].nested() if len(model.lobes) == 1 else []
+    if not forms:
         return None, None
-    for form, values in model.lobes[0].nested():
+    canonical = {}
+    for other in earlier:
+        try:
+            canonical[get_model(other).spec] = other
+        except (ValueError, KeyError):
+            pass
+    for form, values in forms:
         if form.token() in canonical:
             return canonical[form.token()], lambda previous, values=values: _layer_starts(previous, model, values)
     return None, None
