@@ -364,11 +364,12 @@ def _each_candidate(candidates, work, bar, message, when_idle=None):
         for spec in chain:
             smaller, starts = contained[spec]
             previous = out[smaller][0] if smaller in out and out[smaller][0].model is not None else None
-            output = work(spec, "auto" if previous is None else starts(previous))
+            init = "auto" if previous is None else starts(previous)
+            output = work(spec, init)
             if previous is not None and output[0].cost > previous.cost * (1.0 + 1e-9):
                 # The search kept other starts than the contained fit's own point: polish that one too, so that a
                 # candidate never fits its rows worse than the one it contains.
-                again = work(spec, starts(previous)[:1])
+                again = work(spec, init[:1])
                 output = again if again[0].cost < output[0].cost else output
             out[spec] = finished[spec] = output
         return out
