@@ -32,7 +32,6 @@ from .arrays import to_device
 from .models.model import EVALUATION_ROWS, evaluate_dirs, evaluation_program
 from .models.registry import get as get_model
 from .fitting.progressive import new_lobe_candidates
-from .fitting.search import grid
 from .fitting.problem import make_fit_data
 from .fitting.status import information_criteria
 from .progress import Progress
@@ -285,18 +284,16 @@ def _smaller_lafortune(spec: str):
     return (f"{base}+{lobe}" if base else lobe), k
 
 
-def _layer_starts(previous: FitResult, model, values: dict) -> list[dict]:
-    """Start candidates of a one-lobe model from the fit of the form it contains one layer fewer (``previous``):
-    that fit's shape with the layer off (``values``: its weight at 0), where the cost is that fit's, so the
-    model's fit ends no higher; the same with the layer's parameters at their defaults; and the search's grid over
-    the model's free shape parameters, so the global search is not lost."""
+def _layer_starts(previous: FitResult, model, values: dict) -> list:
+    """`brdffit.fit`'s ``init`` for a one-lobe model from the fit of the form it contains one layer fewer
+    (``previous``): that fit's shape with the layer off (``values``: its weight at 0), where the cost is that
+    fit's, so the model's fit ends no higher; the same with the layer's parameters at their defaults; then
+    ``"auto"``, the search's own candidates, so the global search is not lost."""
     declared = model.param_specs
-    specs = [s for s in declared if not s.linear and not s.fixed]
     kept = {name: np.asarray(value) for name, value in previous.params.items()
             if name in declared.names and not declared[name].linear}
-    added = {s.name: s.default for s in specs if s.name not in kept}
-    layer_on = dict(kept, **added)
-    return [dict(layer_on, **values), layer_on] + [dict(kept, **g) for g in grid(specs, 0)]
+    layer_on = dict(kept, **{s.name: s.default for s in declared if not s.linear and s.name not in kept})
+    return [dict(layer_on, **values), layer_on, "auto"]
 
 
 def _contained(spec: str, earlier) -> tuple[str | None, object]:

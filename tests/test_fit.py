@@ -518,3 +518,21 @@ def test_summary_of_a_spectrum_gives_one_row_per_channel():
     assert any(line.startswith("n ") for line in lines[:block])
     three = fit(synth.generate(models.get("lambert", rho_d=[0.2, 0.3, 0.4]), n=200, seed=1), "lambert").summary()
     assert "rho_d[2]" in three and "per channel" not in three
+
+
+def test_a_list_of_starts_ending_in_auto_is_scored_beside_the_search():
+    # init as a list scores those settings instead of the search's grid; ending in "auto", before it (how
+    # brdffit.select starts a material with a layer from the fit without it). The near-mirror's optimum
+    # (m = 0.02) is far from the given setting (m = 0.9): the grid is what reaches it.
+    truth = models.get("lambert+cook-torrance", rho_d=[0.3, 0.2, 0.1], ks=[0.8, 0.7, 0.6], m=0.02, f0=0.04)
+    data = synth.generate(truth, pattern="half-diff", n=2000, noise="relative:0.01", seed=3)
+    searched = fit(data, "lambert+cook-torrance", fixed={"f0": 0.04})
+    given = fit(data, "lambert+cook-torrance", fixed={"f0": 0.04}, init=[{"m": 0.9}])
+    both = fit(data, "lambert+cook-torrance", fixed={"f0": 0.04}, init=[{"m": 0.9}, "auto"])
+    default_m = models.get("lambert+cook-torrance").params["m"]
+    started = {round(float(np.mean(s["init"]["m"])), 9) for s in given.starts}
+    assert started <= {0.9, round(float(default_m), 9)}  # the given setting and the model's own value only
+    assert len({round(float(np.mean(s["init"]["m"])), 9) for s in both.starts} - started) > 0
+    assert both.cost == pytest.approx(searched.cost, rel=1e-9)
+    with pytest.raises(ValueError, match="optionally ending in 'auto'"):
+        fit(data, "lambert+cook-torrance", init=[0.5, "auto"])

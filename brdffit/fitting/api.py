@@ -173,7 +173,12 @@ def _starts(problem: Problem, model: Model, fixed_values: dict, init, multistart
     if isinstance(init, str) and init == "auto":
         starts = search(problem, base, data, seed, screen=screen)
     elif isinstance(init, list):
-        starts = search(problem, base, data, seed, candidates=init, screen=screen)
+        own_search = bool(init) and isinstance(init[-1], str) and init[-1] == "auto"
+        candidates = init[:-1] if own_search else init
+        if not all(isinstance(c, dict) for c in candidates):
+            raise ValueError(f"init as a list takes dicts of shape settings, optionally ending in 'auto', got "
+                             f"{init!r}")
+        starts = search(problem, base, data, seed, candidates=candidates, screen=screen, own_search=own_search)
     elif isinstance(init, str) and init == "model" or isinstance(init, (dict, Model)):
         if isinstance(init, (dict, Model)):
             given = init.params if isinstance(init, Model) else model.replace(**init).params
@@ -182,7 +187,7 @@ def _starts(problem: Problem, model: Model, fixed_values: dict, init, multistart
         starts = [[dict(base)] for _ in range(materials)]
     else:
         raise ValueError(f"init must be 'auto', 'model', a Model, a dict of values or a list of candidate "
-                         f"shape settings, got {init!r}")
+                         f"shape settings (optionally ending in 'auto'), got {init!r}")
     if extra:
         for material, more in zip(starts, scored(extra)):
             material.extend(more[:len(extra)])
@@ -809,7 +814,8 @@ def fit(measurements, model=None, *, loss: str = FIT.loss, solver=FIT.solver, in
             nonlinear parameters (the amplitudes are projected out for a linear loss).
         init: ``"auto"`` (global search over the declared bounds, `brdffit.fitting.search`), ``"model"`` (the
             model's values), a `Model`, a dict of starting values, or a list of candidate settings of the
-            nonlinear parameters (dicts) that the search scores instead of its own grid.
+            nonlinear parameters (dicts) that the search scores instead of its own grid; a list ending in
+            ``"auto"`` is scored before the search's own candidates, not instead of them.
         fixed: parameters held fixed: a dict name -> value, or names held at the model's values.
         free: names of parameters declared fixed by default (e.g. the toon ``width``) that this fit frees.
         multistart: extra quasi-random starts over the bounds, polished with the others in one vmapped solve; the

@@ -378,7 +378,7 @@ def _screened(problem: Problem, candidates: list[dict], data: FitData, screen: F
 
 def search(problem: Problem, base: dict, data: FitData, seed: int, candidates: list[dict] | None = None,
            starts: int = POLISH_STARTS, separation: float = _MIN_SEPARATION,
-           screen: FitData | None = None) -> list[list[dict]]:
+           screen: FitData | None = None, own_search: bool = False) -> list[list[dict]]:
     """The best separated candidates of each material, as starts for the polish.
 
     Arguments:
@@ -387,13 +387,14 @@ def search(problem: Problem, base: dict, data: FitData, seed: int, candidates: l
         data: `FitData` of a subsample (at most `SEARCH_SAMPLES` samples), leading material axis.
         seed: seed of the Sobol points and of the choice among the lobes' candidates.
         candidates: outer-parameter settings to score instead of the grid and the lobes' suggestions (missing
-            names take their ``base`` values).
+            names take their ``base`` values), or beside them with ``own_search``.
         starts: how many starts to return per material.
         separation: the least distance between two starts in the unit cube of the search ranges (negative:
             keep every candidate).
         screen: `FitData` of a smaller subsample (`SCREEN_SAMPLES`, same material axis), or None: with more
             than `SCREEN_ABOVE` candidates, each material's candidates are first scored on it, and the
             `SCREEN_KEEP` best are scored on ``data``; the others are not starts.
+        own_search: score the grid and the lobes' suggestions after the given ``candidates``.
 
     Returns:
         For each material, up to ``starts`` dicts of physical values of every parameter (amplitudes solved),
@@ -404,10 +405,9 @@ def search(problem: Problem, base: dict, data: FitData, seed: int, candidates: l
     outer = [specs[name] for name in scoring.outer]
     base = {k: np.asarray(v, dtype=float) for k, v in base.items()}
     own = {s.name: base[s.name] for s in outer}
-    if candidates is not None:
-        settings = [own] + [{k: v for k, v in c.items() if k in own} for c in candidates]
-    else:
-        settings = [own] + grid(outer, seed) + _lobe_candidates(problem, set(own), seed)
+    settings = [own] + [{k: v for k, v in c.items() if k in own} for c in candidates or []]
+    if candidates is None or own_search:
+        settings += grid(outer, seed) + _lobe_candidates(problem, set(own), seed)
     full = []
     for setting in settings:
         params = dict(base)
