@@ -1,5 +1,5 @@
-"""A NumPy transcription of pbrt-v4's random walk for ``coateddiffuse``, the reference of
-tests/test_coateddiffuse.py.
+"""NumPy transcriptions of pbrt-v4's random walk for ``coateddiffuse`` and ``coatedconductor``, the references of
+tests/test_coateddiffuse.py and tests/test_coatedconductor.py.
 
 pbrt-v4 (github.com/mmp/pbrt-v4), ``src/pbrt/bxdfs.h``: ``LayeredBxDF<DielectricBxDF, DiffuseBxDF, true>::f`` for
 ωo and ωi above the surface and albedo 0 (no medium in the slab): the interface's reflection, then per walk the
@@ -10,15 +10,19 @@ transmission density) and the interface (a reflection from inside), Russian roul
 throughput falls below 0.25, and ``Tr(thickness, w)`` at every crossing. ``DielectricBxDF`` (``Sample_f``, ``f``,
 ``PDF`` with ``BxDFReflTransFlags``), ``TrowbridgeReitzDistribution`` (``D``, ``Lambda``, ``G1``, ``G``, ``PDF``,
 ``Sample_wm``: visible normals) and ``FrDielectric``, ``Refract`` (``src/pbrt/util/scattering.h``) are transcribed
-below. Nothing here imports brdffit. Walks run in parallel as arrays; the mean of ``n`` walks and its standard error
-estimate pbrt-v4's f.
+below. ``coatedconductor`` (``LayeredBxDF<DielectricBxDF, ConductorBxDF, true>::f``) is transcribed for a smooth
+interface (``DielectricBxDF``'s specular branch: refraction and mirror reflection with the Fresnel weights, no
+next-event estimate towards the exit) over a rough ``ConductorBxDF`` (``f``, ``Sample_f``; ``FrComplex`` in complex
+arithmetic), whose index pbrt-v4 divides by the interface's (``CoatedConductorMaterial::GetBxDF``). Nothing here
+imports brdffit. Walks run in parallel as arrays; the mean of ``n`` walks and its standard error estimate pbrt-v4's
+f.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["coated_diffuse_f"]
+__all__ = ["coated_diffuse_f", "coated_conductor_f", "reflectance_index"]
 
 
 def _dot(a, b):
@@ -228,3 +232,109 @@ def coated_diffuse_f(wo, wi, rho: float, eta: float, alpha: float, thickness: fl
         beta = np.where(alive, new_beta, 0.0)
         w = np.where(alive[..., None], new_w, w)
     return reflection + total.mean(), total.std() / np.sqrt(walks)
+
+
+def _fr_complex(cos_i, eta):
+    """``FrComplex``: the Fresnel reflectance of the complex index ``eta`` (η + ik), principal square root."""
+    cos_i = np.clip(cos_i, 0.0, 1.0).astype(complex)
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    cos_t = np.sqrt(1.0 - sin2_t)
+    r_parl = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    r_perp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    return (np.abs(r_parl) ** 2 + np.abs(r_perp) ** 2) / 2.0
+
+
+class _Conductor:
+    """``ConductorBxDF`` over a Trowbridge-Reitz distribution (rough), complex index per channel ``(C,)``."""
+
+    def __init__(self, eta, k, alpha: float):
+        self.n, self.mf = np.asarray(eta, dtype=float) + 1j * np.asarray(k, dtype=float), _TrowbridgeReitz(alpha)
+
+    def f(self, wo, wi):
+        same = wo[..., 2] * wi[..., 2] > 0
+        wm = wo + wi
+        length = np.linalg.norm(wm, axis=-1, keepdims=True)
+        wm = wm / np.maximum(length, 1e-300)
+        fr = _fr_complex(np.abs(_dot(wo, wm))[..., None], self.n)
+        value = (self.mf.d(wm) * self.mf.g(wo, wi) / (4.0 * np.abs(wi[..., 2] * wo[..., 2])))[..., None] * fr
+        return np.where((same & (length[..., 0] > 0))[..., None], value, 0.0)
+
+    def sample(self, wo, u):
+        """``Sample_f`` (reflection): (valid, f ``(..., C)``, ωi, pdf)."""
+        wm = self.mf.sample_wm(wo, u)
+        wi = -wo + 2.0 * _dot(wo, wm)[..., None] * wm
+        ok = (wo[..., 2] * wi[..., 2] > 0) & (wi[..., 2] != 0)
+        pdf = self.mf.pdf(wo, wm) / (4.0 * np.abs(_dot(wo, wm)))
+        fr = _fr_complex(np.abs(_dot(wo, wm))[..., None], self.n)
+        f = (self.mf.d(wm) * self.mf.g(wo, wi) / (4.0 * np.abs(wi[..., 2] * wo[..., 2])))[..., None] * fr
+        return ok & (pdf > 0), f, wi, pdf
+
+
+def reflectance_index(r):
+    """``CoatedConductorMaterial::GetBxDF`` given ``reflectance`` r instead of an index: r clamped to [0, 0.9999],
+    η = 1, k = 2√r/√(1 − r) (before the division by the interface's index)."""
+    r = np.clip(np.asarray(r, dtype=float), 0.0, 0.9999)
+    return np.ones_like(r), 2.0 * np.sqrt(r) / np.sqrt(np.maximum(0.0, 1.0 - r))
+
+
+def _smooth_transmission(w, eta):
+    """``DielectricBxDF::Sample_f`` of a smooth interface with only ``Transmission`` allowed (probability 1):
+    (valid, T = 1 − FrDielectric, the refracted direction, the relative index seen)."""
+    ok, wt, etap = _refract(w, np.broadcast_to(np.array([0.0, 0.0, 1.0]), w.shape), np.full(w.shape[:-1], eta))
+    return ok, 1.0 - _fr_dielectric(w[..., 2], eta), wt, etap
+
+
+def coated_conductor_f(wo, wi, conductor_eta, conductor_k, alpha: float, eta: float, thickness: float = 0.01,
+                       max_depth: int = 10, walks: int = 200_000, seed: int = 0):
+    """pbrt-v4's f(ωo, ωi) of ``coatedconductor`` with a smooth interface (``interface.roughness`` 0), estimated
+    by ``walks`` walks.
+
+    Arguments:
+        wo, wi: unit vectors ``(3,)`` above the surface (ωo towards the camera, ωi towards the light).
+        conductor_eta, conductor_k: the metal's complex index as given to pbrt (``(C,)``; divided by ``eta`` here,
+            as ``CoatedConductorMaterial::GetBxDF`` does); alpha: its Trowbridge-Reitz width.
+        eta: the interface's index of refraction.
+        thickness, max_depth: the slab's thickness and pbrt's ``maxdepth``.
+        walks: the number of walks; seed: their random numbers.
+
+    Returns:
+        ``(mean, standard error)``, each ``(C,)``, in 1/sr.
+    """
+    rng = np.random.default_rng(seed)
+    bottom = _Conductor(np.asarray(conductor_eta, dtype=float) / eta, np.asarray(conductor_k, dtype=float) / eta,
+                        alpha)
+    channels = bottom.n.shape[0]
+    wo = np.broadcast_to(wo, (walks, 3)).copy()
+    wi = np.broadcast_to(wi, (walks, 3)).copy()
+    # The smooth interface's f is 0 off its mirror direction: the walk is all of f.
+    ok_o, t_o, w, etap_o = _smooth_transmission(wo, eta)
+    ok_i, t_i, wis, _ = _smooth_transmission(wi, eta)  # importance mode: no 1/η'²
+    alive = ok_o & ok_i & (w[..., 2] != 0) & (wis[..., 2] != 0)
+    beta = np.where(alive[:, None], (t_o / etap_o**2)[:, None] * np.ones(channels), 0.0)  # f |cos| / pdf
+    z = np.full(walks, thickness)
+    total = np.zeros((walks, channels))
+    for depth in range(max_depth):
+        if depth > 3:  # Russian roulette on the largest channel
+            top = beta.max(axis=1)
+            roulette = alive & (top < 0.25)
+            q = np.maximum(0.0, 1.0 - top)
+            alive &= ~(roulette & (rng.random(walks) < q))
+            beta = np.where((roulette & alive)[:, None], beta / np.where(1.0 - q > 0, 1.0 - q, 1.0)[:, None], beta)
+        z = np.where(z == thickness, 0.0, thickness)
+        beta = beta * _slab(thickness, w)[:, None]
+        at_exit = z == thickness
+        at_base = alive & ~at_exit
+        # At the conductor: next-event estimation along wis (weight 1: the exit interface is specular), ...
+        total += np.where(at_base[:, None], beta * bottom.f(-w, -wis) * (t_i * _slab(thickness, wis))[:, None],
+                          0.0)
+        # ... then a sample of the conductor. At the interface: its mirror reflection from inside.
+        ok_b, f_b, w_b, pdf_b = bottom.sample(-w, rng.random((walks, 2)))
+        reflectance = _fr_dielectric((-w)[..., 2], eta)  # ω = −w going down from inside: cos < 0 inverts η
+        w_r = w * np.array([-1.0, -1.0, 1.0]) * -1.0  # (−wo'.x, −wo'.y, wo'.z) of wo' = −w
+        new_w = np.where(at_exit[:, None], w_r, w_b)
+        new_beta = np.where(at_exit[:, None], beta * reflectance[:, None],
+                            beta * f_b * (np.abs(w_b[..., 2]) / np.where(pdf_b > 0, pdf_b, 1.0))[:, None])
+        alive &= np.where(at_exit, True, ok_b)
+        beta = np.where(alive[:, None], new_beta, 0.0)
+        w = np.where(alive[:, None], new_w, w)
+    return total.mean(axis=0), total.std(axis=0) / np.sqrt(walks)

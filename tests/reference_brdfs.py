@@ -49,6 +49,7 @@ __all__ = [
     "roughplastic",
     "mitsuba_rough_transmittance",
     "coateddiffuse",
+    "coatedconductor",
     "coated_transmission",
     "coated_internal_reflectance",
     "sheen",
@@ -1370,6 +1371,100 @@ def coateddiffuse(theta_i, phi_i, theta_o, phi_o, reflectance, roughness, eta):
     return _masked(pair, reflection + rho / np.pi * series * through[:, None])
 
 
+# pbrt-v4's coatedconductor under a smooth interface: the expectation of LayeredBxDF<DielectricBxDF, ConductorBxDF,
+# true>::f by the rules brdffit's lobe uses (tests/test_coatedconductor.py holds those rules to finer ones and to
+# pbrt-v4's walk), here in angles and with the conductor of the pbrt reference above (FrComplex in complex arithmetic).
+def _keys_weight(s):
+    """Keys' kernel W(s) (a = −1/2) at a distance ``s`` in node spacings."""
+    s = np.abs(s)
+    return np.where(s <= 1.0, 1.5 * s**3 - 2.5 * s**2 + 1.0,
+                    np.where(s < 2.0, -0.5 * s**3 + 2.5 * s**2 - 4.0 * s + 2.0, 0.0))
+
+
+def _keys_extended(table, axis):
+    """One node more beyond each end of ``axis``: f₋₁ = 3 f₀ − 3 f₁ + f₂ (Keys 1981, Eqs. 25-26)."""
+    t = np.moveaxis(table, axis, 0)
+    return np.moveaxis(np.concatenate([(3 * t[0] - 3 * t[1] + t[2])[None], t, (3 * t[-1] - 3 * t[-2] + t[-3])[None]]),
+                       0, axis)
+
+
+def _keys_neighbours(x, step, count):
+    """Indices (into an axis with one extra node before the first) and Keys weights of the 4 nodes around each x on
+    the nodes j·step, j < count."""
+    c = np.clip(x / step, 0.0, count - 1.0)
+    i = np.minimum(np.floor(c), count - 2).astype(int)
+    offsets = np.arange(-1, 3)
+    return i[:, None] + offsets + 1, _keys_weight(c[:, None] - (i[:, None] + offsets))
+
+
+@_quiet
+def coatedconductor(theta_i, phi_i, theta_o, phi_o, reflectance, conductor_roughness, interface_eta):
+    """pbrt-v4's ``coatedconductor`` with ``interface.roughness`` 0 (``reflectance`` r: conductor index
+    (1 + i 2√r/√(1 − r))/η, roughness α; thickness 0.01, albedo 0, maxdepth 10): T(θo) T(θi)/η² Tr Tr (f_c(u0, ui) +
+    Σ_{k=1}^{4} 𝒦^k f_c), u0 and ui refracted by Snell's law, 𝒦 one more bounce at the conductor and a mirror
+    reflection by the interface from inside (R, 1 beyond the critical angle), the bounces by cosine coefficients in
+    Δφ (64 midpoints over [0, π]) over Gauss-Legendre cosines (16 on each side of the critical cosine), tabulated at
+    the outside sines j/32 and 65 azimuths over [0, π] and read by Keys' cubic convolution (brdffit.models.
+    coatedconductor's module doc)."""
+    pair = Pair(theta_i, phi_i, theta_o, phi_o)
+    eta = interface_eta
+    r = np.atleast_1d(np.asarray(reflectance, dtype=float))
+    eta_c, k_c = np.full_like(r, 1.0 / eta), 2.0 * np.sqrt(r) / np.sqrt(1.0 - r) / eta
+
+    def f_c(t_in, p_in, t_out, p_out):  # the conductor inside the coat, (N, C)
+        return pbrt(t_in, p_in, t_out, p_out, 0.0, 1.0, conductor_roughness, eta_c, k_c)
+
+    def tr(cos):
+        return np.exp(-_COATED_THICKNESS / cos)
+
+    def fresnel(cos, n1, n2):  # unpolarised, 1 under total internal reflection
+        sin_t = n1 / n2 * np.sqrt(1.0 - cos * cos)
+        cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin_t**2))
+        rs = (n1 * cos - n2 * cos_t) / (n1 * cos + n2 * cos_t)
+        rp = (n2 * cos - n1 * cos_t) / (n2 * cos + n1 * cos_t)
+        return np.where(sin_t >= 1.0, 1.0, (rs**2 + rp**2) / 2.0)
+
+    x, w = np.polynomial.legendre.leggauss(16)
+    x, w = (x + 1.0) / 2.0, w / 2.0
+    critical = np.sqrt(1.0 - 1.0 / eta**2)
+    mu = np.concatenate([critical * x, critical + (1.0 - critical) * x])
+    weight = np.concatenate([critical * w, (1.0 - critical) * w]) * mu * tr(mu) ** 2 * fresnel(mu, eta, 1.0)
+    ends = np.arcsin(np.linspace(0.0, 1.0, 33) / eta)
+    phi = (np.arange(64) + 0.5) * np.pi / 64
+    harmonic = np.arange(64)
+
+    def coefficients(theta_a, theta_b):  # (M, A, B, C)
+        ta, tb, ph = (g.ravel() for g in np.meshgrid(theta_a, theta_b, phi, indexing="ij"))
+        samples = f_c(tb, ph, ta, np.zeros_like(ta)).reshape(len(theta_a), len(theta_b), len(phi), -1)
+        basis = np.cos(harmonic[:, None] * phi[None, :]) * np.where(harmonic == 0, 1.0, 2.0)[:, None] / 64
+        return np.einsum("mj,abjc->mabc", basis, samples)
+
+    factor = (np.where(harmonic == 0, 2.0 * np.pi, np.pi) * (-1.0) ** harmonic)[:, None, None, None]
+    middle = factor * coefficients(np.arccos(mu), np.arccos(mu)) * weight[None, None, :, None]
+    to_ends = coefficients(ends, np.arccos(mu))
+    first, last = factor * to_ends * weight[None, None, :, None], np.swapaxes(to_ends, 1, 2)
+    chain = total = last
+    for _ in range(3):
+        chain = np.einsum("mabc,mbdc->madc", middle, chain)
+        total = total + chain
+    bounces = np.einsum("mabc,mbdc->madc", first, total)
+    step = np.pi / 64
+    psi = np.arange(-1, 66) * step
+    table = np.einsum("mt,mabc->abtc", np.cos(harmonic[:, None] * psi[None, :]), bounces)
+    table = _keys_extended(_keys_extended(table, 0), 1)
+    dphi = np.abs(np.angle(np.exp(1j * (pair.po - pair.pi_))))
+    ia, wa = _keys_neighbours(pair.so, 1.0 / 32, 33)
+    ib, wb = _keys_neighbours(pair.si, 1.0 / 32, 33)
+    ip, wp = _keys_neighbours(dphi, step, 65)
+    bounced = np.einsum("na,nb,np,nabpc->nc", wa, wb, wp,
+                        table[ia[:, :, None, None], ib[:, None, :, None], ip[:, None, None, :]])
+    t_o, t_i = np.arcsin(pair.so / eta), np.arcsin(pair.si / eta)
+    direct = f_c(t_i, pair.pi_, t_o, pair.po)
+    through = ((1.0 - fresnel(pair.co, 1.0, eta)) * (1.0 - fresnel(pair.ci, 1.0, eta)) / eta**2
+               * tr(np.cos(t_o)) * tr(np.cos(t_i)))
+    return _masked(pair, through[:, None] * (direct + bounced))
+
+
 REFERENCES = {
     "lambert": lambda ti, pi_, to, po, p: lambert(ti, pi_, to, po, p["rho_d"]),
     "oren-nayar": lambda ti, pi_, to, po, p: oren_nayar(ti, pi_, to, po, p["rho_d"], p["sigma"]),
@@ -1394,6 +1489,7 @@ REFERENCES = {
     "pbrt": lambda ti, pi_, to, po, p: pbrt(ti, pi_, to, po, **p),
     "roughplastic": lambda ti, pi_, to, po, p: roughplastic(ti, pi_, to, po, **p),
     "coateddiffuse": lambda ti, pi_, to, po, p: coateddiffuse(ti, pi_, to, po, **p),
+    "coatedconductor": lambda ti, pi_, to, po, p: coatedconductor(ti, pi_, to, po, **p),
     "abc-smooth": lambda ti, pi_, to, po, p: abc_smooth(ti, pi_, to, po, **p),
     "abc-microfacet": lambda ti, pi_, to, po, p: abc_microfacet(ti, pi_, to, po, **p),
     "sgd": lambda ti, pi_, to, po, p: sgd(ti, pi_, to, po, **p),

@@ -146,6 +146,7 @@ OTHER_CASES = [
     Case("pbrt", {}, {"reflectance": [0.7, 0.4, 0.15], "amount": 0.35, "roughness": 0.3, "eta": [0.2, 0.9, 1.45],
                       "k": [3.2, 0.6, 0.001]}),
     Case("coateddiffuse", {}, {"reflectance": [0.7, 0.4, 0.15], "roughness": 0.3, "eta": 1.7}),
+    Case("coatedconductor", {}, {"reflectance": [0.9, 0.6, 0.25], "conductor_roughness": 0.3, "interface_eta": 1.7}),
     Case("roughplastic", {}, {"diffuse_reflectance": [0.7, 0.4, 0.15], "specular_reflectance": [0.9, 0.8, 0.95],
                               "alpha": 0.3, "int_ior": 1.7}),
     Case("ashikhmin-shirley", {}, {"rs": RS, "n": 35.0}),
@@ -201,7 +202,7 @@ def _values(case_id):
 # The lobes and options of the modern microfacet, Burley and sheen models: against the reference at random
 # directions above the horizon to 1e-12 relative (the fixed configurations above hold every lobe to 1e-10).
 MODERN = [case for case in CASES if case.spec in ("burley", "sheen", "charlie-sheen", "principled", "gltf", "blender",
-                                                  "openpbr", "pbrt", "coateddiffuse", "roughplastic", "abc-smooth", "abc-microfacet",
+                                                  "openpbr", "pbrt", "coateddiffuse", "coatedconductor", "roughplastic", "abc-smooth", "abc-microfacet",
                                                   "sgd")
           or case.options.get("distribution") in ("std", "gtr")
           or case.options.get("anisotropic") is True and case.spec != "lafortune"

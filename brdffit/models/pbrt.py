@@ -41,7 +41,7 @@ from .specs import roughness
 
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) does not need JAX
 
-__all__ = ["PbrtMaterial", "MAX_ETA", "MIN_ETA", "MAX_K"]
+__all__ = ["PbrtMaterial", "conductor_bxdf", "MAX_ETA", "MIN_ETA", "MAX_K"]
 
 # pbrt-v4 takes any non-negative RGB for the conductor's "rgb eta" and "rgb k" (unbounded spectra); η = 0 with
 # k = 0 would divide by zero in FrComplex, so η starts just above it. [1e-3, 10] covers the metals' indices (silver's
@@ -51,6 +51,12 @@ MIN_ETA, MAX_ETA, MAX_K = 1e-3, 10.0, 20.0
 
 # pbrt-v4's conductor BxDF in brdffit's terms: Trowbridge-Reitz (GGX) D, height-correlated Smith G, FrComplex.
 _CONDUCTOR = CookTorrance(distribution="ggx", shadowing="smith-correlated", fresnel="conductor")
+
+
+def conductor_bxdf(alpha, eta, k):
+    """pbrt-v4's ``ConductorBxDF::f`` of Trowbridge-Reitz width α and complex index η + ik, as a function of a
+    `brdffit.geometry.LocalPair` returning ``(..., C)`` (η, k of shape ``(C,)``)."""
+    return lambda pair: _CONDUCTOR({"ks": 1.0, "m": alpha, "eta": eta, "k": k}, pair)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,5 +90,5 @@ class PbrtMaterial(Lobe):
 
     def __call__(self, params, pair: LocalPair):
         t = params["amount"]
-        conductor = _CONDUCTOR({"ks": 1.0, "m": params["roughness"], "eta": params["eta"], "k": params["k"]}, pair)
+        conductor = conductor_bxdf(params["roughness"], params["eta"], params["k"])(pair)
         return (1.0 - t) * params["reflectance"] / jnp.pi + t * conductor

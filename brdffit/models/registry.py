@@ -12,6 +12,7 @@ import re
 from .._lazy import module
 from .abc import ABCMicrofacet, ABCSmooth
 from .ashikhmin_shirley import AshikhminShirley, AshikhminShirleyAniso
+from .coatedconductor import CoatedConductor
 from .coateddiffuse import CoatedDiffuse
 from .cook_torrance import GGX, CookTorrance
 from .blender import BlenderPrincipled
@@ -63,6 +64,7 @@ _LOBES: dict[str, type[Lobe]] = {
         OpenPBR,
         PbrtMaterial,
         CoatedDiffuse,
+        CoatedConductor,
         RoughPlastic,
         ToonDiffuse,
         ToonSpecular,
