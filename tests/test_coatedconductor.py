@@ -88,3 +88,80 @@ def test_a_fit_recovers_a_coated_metal():
     np.testing.assert_allclose(result.params["reflectance"], [0.9, 0.7, 0.4], rtol=0.01)
     assert float(result.params["conductor_roughness"]) == pytest.approx(0.25, rel=0.02)
     assert float(result.params["interface_eta"]) == pytest.approx(1.6, rel=0.02)
+
+
+@pytest.mark.parametrize("reflectance, alpha, eta", [([0.9, 0.6, 0.3], 0.2, 1.6), ([0.9999, 0.0, 0.5], 1e-3, 3.0),
+                                                     ([0.05, 0.97, 0.4], 1.0, 1.01)])
+def test_pbrt_export_is_the_material_as_it_is(reflectance, alpha, eta):
+    """pbrt-v4's coatedconductor with the model's own values (round trip): a smooth interface, the metal's index
+    from its reflectance, remaproughness false, the slab stated; read back by pbrt-v4's formulas (its
+    ``ConductorBxDF::f``, not brdffit's lobe) it evaluates to the model; pbrt's newer ``reflectance`` parameter
+    reads back the same."""
+    from brdffit.export import export_details
+    from brdffit.export import pbrt_reference as pr
+    from brdffit.export import terms as tm
+
+    model = brdffit.models.get("coatedconductor", reflectance=reflectance, conductor_roughness=alpha,
+                               interface_eta=eta)
+    details = export_details(model, "pbrt", name="m")
+    assert details.exact and "# exact: " in details.text
+    material = pr.parse(details.text)["m"]
+    assert material["type"] == "coatedconductor" and material["remaproughness"] is False
+    assert (material["interface.roughness"], material["interface.eta"], material["conductor.roughness"]) == (
+        0.0, eta, alpha)
+    assert material["conductor.eta"] == [1.0, 1.0, 1.0] and min(material["conductor.k"]) >= 0.0
+    r = np.asarray(reflectance)
+    np.testing.assert_allclose(material["conductor.k"], 2 * np.sqrt(r) / np.sqrt(1 - r), rtol=1e-15)
+    assert (material["thickness"], material["albedo"], material["g"], material["maxdepth"], material["nsamples"]) \
+        == (0.01, [0.0, 0.0, 0.0], 0.0, 10, 1)
+    pairs = tm.deviation_pairs([tm.Peak("half", alpha * eta)], n=600, seed=7, per_peak=600)
+    want = np.asarray(tm.evaluate_dirs(model, pairs.wi, pairs.wo))
+    # At α = 1e-3 the conductor's D changes by 4θh/α² per radian of θh near its peak: brdffit's half vector and
+    # the transcription's normalize(ωi + ωo), equal to rounding (1e-16), give D values 0.3 % apart at the sharpest
+    # pairs (f ~ 3,000/sr); elsewhere the two evaluations agree to 1e-10.
+    rtol = 1e-10 if alpha >= 0.01 else 5e-3
+    np.testing.assert_allclose(pr.evaluate(pr.parse(details.text), "m", pairs.wi, pairs.wo), want, rtol=rtol,
+                               atol=1e-14)
+    newer = (f'MakeNamedMaterial "n" "string type" [ "coatedconductor" ] "float interface.eta" [ {eta!r} ] '
+             f'"rgb reflectance" [ {" ".join(map(repr, reflectance))} ] "float conductor.roughness" [ {alpha!r} ] '
+             '"bool remaproughness" [ false ]')
+    np.testing.assert_allclose(pr.evaluate(pr.parse(newer), "n", pairs.wi, pairs.wo), want, rtol=rtol, atol=1e-14)
+
+
+def test_pbrt_reader_refuses_a_rough_coat_and_a_named_metal():
+    from brdffit.export import export_details
+    from brdffit.export import pbrt_reference as pr
+    from brdffit.export import terms as tm
+
+    text = export_details(brdffit.models.get("coatedconductor"), "pbrt", name="m").text
+    up = np.array([[0.0, 0.0, 1.0]])
+    rough = text.replace('"float interface.roughness" [ 0.0 ]', '"float interface.roughness" [ 0.1 ]')
+    with pytest.raises(tm.ExportError, match="interface roughness 0.1, .* cover a smooth interface"):
+        pr.evaluate(pr.parse(rough), "m", up, up)
+    copper = 'MakeNamedMaterial "c" "string type" [ "coatedconductor" ] "float conductor.roughness" [ 0.2 ]'
+    with pytest.raises(tm.ExportError, match="copper's named spectra, is not covered"):
+        pr.evaluate(pr.parse(copper), "c", up, up)
+
+
+def test_pbrt_target_chooses_a_coated_conductor_for_its_data():
+    """Data of pbrt-v4's coatedconductor: the pbrt target fits its three models and chooses the coated conductor on
+    held-out directions (neither the mix of a diffuse and a conductor nor the coated diffuse dims and narrows a
+    metal's highlight as the coat does), recovered and written as pbrt's coatedconductor."""
+    from brdffit import select
+    from brdffit.export import export_details
+    from brdffit.export.pbrt_reference import parse
+
+    truth = dict(reflectance=[0.85, 0.55, 0.25], conductor_roughness=0.15, interface_eta=1.5)
+    data = brdffit.synth.generate(brdffit.models.get("coatedconductor", **truth), pattern="half-diff", n=800,
+                                  noise="relative:0.01", seed=6)
+    selection = select(data, ["lambert"], criterion="heldout", target="pbrt")
+    assert selection.chosen == "coatedconductor"
+    rows = {row["spec"]: row for row in selection.table}
+    assert rows["coatedconductor"]["heldout_error"] < 0.5 * min(rows["pbrt"]["heldout_error"],
+                                                              rows["coateddiffuse"]["heldout_error"])
+    params = selection.result.params
+    np.testing.assert_allclose(params["reflectance"], truth["reflectance"], rtol=0.03)
+    assert float(params["conductor_roughness"]) == pytest.approx(truth["conductor_roughness"], rel=0.03)
+    assert float(params["interface_eta"]) == pytest.approx(truth["interface_eta"], rel=0.03)
+    details = export_details(selection.result, "pbrt")
+    assert details.exact and parse(details.text)["material"]["type"] == "coatedconductor"

@@ -184,7 +184,7 @@ def test_pbrt_reader_refuses_a_slab_it_does_not_cover():
 
 
 def test_a_coated_diffuse_in_a_sum_is_refused_naming_what_pbrt_takes():
-    with pytest.raises(tm.ExportError, match="or the pbrt or the coateddiffuse model alone"):
+    with pytest.raises(tm.ExportError, match="or the pbrt, coateddiffuse or coatedconductor model alone"):
         export_details(models.get("lambert+coateddiffuse"), "pbrt")
 
 

@@ -82,7 +82,7 @@ def test_reciprocal():
 
 
 def test_pbrt_model_in_a_sum_is_refused_naming_what_pbrt_takes():
-    with pytest.raises(tm.ExportError, match="or the pbrt or the coateddiffuse model alone"):
+    with pytest.raises(tm.ExportError, match="or the pbrt, coateddiffuse or coatedconductor model alone"):
         export_details(models.get("lambert+pbrt"), "pbrt")
 
 

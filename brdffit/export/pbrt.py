@@ -23,7 +23,11 @@ round-trip precision), exact and with nothing clamped. So is brdffit's ``coatedd
 (`brdffit.models.coateddiffuse`), pbrt-v4's ``coateddiffuse`` material as the expectation of its random walk:
 written with its ``reflectance``, ``roughness`` (``remaproughness`` false) and ``eta``, and the slab's parameters
 the model assumes (``thickness`` 0.01, ``albedo`` 0, ``g`` 0, ``maxdepth`` 10, ``nsamples`` 1) stated rather than
-left to pbrt's defaults. Those two are what ``brdffit fit --for pbrt`` fits.
+left to pbrt's defaults; and brdffit's ``coatedconductor`` model (`brdffit.models.coatedconductor`), pbrt-v4's
+``coatedconductor`` under a smooth coat: ``interface.roughness`` 0, ``interface.eta``, the metal of reflectance r as
+``conductor.eta`` 1 and ``conductor.k`` 2√r/√(1 − r) (the index pbrt-v4's own ``reflectance`` parameter sets),
+``conductor.roughness`` (``remaproughness`` false) and the same slab. Those three are what ``brdffit fit --for
+pbrt`` fits.
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ from .terms import check_channels
 __all__ = ["write", "EXPORTABLE"]
 
 EXPORTABLE = ("lambert (any number, summed) and isotropic cook-torrance or ggx lobes with any Fresnel mode, summed; "
-              "or the pbrt or the coateddiffuse model alone")
+              "or the pbrt, coateddiffuse or coatedconductor model alone")
 # With a diffuse part beside the conductors, the conductors' weights sum to at most 1 minus this.
 _MIN_DIFFUSE_WEIGHT = 1e-3
 
@@ -180,11 +184,17 @@ _BOUNDS = {"weight": (1e-6, 1.0), "reflectance": (0.0, 1.0), "eta": (1e-3, 10.0)
 
 
 def _peaks(parts: list[_Part]) -> list:
-    """The peaks of the written conductors and coated interfaces (Trowbridge-Reitz of width α = roughness,
-    remaproughness false)."""
-    return [tm.Peak("half", float(np.clip(dict((key, value) for _, key, value in part.params)["roughness"], 1e-4,
-                                          1.0)), lobe=f"pbrt {part.kind}")
-            for part in parts if part.kind in ("conductor", "coateddiffuse")]
+    """The peaks of the written conductors, coated interfaces and coated conductors (Trowbridge-Reitz of width α =
+    roughness, remaproughness false; a coated conductor's seen through its coat, about η times wider)."""
+    peaks = []
+    for part in parts:
+        values = dict((key, value) for _, key, value in part.params)
+        if part.kind in ("conductor", "coateddiffuse"):
+            peaks.append(tm.Peak("half", float(np.clip(values["roughness"], 1e-4, 1.0)), lobe=f"pbrt {part.kind}"))
+        elif part.kind == "coatedconductor":
+            width = values["conductor.roughness"] * values["interface.eta"]
+            peaks.append(tm.Peak("half", float(np.clip(width, 1e-4, 1.0)), lobe=f"pbrt {part.kind}"))
+    return peaks
 
 
 def _refine(parts: list[_Part], source, model, name: str) -> list[_Part]:
@@ -258,8 +268,25 @@ def _coated_diffuse_parts(v: dict) -> list[_Part]:
                                     ("integer", "maxdepth", cd.MAX_DEPTH), ("integer", "nsamples", 1)], 1.0)]
 
 
+def _coated_conductor_parts(v: dict) -> list[_Part]:
+    """brdffit's ``coatedconductor`` model as pbrt-v4's ``coatedconductor``: the smooth interface, the metal of
+    reflectance r as the index pbrt-v4's ``reflectance`` parameter sets (η 1, k 2√r/√(1 − r), which every pbrt-v4
+    version reads), and the slab's parameters stated."""
+    from ..models import coateddiffuse as cd
+
+    r = np.asarray(v["reflectance"], dtype=float)
+    return [_Part("coatedconductor", [("float", "interface.roughness", 0.0), ("float", "interface.eta",
+                                                                               float(v["interface_eta"])),
+                                      ("rgb", "conductor.eta", np.ones_like(r)),
+                                      ("rgb", "conductor.k", 2.0 * np.sqrt(r) / np.sqrt(1.0 - r)),
+                                      ("float", "conductor.roughness", float(v["conductor_roughness"])),
+                                      ("bool", "remaproughness", False), ("float", "thickness", cd.THICKNESS),
+                                      ("rgb", "albedo", np.zeros(3)), ("float", "g", 0.0),
+                                      ("integer", "maxdepth", cd.MAX_DEPTH), ("integer", "nsamples", 1)], 1.0)]
+
+
 # The brdffit models that are pbrt-v4 materials as they stand, and their materials.
-_OWN = {"pbrt": _mix_parts, "coateddiffuse": _coated_diffuse_parts}
+_OWN = {"pbrt": _mix_parts, "coateddiffuse": _coated_diffuse_parts, "coatedconductor": _coated_conductor_parts}
 
 
 def _own_model(model, name: str):
@@ -297,7 +324,8 @@ def write(model, name: str, header: list[str], source=None):
         header: comment lines that open the text.
         source: for the fit option, the model that pbrt-v4's parameters of the mapping of ``model`` are then
             refined against (`_refine`) and the deviation measured against; None writes the mapping. brdffit's
-            ``pbrt`` and ``coateddiffuse`` models alone are written as they are (`_write_own`), not refined.
+            ``pbrt``, ``coateddiffuse`` and ``coatedconductor`` models alone are written as they are (`_write_own`),
+            not refined.
 
     Returns:
         (text, a function (wi, wo) -> f_r of the written material by pbrt-v4's formulas, notes, `Deviation` from

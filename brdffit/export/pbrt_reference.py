@@ -12,7 +12,9 @@ probability ``amount``, so its expected BSDF is (1 − amount) f0 + amount f1). 
 walk whose expectation has no closed form: it is evaluated here as `brdffit.models.coateddiffuse` derives it
 (``DielectricBxDF::f`` for the interface's reflection, then the light through the base by that module's
 quadrature, in NumPy), for the slab that module covers (thickness 0.01, albedo 0, g 0, maxdepth 10, a rough
-interface). tests/test_coateddiffuse.py checks that quadrature against a transcription of pbrt-v4's walk.
+interface). tests/test_coateddiffuse.py checks that quadrature against a transcription of pbrt-v4's walk. So is
+``coatedconductor`` with a smooth interface (``LayeredBxDF<DielectricBxDF, ConductorBxDF, true>::f``), as
+`brdffit.models.coatedconductor` derives it over ``ConductorBxDF::f`` transcribed here (tests/test_coatedconductor.py).
 """
 
 from __future__ import annotations
@@ -148,6 +150,8 @@ def evaluate(materials: dict, name: str, wi, wo) -> np.ndarray:
         return np.where(above[:, None], f, 0.0)
     if kind == "coateddiffuse":
         return np.where(above[:, None], _coated_diffuse(mat, name, wi, wo), 0.0)
+    if kind == "coatedconductor":
+        return np.where(above[:, None], _coated_conductor(mat, name, wi, wo), 0.0)
     raise ExportError(f"pbrt material {name!r} of type {kind!r}: no formula here")
 
 
@@ -155,12 +159,7 @@ def _coated_diffuse(mat: dict, name: str, wi, wo) -> np.ndarray:
     """f_r of a ``coateddiffuse`` material (module doc), above the surface."""
     from ..models import coateddiffuse as cd
 
-    slab = {"thickness": cd.THICKNESS, "maxdepth": cd.MAX_DEPTH, "g": 0.0, "albedo": [0.0, 0.0, 0.0]}
-    for key, covered in slab.items():
-        given = mat.get(key, covered)
-        if not np.allclose(np.asarray(given, dtype=float), np.asarray(covered, dtype=float), rtol=0.0, atol=0.0):
-            raise ExportError(f"pbrt material {name!r}: coateddiffuse with {key} {given}; the formulas here cover "
-                              f"{key} {covered} only")
+    _slab(mat, name, "coateddiffuse")
     alpha = _alpha(mat)
     eta = float(mat.get("eta", 1.5))
     if alpha < 1e-3 or not cd.MIN_ETA <= eta <= cd.MAX_ETA:
@@ -171,10 +170,58 @@ def _coated_diffuse(mat: dict, name: str, wi, wo) -> np.ndarray:
     return reflection + cd.through_the_base(np.maximum(wo[:, 2], 0.0), np.maximum(wi[:, 2], 0.0), rho, alpha, eta, np)
 
 
-def _alpha(mat: dict) -> float:
-    """The Trowbridge-Reitz α of a material's ``float roughness`` (its square root unless ``remaproughness`` is
-    false: ``RoughnessToAlpha``)."""
-    roughness = float(mat.get("roughness", 0.0))
+def _slab(mat: dict, name: str, kind: str) -> None:
+    """Refuse a layered material whose slab is not the one the formulas here cover (thickness 0.01, maxdepth 10,
+    albedo 0, g 0: `brdffit.models.coateddiffuse`'s constants)."""
+    from ..models import coateddiffuse as cd
+
+    slab = {"thickness": cd.THICKNESS, "maxdepth": cd.MAX_DEPTH, "g": 0.0, "albedo": [0.0, 0.0, 0.0]}
+    for key, covered in slab.items():
+        given = mat.get(key, covered)
+        if not np.allclose(np.asarray(given, dtype=float), np.asarray(covered, dtype=float), rtol=0.0, atol=0.0):
+            raise ExportError(f"pbrt material {name!r}: {kind} with {key} {given}; the formulas here cover "
+                              f"{key} {covered} only")
+
+
+def _coated_conductor(mat: dict, name: str, wi, wo) -> np.ndarray:
+    """f_r of a ``coatedconductor`` material with a smooth interface (`brdffit.models.coatedconductor`'s
+    expectation of the walk, in NumPy, over ``ConductorBxDF::f`` as transcribed here), above the surface. The metal
+    is ``conductor.eta`` and ``conductor.k``, or ``reflectance`` r (newer pbrt-v4: η = 1, k = 2√r/√(1 − r), r
+    clamped to [0, 0.9999]), divided by ``interface.eta`` (``CoatedConductorMaterial::GetBxDF``)."""
+    from ..geometry import LocalPair
+    from ..models import coatedconductor as cc
+    from ..models import coateddiffuse as cd
+
+    _slab(mat, name, "coatedconductor")
+    interface = _alpha(mat, "interface.roughness")
+    alpha = _alpha(mat, "conductor.roughness")
+    eta = float(mat.get("interface.eta", 1.5))
+    if interface >= 1e-3 or alpha < 1e-3 or not cd.MIN_ETA <= eta <= cd.MAX_ETA:
+        raise ExportError(f"pbrt material {name!r}: coatedconductor with interface roughness {interface:g}, "
+                          f"conductor roughness {alpha:g} and interface.eta {eta:g}; the formulas here cover a smooth "
+                          f"interface (alpha < 1e-3) of eta in [{cd.MIN_ETA:g}, {cd.MAX_ETA:g}] over a rough "
+                          "conductor (alpha >= 1e-3)")
+    if "reflectance" in mat:
+        r = np.clip(_rgb(mat["reflectance"]), 0.0, cc.MAX_REFLECTANCE)
+        eta_c, k_c = np.ones(3), 2.0 * np.sqrt(r) / np.sqrt(1.0 - r)
+    elif "conductor.eta" in mat and "conductor.k" in mat:
+        eta_c, k_c = _rgb(mat["conductor.eta"]), _rgb(mat["conductor.k"])
+    else:
+        raise ExportError(f"pbrt material {name!r}: coatedconductor without an RGB conductor.eta and conductor.k "
+                          "or reflectance (pbrt-v4's default, copper's named spectra, is not covered here)")
+
+    def conductor(pair):
+        shape = pair.wi.shape[:-1]
+        f = _microfacet_reflection(alpha, eta_c / eta, k_c / eta, pair.wi.reshape(-1, 3), pair.wo.reshape(-1, 3))
+        return f.reshape(shape + (3,))
+
+    return cc.beneath(LocalPair.from_dirs(wi, wo, xp=np), eta, conductor, np)
+
+
+def _alpha(mat: dict, key: str = "roughness") -> float:
+    """The Trowbridge-Reitz α of a material's float ``key`` (its square root unless ``remaproughness`` is false:
+    ``RoughnessToAlpha``)."""
+    roughness = float(mat.get(key, 0.0))
     return np.sqrt(roughness) if mat.get("remaproughness", True) else roughness
 
 

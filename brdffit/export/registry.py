@@ -62,7 +62,8 @@ TARGETS = {t.name: t for t in (
     Target("json", "brdffit's own description (model_from_dict reads it back)", "native", renderer=False),
     Target("mitsuba", "a Mitsuba 3 <bsdf version=\"3.0.0\"> document", "mitsuba",
            renders=("lambert", "principled", "roughplastic", "ggx(fresnel=conductor, bounded=true)")),
-    Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", "pbrt", refines=True, renders=("pbrt", "coateddiffuse")),
+    Target("pbrt", "pbrt-v4 MakeNamedMaterial statements", "pbrt", refines=True,
+           renders=("pbrt", "coateddiffuse", "coatedconductor")),
     Target("gltf", "a glTF 2.0 .gltf file: the material (with KHR_materials_ior, _specular, _sheen, _clearcoat) on a "
                    "sphere",
            "gltf", family="gltf", renders=("gltf",)),

@@ -222,8 +222,8 @@ class CoatedConductor(Lobe):
     def param_specs(self):
         return (
             ParamSpec("reflectance", 0.7, 0.0, MAX_REFLECTANCE, colour=True,
-                      doc='"rgb reflectance" r: the metal as pbrt-v4 builds it from its normal reflectance in air, '
-                          'index (1 + i·2√r/√(1 − r))/interface.eta'),
+                      doc='the metal\'s normal reflectance in air r: "rgb conductor.eta" 1 and "rgb conductor.k" '
+                          '2√r/√(1 − r), the index pbrt-v4\'s "reflectance" sets (divided by interface.eta)'),
             roughness("conductor_roughness", default=0.2,
                       doc='"float conductor.roughness" with "bool remaproughness" false: the metal\'s '
                           'Trowbridge-Reitz α'),
