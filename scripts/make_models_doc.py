@@ -155,7 +155,7 @@ EQUATIONS = {
         "f_c = FrComplex(|u·h|; (1 + i 2√r/√(1 − r))/η) D G/(4 cos u cos v),  r = reflectance,  GGX of width "
         "conductor_roughness\n"
         "𝒦 g(u) = ∫ f_c(u, v) |cos v| Tr(v)² R(v) g(v turned by π in azimuth) dv,  R: the coat's reflection from inside\n"
-        "𝒦 by cosine harmonics in Δφ (64) over 2 × 16 Gauss-Legendre cosines; the sum tabulated at 33 × 33 outside "
+        "𝒦 by cosine harmonics in Δφ (64) over 2 × 12 Gauss-Legendre cosines; the sum tabulated at 33 × 33 outside "
         "sines × 65 Δφ, cubic between"
     ),
     "roughplastic": (

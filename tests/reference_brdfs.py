@@ -1403,7 +1403,7 @@ def coatedconductor(theta_i, phi_i, theta_o, phi_o, reflectance, conductor_rough
     (1 + i 2√r/√(1 − r))/η, roughness α; thickness 0.01, albedo 0, maxdepth 10): T(θo) T(θi)/η² Tr Tr (f_c(u0, ui) +
     Σ_{k=1}^{4} 𝒦^k f_c), u0 and ui refracted by Snell's law, 𝒦 one more bounce at the conductor and a mirror
     reflection by the interface from inside (R, 1 beyond the critical angle), the bounces by cosine coefficients in
-    Δφ (64 midpoints over [0, π]) over Gauss-Legendre cosines (16 on each side of the critical cosine), tabulated at
+    Δφ (64 midpoints over [0, π]) over Gauss-Legendre cosines (12 on each side of the critical cosine), tabulated at
     the outside sines j/32 and 65 azimuths over [0, π] and read by Keys' cubic convolution (brdffit.models.
     coatedconductor's module doc)."""
     pair = Pair(theta_i, phi_i, theta_o, phi_o)
@@ -1424,7 +1424,7 @@ def coatedconductor(theta_i, phi_i, theta_o, phi_o, reflectance, conductor_rough
         rp = (n2 * cos - n1 * cos_t) / (n2 * cos + n1 * cos_t)
         return np.where(sin_t >= 1.0, 1.0, (rs**2 + rp**2) / 2.0)
 
-    x, w = np.polynomial.legendre.leggauss(16)
+    x, w = np.polynomial.legendre.leggauss(12)
     x, w = (x + 1.0) / 2.0, w / 2.0
     critical = np.sqrt(1.0 - 1.0 / eta**2)
     mu = np.concatenate([critical * x, critical + (1.0 - critical) * x])

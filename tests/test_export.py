@@ -181,7 +181,8 @@ def test_fits_of_the_shipped_synthetic_data_export_and_load(mi, path):
         if to == "mitsuba":
             _renders_what_it_states(result) if "approximation:" in result.text else mi.load_string(result.text)
         else:
-            assert pr.parse(result.text)["material"]["type"] in ("diffuse", "conductor", "mix", "coateddiffuse")
+            assert pr.parse(result.text)["material"]["type"] in ("diffuse", "conductor", "mix", "coateddiffuse",
+                                                               "coatedconductor")
 
 
 def test_pbrt_fit_option_refines_pbrts_own_parameters_and_fits_its_models():

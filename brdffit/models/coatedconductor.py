@@ -69,7 +69,7 @@ MAX_REFLECTANCE = 0.9999
 # Gauss-Legendre nodes on each side of the critical cosine, midpoints over the azimuth difference in [0, π], the
 # sines of the outside end directions, and the azimuths at which the bounces' sum is tabulated (tests hold each to
 # a finer rule).
-COSINE_NODES = 16
+COSINE_NODES = 12
 AZIMUTH_NODES = 64
 END_NODES = 33
 TABLE_AZIMUTHS = 65
@@ -77,6 +77,7 @@ TABLE_AZIMUTHS = 65
 
 @functools.cache
 def _legendre(n: int):
+    """Gauss-Legendre nodes and weights of n points on [0, 1]."""
     x, w = np.polynomial.legendre.leggauss(n)
     return 0.5 * (x + 1.0), 0.5 * w
 
@@ -193,15 +194,15 @@ def beneath(pair: LocalPair, eta, conductor, xp):
     mu_o, mu_i = xp.clip(wo[..., 2], 0.0, 1.0), xp.clip(wi[..., 2], 0.0, 1.0)
     s_o, s_i = xp.sqrt(1.0 - mu_o * mu_o), xp.sqrt(1.0 - mu_i * mu_i)
     # The refracted directions, pointing up: horizontal components divided by η (Snell), azimuths kept.
-    down_o, down_i = xp.sqrt(1.0 - (s_o / eta) ** 2), xp.sqrt(1.0 - (s_i / eta) ** 2)
-    u0 = xp.stack([wo[..., 0] / eta, wo[..., 1] / eta, down_o], axis=-1)
-    ui = xp.stack([wi[..., 0] / eta, wi[..., 1] / eta, down_i], axis=-1)
+    cos_u0, cos_ui = xp.sqrt(1.0 - (s_o / eta) ** 2), xp.sqrt(1.0 - (s_i / eta) ** 2)
+    u0 = xp.stack([wo[..., 0] / eta, wo[..., 1] / eta, cos_u0], axis=-1)
+    ui = xp.stack([wi[..., 0] / eta, wi[..., 1] / eta, cos_ui], axis=-1)
     dphi = xp.arctan2(xp.abs(wo[..., 0] * wi[..., 1] - wo[..., 1] * wi[..., 0]),
                       wo[..., 0] * wi[..., 0] + wo[..., 1] * wi[..., 1])  # in [0, π]; 0 where a sine is 0
     direct = conductor(LocalPair.from_dirs(ui, u0, xp=xp))
     bounced = _read(_table(_bounces(eta, conductor, xp), xp), s_o, s_i, dphi, xp)
     through = ((1.0 - dielectric(mu_o, 1.0, eta, xp)) * (1.0 - dielectric(mu_i, 1.0, eta, xp)) / (eta * eta)
-               * _slab(down_o, xp) * _slab(down_i, xp))
+               * _slab(cos_u0, xp) * _slab(cos_ui, xp))
     above = (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0)
     return xp.where(above[..., None], through[..., None] * (direct + bounced), 0.0)
 
