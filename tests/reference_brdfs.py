@@ -1213,14 +1213,19 @@ def _roughplastic_table():
     return data["sqrt_alpha"], data["sqrt_eta_minus_1"], data["values"]
 
 
+def _keys_weight(s):
+    """Keys' kernel W(s) (a = −1/2) at a distance ``s`` in node spacings."""
+    s = np.abs(s)
+    return np.where(s <= 1.0, 1.5 * s**3 - 2.5 * s**2 + 1.0,
+                    np.where(s < 2.0, -0.5 * s**3 + 2.5 * s**2 - 4.0 * s + 2.0, 0.0))
+
+
 def _keys_cubic(table_x, table_y, values, x, y):
     """Keys 1981 cubic convolution (a = −1/2) on a uniform grid, neighbours clamped at the edges: Σ over the 4 × 4
     nodes around (x, y) of W(x − x_i) W(y − y_j) v_ij, W(s) = 1.5|s|³ − 2.5|s|² + 1 for |s| ≤ 1 and
     −0.5|s|³ + 2.5|s|² − 4|s| + 2 for 1 < |s| < 2 (in node spacings)."""
     def kernel(s):
-        s = abs(s)
-        return 1.5 * s**3 - 2.5 * s**2 + 1.0 if s <= 1.0 else (-0.5 * s**3 + 2.5 * s**2 - 4.0 * s + 2.0 if s < 2.0
-                                                                else 0.0)
+        return float(_keys_weight(s))
 
     def cell(nodes, t):
         h = nodes[1] - nodes[0]
@@ -1374,13 +1379,6 @@ def coateddiffuse(theta_i, phi_i, theta_o, phi_o, reflectance, roughness, eta):
 # pbrt-v4's coatedconductor under a smooth interface: the expectation of LayeredBxDF<DielectricBxDF, ConductorBxDF,
 # true>::f by the rules brdffit's lobe uses (tests/test_coatedconductor.py holds those rules to finer ones and to
 # pbrt-v4's walk), here in angles and with the conductor of the pbrt reference above (FrComplex in complex arithmetic).
-def _keys_weight(s):
-    """Keys' kernel W(s) (a = −1/2) at a distance ``s`` in node spacings."""
-    s = np.abs(s)
-    return np.where(s <= 1.0, 1.5 * s**3 - 2.5 * s**2 + 1.0,
-                    np.where(s < 2.0, -0.5 * s**3 + 2.5 * s**2 - 4.0 * s + 2.0, 0.0))
-
-
 def _keys_extended(table, axis):
     """One node more beyond each end of ``axis``: f₋₁ = 3 f₀ − 3 f₁ + f₂ (Keys 1981, Eqs. 25-26)."""
     t = np.moveaxis(table, axis, 0)
@@ -1417,12 +1415,8 @@ def coatedconductor(theta_i, phi_i, theta_o, phi_o, reflectance, conductor_rough
     def tr(cos):
         return np.exp(-_COATED_THICKNESS / cos)
 
-    def fresnel(cos, n1, n2):  # unpolarised, 1 under total internal reflection
-        sin_t = n1 / n2 * np.sqrt(1.0 - cos * cos)
-        cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin_t**2))
-        rs = (n1 * cos - n2 * cos_t) / (n1 * cos + n2 * cos_t)
-        rp = (n2 * cos - n1 * cos_t) / (n2 * cos + n1 * cos_t)
-        return np.where(sin_t >= 1.0, 1.0, (rs**2 + rp**2) / 2.0)
+    def fresnel(cos, n1, n2):  # 1 under total internal reflection
+        return fresnel_dielectric(np.arccos(cos), n1, n2)
 
     x, w = np.polynomial.legendre.leggauss(12)
     x, w = (x + 1.0) / 2.0, w / 2.0

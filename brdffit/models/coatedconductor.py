@@ -50,7 +50,8 @@ from .._lazy import module
 from ..geometry import LocalPair
 from ..params import ParamSpec
 from . import cubic
-from .coateddiffuse import MAX_ETA as MAX_INTERFACE_ETA, MIN_ETA as MIN_INTERFACE_ETA, MAX_DEPTH, THICKNESS
+from .coateddiffuse import MAX_ETA as MAX_INTERFACE_ETA, MIN_ETA as MIN_INTERFACE_ETA, MAX_DEPTH
+from .coateddiffuse import slab_transmittance
 from .fresnel import dielectric
 from .lobe import Lobe
 from .pbrt import conductor_bxdf
@@ -91,11 +92,6 @@ def _azimuths(n: int):
     return phi, to_coefficients
 
 
-def _slab(mu, xp):
-    """Tr = exp(−thickness/μ) for a cosine μ > 0."""
-    return xp.exp(-THICKNESS / mu)
-
-
 def _kernel_coefficients(a, b, conductor, xp):
     """F_m(μa, μb): the cosine coefficients in Δφ of f_c(u, v) for u of (sine, cosine) ``a`` = (sa, μa), v of ``b``,
     ``(M, A, B, C)`` (the sines given, not derived: √(1 − μ²) has no derivative at μ = 1)."""
@@ -121,7 +117,7 @@ def _bounces(eta, conductor, xp):
     ends = (s, xp.sqrt(1.0 - s * s))
     # 𝒦's weight of the intermediate direction: the cosine rule, |cos v| Tr(v)² from the two crossings, and the
     # interface's reflection from inside (total beyond the critical angle).
-    weight = width * mu * _slab(mu, xp) ** 2 * dielectric(mu, eta, 1.0, xp)
+    weight = width * mu * slab_transmittance(mu, xp) ** 2 * dielectric(mu, eta, 1.0, xp)
     m = np.arange(AZIMUTH_NODES)
     factor = xp.asarray(np.where(m == 0, 2.0 * math.pi, math.pi) * (-1.0) ** m)[:, None, None, None]
     middle = factor * _kernel_coefficients(nodes, nodes, conductor, xp) * weight[None, None, :, None]  # (M, G, G, C)
@@ -202,7 +198,7 @@ def beneath(pair: LocalPair, eta, conductor, xp):
     direct = conductor(LocalPair.from_dirs(ui, u0, xp=xp))
     bounced = _read(_table(_bounces(eta, conductor, xp), xp), s_o, s_i, dphi, xp)
     through = ((1.0 - dielectric(mu_o, 1.0, eta, xp)) * (1.0 - dielectric(mu_i, 1.0, eta, xp)) / (eta * eta)
-               * _slab(cos_u0, xp) * _slab(cos_ui, xp))
+               * slab_transmittance(cos_u0, xp) * slab_transmittance(cos_ui, xp))
     above = (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0)
     return xp.where(above[..., None], through[..., None] * (direct + bounced), 0.0)
 

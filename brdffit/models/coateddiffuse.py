@@ -67,7 +67,7 @@ from .specs import roughness
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) needs neither JAX
 np = module("numpy")  # nor NumPy
 
-__all__ = ["CoatedDiffuse", "transmission", "internal_reflectance", "bottom_series", "cosines", "THICKNESS",
+__all__ = ["CoatedDiffuse", "slab_transmittance", "transmission", "internal_reflectance", "bottom_series", "cosines", "THICKNESS",
            "MAX_DEPTH", "MIN_ETA", "MAX_ETA", "COSINE_NODES", "NORMAL_NODES", "REFLECTION_NODES"]
 
 # pbrt-v4's defaults for the slab (CoatedDiffuseMaterial::Create): thickness 0.01, maxdepth 10 (albedo 0, g 0).
@@ -115,7 +115,7 @@ def _smith_lambda(z2, alpha):
     return 0.5 * ((1.0 + alpha * alpha * tan2) ** 0.5 - 1.0)
 
 
-def _slab(cos_theta, xp):
+def slab_transmittance(cos_theta, xp):
     """Tr = exp(−thickness/|cosθ|), 0 at the horizon."""
     c = xp.abs(cos_theta)
     return xp.where(c > 0.0, xp.exp(-THICKNESS / xp.where(c > 0.0, c, 1.0)), 0.0)
@@ -162,7 +162,7 @@ def transmission(mu, alpha, eta, xp=None):
     lam_t = _smith_lambda(oz2, alpha)
     g2 = 1.0 / (1.0 + lam_i + lam_t)
     t = 1.0 - dielectric(c, 1.0, eta, xp)
-    value = xp.where(down & (mu > 0.0), t * g2 * c / (mu_safe * mz) * _slab(xp.where(down, oz, -1.0), xp), 0.0)
+    value = xp.where(down & (mu > 0.0), t * g2 * c / (mu_safe * mz) * slab_transmittance(xp.where(down, oz, -1.0), xp), 0.0)
     # The power-heuristic weights of Y: the transmission's density from ω, p = G1(ω) D c / μ · |ω'·m| / (ω'·m +
     # c/η)², and from ω' back out to ω, p' = G1(ω') D |ω'·m| / |cos ω'| · c / (c + η ω'·m)²; the base's cosine
     # density |cos ω'|/π.
@@ -189,7 +189,7 @@ def _inside_reflection(mu, alpha, eta, xp):
     rz2 = xp.where(valid, rz * rz, 0.5)
     g2 = 1.0 / (1.0 + _smith_lambda(mu * mu, alpha) + _smith_lambda(rz2, alpha))
     f = dielectric(xp.where(valid, c, 1.0), eta, 1.0, xp)  # from the dense side: F = 1 beyond the critical angle
-    value = xp.where(valid, f * g2 * c / (mu * mz) * _slab(xp.where(valid, rz, 1.0), xp), 0.0)
+    value = xp.where(valid, f * g2 * c / (mu * mz) * slab_transmittance(xp.where(valid, rz, 1.0), xp), 0.0)
     return xp.sum(value * xp.asarray(weight), axis=-1)
 
 
@@ -211,7 +211,7 @@ def internal_reflectance(alpha, eta, xp=None):
     critical = xp.sqrt(1.0 - 1.0 / (eta * eta))
     mu = xp.concatenate([critical * x, critical + (1.0 - critical) * x])
     width = xp.concatenate([critical * w, (1.0 - critical) * w])
-    return xp.sum(width * 2.0 * mu * _slab(mu, xp) * _inside_reflection(mu, alpha, eta, xp))
+    return xp.sum(width * 2.0 * mu * slab_transmittance(mu, xp) * _inside_reflection(mu, alpha, eta, xp))
 
 
 def bottom_series(rho, r):
