@@ -265,7 +265,9 @@ NOTES = {
                        "(thickness 0.01, albedo 0, maxdepth 10). pbrt-v4's `f` estimates it by a random walk; the "
                        "lobe is that walk's expectation, by quadrature (within 1 % of rules three times finer at "
                        "any pair, 0.05 % in the cosine-weighted norm, from α = 0.05 on), checked against a "
-                       "transcription of the walk (tests/test_coatedconductor.py). The coat's mirror reflection is "
+                       "transcription of the walk (tests/test_coatedconductor.py); pbrt-v4's sampling walk "
+                       "(`Sample_f`, indirect light) has the same expectation, checked against its transcription "
+                       "too, so renders follow the lobe under any light. The coat's mirror reflection is "
                        "a delta that `f` does not return: pbrt renders it besides the lobe. A rough coat is not "
                        "modelled. Reciprocal: under a smooth coat the walk's two ends enter alike (no power heuristic "
                        "between them, as in coateddiffuse); the reflectance is not a linear amplitude. `brdffit fit --for pbrt`, `brdffit export --to pbrt`.",

@@ -13,7 +13,9 @@ throughput falls below 0.25, and ``Tr(thickness, w)`` at every crossing. ``Diele
 below. ``coatedconductor`` (``LayeredBxDF<DielectricBxDF, ConductorBxDF, true>::f``) is transcribed for a smooth
 interface (``DielectricBxDF``'s specular branch: refraction and mirror reflection with the Fresnel weights, no
 next-event estimate towards the exit) over a rough ``ConductorBxDF`` (``f``, ``Sample_f``; ``FrComplex`` in complex
-arithmetic), whose index pbrt-v4 divides by the interface's (``CoatedConductorMaterial::GetBxDF``). Nothing here
+arithmetic), whose index pbrt-v4 divides by the interface's (``CoatedConductorMaterial::GetBxDF``), and so is its
+``LayeredBxDF::Sample_f`` (the walk that samples a direction: every step sampled, the smooth interface choosing
+reflection or transmission with its Fresnel probabilities, the path's f and pdf multiplied up). Nothing here
 imports brdffit. Walks run in parallel as arrays; the mean of ``n`` walks and its standard error estimate pbrt-v4's
 f.
 """
@@ -22,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["coated_diffuse_f", "coated_conductor_f", "reflectance_index"]
+__all__ = ["coated_diffuse_f", "coated_conductor_f", "coated_conductor_sample", "reflectance_index", "EXIT",
+           "MIRROR"]
 
 
 def _dot(a, b):
@@ -338,3 +341,93 @@ def coated_conductor_f(wo, wi, conductor_eta, conductor_k, alpha: float, eta: fl
         beta = np.where(alive[:, None], new_beta, 0.0)
         w = np.where(alive[:, None], new_w, w)
     return total.mean(axis=0), total.std(axis=0) / np.sqrt(walks)
+
+
+# The kinds of sample `coated_conductor_sample` returns (0: none, the walk was absorbed, cut by Russian roulette or
+# ran out of depth).
+MIRROR = 1  # the interface's mirror reflection at the entrance (a delta, outside f)
+EXIT = 2  # the walk left through the interface after visiting the conductor
+
+
+def _smooth_sample(w, eta, u):
+    """``DielectricBxDF::Sample_f`` of a smooth interface, every lobe allowed, radiance mode: reflection with
+    probability R/(R + T), else refraction. Returns (reflected, valid, f ``(...)``, ωi, pdf); from below (w.z < 0)
+    ``FrDielectric`` and ``Refract`` invert η."""
+    r = _fr_dielectric(w[..., 2], eta)
+    t = 1.0 - r
+    reflected = u < r / (r + t)
+    mirror = w * np.array([-1.0, -1.0, 1.0])
+    ok, wt, etap = _refract(w, np.broadcast_to(np.array([0.0, 0.0, 1.0]), w.shape), np.full(w.shape[:-1], eta))
+    wi = np.where(reflected[..., None], mirror, wt)
+    cos = np.abs(wi[..., 2])
+    f = np.where(reflected, r, t / etap**2) / np.where(cos > 0, cos, 1.0)
+    pdf = np.where(reflected, r, t) / (r + t)
+    return reflected, reflected | ok, f, wi, pdf
+
+
+def coated_conductor_sample(wo, conductor_eta, conductor_k, alpha: float, eta: float, thickness: float = 0.01,
+                            max_depth: int = 10, samples: int = 200_000, seed: int = 0):
+    """pbrt-v4's ``LayeredBxDF<DielectricBxDF, ConductorBxDF, true>::Sample_f`` of ``coatedconductor`` with a smooth
+    interface, radiance mode, drawn ``samples`` times from ωo.
+
+    The first step samples the interface: its mirror reflection (returned at once, a delta) or the refraction into
+    the slab. Then, up to ``max_depth`` times: Russian roulette after depth 3 where the path's f/pdf falls below
+    0.25 (on the largest channel; the survivors' pdf scaled by 1 − q), ``Tr`` for the crossing, and a sample of the
+    layer reached: the conductor (``ConductorBxDF::Sample_f``) or the interface from inside (mirror or refraction);
+    f and pdf multiply, f also by |cosθ| after a scattering inside; a refraction out of the slab returns the sample.
+
+    Arguments:
+        wo: a unit vector ``(3,)`` above the surface (towards the camera).
+        conductor_eta, conductor_k: the metal's complex index as given to pbrt (``(C,)``; divided by ``eta``);
+            alpha: its Trowbridge-Reitz width.
+        eta: the interface's index of refraction.
+        thickness, max_depth: the slab's thickness and pbrt's ``maxdepth``.
+        samples: how many samples; seed: their random numbers.
+
+    Returns:
+        ``(kind, weight, wi)``: `MIRROR`, `EXIT` or 0 for each sample ``(samples,)``; the weight a path tracer
+        multiplies its throughput by, f |cosθi| / pdf ``(samples, C)`` (0 for a sample of kind 0); and ωi
+        ``(samples, 3)``.
+    """
+    rng = np.random.default_rng(seed)
+    bottom = _Conductor(np.asarray(conductor_eta, dtype=float) / eta, np.asarray(conductor_k, dtype=float) / eta,
+                        alpha)
+    channels = bottom.n.shape[0]
+    wo = np.broadcast_to(wo, (samples, 3)).copy()
+    kind = np.zeros(samples, dtype=int)
+    weight = np.zeros((samples, channels))
+    reflected, ok, f0, w, pdf = _smooth_sample(wo, eta, rng.random(samples))
+    first = np.abs(w[..., 2]) * f0
+    kind[reflected & ok] = MIRROR
+    weight[reflected & ok] = (first / pdf)[reflected & ok, None]
+    out = w.copy()
+    alive = ok & ~reflected & (pdf > 0) & (w[..., 2] != 0)
+    f = np.where(alive[:, None], first[:, None] * np.ones(channels), 0.0)
+    pdf = np.where(alive, pdf, 1.0)
+    z = np.full(samples, thickness)
+    for depth in range(max_depth):
+        rr = f.max(axis=1) / pdf
+        roulette = alive & (depth > 3) & (rr < 0.25)
+        q = np.maximum(0.0, 1.0 - rr)
+        alive &= ~(roulette & (rng.random(samples) < q))
+        pdf = np.where(roulette & alive, pdf * (1.0 - q), pdf)
+        alive &= w[..., 2] != 0
+        z = np.where(z == thickness, 0.0, thickness)
+        f = f * _slab(thickness, w)[:, None]
+        at_base = z == 0.0
+        # The conductor, seen from −w (above it); the interface, seen from −w below it.
+        ok_b, f_b, w_b, pdf_b = bottom.sample(-w, rng.random((samples, 2)))
+        refl_t, ok_t, f_t, w_t, pdf_t = _smooth_sample(-w, eta, rng.random(samples))
+        w_next = np.where(at_base[:, None], w_b, w_t)
+        alive &= np.where(at_base, ok_b & (pdf_b > 0), ok_t & (pdf_t > 0)) & (w_next[..., 2] != 0)
+        f = f * np.where(at_base[:, None], f_b, f_t[:, None])
+        pdf = pdf * np.where(at_base, pdf_b, pdf_t)
+        w = np.where(alive[:, None], w_next, w)
+        leaving = alive & ~at_base & ~refl_t
+        kind[leaving] = EXIT
+        weight[leaving] = f[leaving] * np.abs(w[leaving, 2:3]) / pdf[leaving, None]
+        out[leaving] = w[leaving]
+        alive &= ~leaving
+        f = np.where(alive[:, None], f * np.abs(w[..., 2:3]), 0.0)
+        pdf = np.where(alive, pdf, 1.0)
+    return kind, weight, out

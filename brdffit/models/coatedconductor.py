@@ -37,7 +37,9 @@ holds the rules to finer ones and the lobe to a NumPy transcription of pbrt-v4's
 
 Not modelled: a rough interface (pbrt-v4's walk then samples the interface's transmission and weights two
 next-event estimates by the power heuristic, integrals over four more dimensions), the slab's medium (albedo,
-g), an anisotropic conductor. pbrt-v4 renders the interface's mirror reflection besides f (``Sample_f``).
+g), an anisotropic conductor. pbrt-v4 renders the interface's mirror reflection besides f (``Sample_f``), and
+where it samples the BSDF, ``Sample_f``'s walk, whose expectation under a smooth coat is the same f (no power
+heuristic weighs two estimates; tests/test_coatedconductor.py holds a transcription of that walk to the lobe).
 """
 
 from __future__ import annotations
