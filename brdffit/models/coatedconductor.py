@@ -99,12 +99,14 @@ def _kernel_coefficients(a, b, conductor, xp):
     ``(M, A, B, C)`` (the sines given, not derived: √(1 − μ²) has no derivative at μ = 1)."""
     phi, to_coefficients = _azimuths(AZIMUTH_NODES)
     (sa, mu_a), (sb, mu_b) = a, b
-    sa, sb = sa[:, None, None], sb[None, :, None]
-    shape = (mu_a.shape[0], mu_b.shape[0], phi.shape[0])
-    u = xp.stack(xp.broadcast_arrays(sa, xp.zeros(shape), mu_a[:, None, None]), axis=-1)
-    v = xp.stack(xp.broadcast_arrays(sb * np.cos(phi), sb * np.sin(phi), mu_b[None, :, None]), axis=-1)
-    samples = conductor(LocalPair.from_dirs(v, u, xp=xp))  # (A, B, φ, C)
-    return xp.einsum("mj,abjc->mabc", xp.asarray(to_coefficients), samples)
+    cos, sin = np.cos(phi)[:, None, None], np.sin(phi)[:, None, None]
+    shape = (phi.shape[0], mu_a.shape[0], mu_b.shape[0])
+    u = xp.stack(xp.broadcast_arrays(sa[:, None], xp.zeros(shape), mu_a[:, None]), axis=-1)
+    v = xp.stack(xp.broadcast_arrays(sb * cos, sb * sin, mu_b), axis=-1)
+    # The azimuths on the leading axis: the projection is then one product with the samples as they lie (twice as
+    # fast a fit as with them third).
+    samples = conductor(LocalPair.from_dirs(v, u, xp=xp))  # (φ, A, B, C)
+    return xp.einsum("mj,jabc->mabc", xp.asarray(to_coefficients), samples)
 
 
 def _bounces(eta, conductor, xp):
