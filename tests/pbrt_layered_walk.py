@@ -353,12 +353,10 @@ def _smooth_sample(w, eta, u):
     """``DielectricBxDF::Sample_f`` of a smooth interface, every lobe allowed, radiance mode: reflection with
     probability R/(R + T), else refraction. Returns (reflected, valid, f ``(...)``, ωi, pdf); from below (w.z < 0)
     ``FrDielectric`` and ``Refract`` invert η."""
-    r = _fr_dielectric(w[..., 2], eta)
-    t = 1.0 - r
+    ok, t, wt, etap = _smooth_transmission(w, eta)
+    r = 1.0 - t
     reflected = u < r / (r + t)
-    mirror = w * np.array([-1.0, -1.0, 1.0])
-    ok, wt, etap = _refract(w, np.broadcast_to(np.array([0.0, 0.0, 1.0]), w.shape), np.full(w.shape[:-1], eta))
-    wi = np.where(reflected[..., None], mirror, wt)
+    wi = np.where(reflected[..., None], w * np.array([-1.0, -1.0, 1.0]), wt)
     cos = np.abs(wi[..., 2])
     f = np.where(reflected, r, t / etap**2) / np.where(cos > 0, cos, 1.0)
     pdf = np.where(reflected, r, t) / (r + t)
