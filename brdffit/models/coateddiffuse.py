@@ -67,8 +67,8 @@ from .specs import roughness
 jnp = module("jax.numpy")  # loaded on first use: the registry (`brdffit models`) needs neither JAX
 np = module("numpy")  # nor NumPy
 
-__all__ = ["CoatedDiffuse", "slab_transmittance", "transmission", "internal_reflectance", "bottom_series", "cosines", "THICKNESS",
-           "MAX_DEPTH", "MIN_ETA", "MAX_ETA", "COSINE_NODES", "NORMAL_NODES", "REFLECTION_NODES"]
+__all__ = ["CoatedDiffuse", "slab_transmittance", "transmission", "internal_reflectance", "bottom_series", "cosines",
+           "THICKNESS", "MAX_DEPTH", "MIN_ETA", "MAX_ETA", "COSINE_NODES", "NORMAL_NODES", "REFLECTION_NODES"]
 
 # pbrt-v4's defaults for the slab (CoatedDiffuseMaterial::Create): thickness 0.01, maxdepth 10 (albedo 0, g 0).
 THICKNESS = 0.01
@@ -162,7 +162,8 @@ def transmission(mu, alpha, eta, xp=None):
     lam_t = _smith_lambda(oz2, alpha)
     g2 = 1.0 / (1.0 + lam_i + lam_t)
     t = 1.0 - dielectric(c, 1.0, eta, xp)
-    value = xp.where(down & (mu > 0.0), t * g2 * c / (mu_safe * mz) * slab_transmittance(xp.where(down, oz, -1.0), xp), 0.0)
+    value = xp.where(down & (mu > 0.0),
+                     t * g2 * c / (mu_safe * mz) * slab_transmittance(xp.where(down, oz, -1.0), xp), 0.0)
     # The power-heuristic weights of Y: the transmission's density from ω, p = G1(ω) D c / μ · |ω'·m| / (ω'·m +
     # c/η)², and from ω' back out to ω, p' = G1(ω') D |ω'·m| / |cos ω'| · c / (c + η ω'·m)²; the base's cosine
     # density |cos ω'|/π.
