@@ -18,6 +18,15 @@ def _direction(theta, phi):
     return np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
 
 
+def _cosine_rule(cosines: int, azimuths: int):
+    """A product rule for ∫ g(ωi) cosθi dωi over the hemisphere: Gauss-Legendre in cosθi, midpoints in φ. Returns
+    the directions ``(n, 3)`` and their weights (cosθi included) ``(n,)``."""
+    x, w = np.polynomial.legendre.leggauss(cosines)
+    mu, phi = (x + 1) / 2, (np.arange(azimuths) + 0.5) * 2 * np.pi / azimuths
+    m, p = np.meshgrid(mu, phi, indexing="ij")
+    return _direction(np.arccos(m), p).reshape(3, -1).T, (w[:, None] / 2 * m * (2 * np.pi / azimuths)).ravel()
+
+
 def _lobe(pairs_wi, pairs_wo, reflectance, alpha, eta):
     """The lobe evaluated eagerly (module constants read at call time, unlike a compiled program)."""
     params = {"reflectance": jnp.asarray(reflectance, dtype=float), "conductor_roughness": jnp.asarray(alpha),
@@ -53,11 +62,7 @@ def test_pbrts_sampling_walk_has_the_lobes_expectation(reflectance, alpha, eta, 
     wo = _direction(np.radians(theta_o), 0.0)
     kind, weight, wi = coated_conductor_sample(wo, *reflectance_index(reflectance), alpha, eta, samples=200_000,
                                                seed=int(theta_o))
-    x, w = np.polynomial.legendre.leggauss(256)
-    mu, phi = (x + 1) / 2, (np.arange(512) + 0.5) * 2 * np.pi / 512
-    m, p = np.meshgrid(mu, phi, indexing="ij")
-    nodes = _direction(np.arccos(m), p).reshape(3, -1).T
-    rule = (w[:, None] / 2 * m * (2 * np.pi / 512)).ravel()
+    nodes, rule = _cosine_rule(256, 512)
     f = _lobe(nodes, np.broadcast_to(wo, nodes.shape), reflectance, alpha, eta)
     mirror = np.array([-wo[0], -wo[1], wo[2]])
     for g in (lambda d: np.ones(len(d)), lambda d: np.maximum(0.0, d @ mirror) ** 8, lambda d: 1.0 - d[:, 2] ** 2):
@@ -94,12 +99,7 @@ def test_albedo_stays_below_one_and_grows_with_the_metals_reflectance():
     # the normal, the coat's two transmissions (0.96 each) and the slab's transmittance are most of what is lost.
     # A rough conductor returns less: its single scattering loses energy, and what it sends beyond the critical
     # angle is trapped for the walk's five visits (0.22 at α = 0.8, the walk's value too).
-    x, w = np.polynomial.legendre.leggauss(64)
-    mu, wmu = (x + 1) / 2, w / 2
-    phi = (np.arange(128) + 0.5) * 2 * np.pi / 128
-    m, p = np.meshgrid(mu, phi, indexing="ij")
-    wi = np.stack([np.sqrt(1 - m**2) * np.cos(p), np.sqrt(1 - m**2) * np.sin(p), m], -1).reshape(-1, 3)
-    weight = (wmu[:, None] * m * (2 * np.pi / 128)).ravel()
+    wi, weight = _cosine_rule(64, 128)
     for theta_o in np.radians([0.0, 45.0, 80.0]):
         wo = np.broadcast_to(_direction(theta_o, np.pi), wi.shape)
         smooth, rough = (weight @ _lobe(wi, wo, [0.9999, 0.9, 0.5], alpha, 1.5) for alpha in (0.05, 0.8))
