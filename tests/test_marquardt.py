@@ -1,5 +1,5 @@
 """The default solver (`brdffit.fitting.marquardt`): its transforms' slopes, its agreement with optimistix's
-Levenberg-Marquardt, holds and the independence of the points of a batch."""
+Levenberg-Marquardt, holds, the independence of the points of a batch and its secant term."""
 
 import dataclasses
 
@@ -124,3 +124,47 @@ def test_a_scalar_whose_optimum_lies_on_a_bound_is_put_on_it_in_one_solve():
             for a in np.linspace(0.8, upper, 41) for f in np.linspace(0.02, 0.1, 41)]
     costs, _ = score(problem.structure, grid, fit_data)
     assert out.cost <= costs.min() * (1 + 1e-9)
+
+
+def test_the_secant_term_meets_the_secant_equation(misspecified):
+    """Dennis, Gay & Welsch's update (`marquardt._secant`), from a symmetric S of the wrong size, between a start
+    and the optimum of Lambert + Cook-Torrance on the misspecified data: S₊ is symmetric and J₊ᵀJ₊ + S₊ maps the
+    step s to the change y of Jᵀr, both in the unconstrained variables the steps are taken in."""
+    problem, base, data = _problem_and_data(misspecified, "lambert+cook-torrance")
+    batch = marquardt._Batch(problem, [data])
+    optimum = fit(misspecified, "lambert+cook-torrance").params
+    x0, x1 = (problem.layout.flatten(dict(base, **p), problem.free).reshape(1, 1, -1)
+              for p in ({"m": np.asarray(0.5), "f0": np.asarray(0.2)}, optimum))
+    old, new = batch.evaluate(x0), batch.evaluate(x1)
+    size = batch.size
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(size, size))
+    start = (a + a.T).reshape(1, 1, size, size)
+    still = np.zeros((1, 1, size), bool)
+    updated = marquardt._secant(batch, old, new, np.ones((1, 1), bool), start, still)[0, 0]
+    u0, u1 = batch.unconstrained(old.x), batch.unconstrained(new.x)
+    s = (u1 - u0)[0, 0]
+    slope0, slope1 = batch.slopes(u0)[0, 0], batch.slopes(u1)[0, 0]
+    y = new.sums.jtr[0, 0] * slope1 - old.sums.jtr[0, 0] * slope0
+    assert float(y @ s) > 0.0  # a step towards the optimum: the update applies
+    jtj = new.sums.jtj[0, 0] * slope1[:, None] * slope1[None, :]
+    np.testing.assert_allclose(updated, updated.T, rtol=0, atol=1e-12 * np.abs(updated).max())
+    np.testing.assert_allclose((jtj + updated) @ s, y, rtol=0, atol=1e-9 * np.abs(y).max())
+    # Not accepted: S stays as it was.
+    kept = marquardt._secant(batch, old, new, np.zeros((1, 1), bool), start, still)
+    np.testing.assert_array_equal(kept, start)
+
+
+def test_a_large_residual_fit_converges_in_fewer_steps_with_the_secant_term(misspecified, monkeypatch):
+    """Lambert + two Lafortune lobes on GGX data (a model that cannot describe them: large residuals), fitted with
+    the secant term and with Gauss-Newton's JᵀJ alone (an S never positive definite enough to be used): the same
+    optimum, to 1e-8 of the cost, in at most 60 % of the steps (30 against 60 over the four starts; the first
+    start 9 against 39)."""
+    spec = "lambert+lafortune(lobes=2)"
+    secant = fit(misspecified, spec)
+    monkeypatch.setattr(marquardt, "_SECANT_DEFINITE", np.inf)
+    gauss_newton = fit(misspecified, spec)
+    assert secant.converged and gauss_newton.converged, (secant.summary(), gauss_newton.summary())
+    assert secant.cost <= gauss_newton.cost * (1 + 1e-8)
+    steps = [sum(start["steps"] for start in r.starts) for r in (secant, gauss_newton)]
+    assert steps[0] <= 0.6 * steps[1], steps

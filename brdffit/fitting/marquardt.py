@@ -23,7 +23,7 @@ Lafortune lobes refitted to a real paper from its screening fit: 70 steps). Each
 structured secant approximation of S (Dennis, Gay & Welsch 1981, ACM TOMS 7(3), the NL2SOL algorithm: `_secant`)
 and steps with JᵀJ + S in place of JᵀJ where S predicted its last trial's cost change better than Gauss-Newton did
 and JᵀJ + S is positive definite (NL2SOL's choice between its two models): the same refit takes 18 steps, a
-selection on a real file 5-40 % fewer passes. A step is accepted only if the projected
+selection 3-33 % fewer passes. A step is accepted only if the projected
 cost does not increase (at a kept trial's second pass too); λ then shrinks tenfold if the step achieved at least
 `GAIN_RATIO` of the decrease its model predicted and stays otherwise (Moré 1978), and a rejected step grows it
 tenfold. A point has converged when its next step and its amplitude change are below ``rtol·|x| + atol``
