@@ -16,23 +16,23 @@ those of the projected point), then takes a Levenberg-Marquardt step
     (JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr        (Marquardt 1963, Eq. 29's scaling)
 
 over the outer parameters, in their unconstrained variables (`brdffit.params`; the chain rule maps their columns),
-and the amplitudes off their bounds: Kaufman's joint step (BIT 15, 1975). JᵀJ is the Hessian of the cost (over
-2) only where the residuals are small: a misspecified model, the rule on real measurements, leaves a second term
+and the amplitudes off their bounds: Kaufman's joint step (BIT 15, 1975). JᵀJ is the Hessian of the cost (over 2)
+only where the residuals are small: a misspecified model, the rule on real measurements, leaves a second term
 S = Σ rᵢ∇²rᵢ that Gauss-Newton ignores, and then converges linearly, in steps that alternate or creep (Lambert + three
 Lafortune lobes refitted to a real paper from its screening fit: 70 steps). Each point therefore also carries a
-structured secant approximation of S (Dennis, Gay & Welsch 1981, ACM TOMS 7(3), the NL2SOL algorithm: `_secant`)
-and steps with JᵀJ + S in place of JᵀJ where S predicted its last trial's cost change better than Gauss-Newton did
-and JᵀJ + S is positive definite (NL2SOL's choice between its two models): the same refit takes 18 steps, a
-selection 3-33 % fewer passes. A step is accepted only if the projected
-cost does not increase (at a kept trial's second pass too); λ then shrinks tenfold if the step achieved at least
-`GAIN_RATIO` of the decrease its model predicted and stays otherwise (Moré 1978), and a rejected step grows it
-tenfold. A point has converged when its next step and its amplitude change are below ``rtol·|x| + atol``
-(optimistix's Cauchy test on the variables) with λ ≤ 1, so that damping cannot fake a small step, or with its last
-trial changing the cost by at most ``rtol·cost + atol`` (the Cauchy test on the cost: at the optimum, rounding
-rejects every trial and λ grows). It stops at ``max_steps``, or when λ exceeds 1e12 (no step of any length lowers
-the cost: a kink, or the optimum itself); the pipeline's Karush-Kuhn-Tucker test (`brdffit.fitting.status`) then
-tells a stall from an optimum. A problem without outer parameters (Lambert) converges after one projection.
-Parameters the pipeline holds (on a bound, or where a dead lobe left them) simply do not move.
+structured secant approximation of S (Dennis, Gay & Welsch 1981, ACM TOMS 7(3), the NL2SOL algorithm: `_secant`) and
+steps with JᵀJ + S in place of JᵀJ where S predicted its last trial's cost change better than Gauss-Newton did and
+JᵀJ + S is positive definite (NL2SOL's choice between its two models): the same refit takes 18 steps, a selection
+3-33 % fewer passes. A step is accepted only if the projected cost does not increase (at a kept trial's second pass
+too); λ then shrinks tenfold if the step achieved at least `GAIN_RATIO` of the decrease its model predicted and stays
+otherwise (Moré 1978), and a rejected step grows it tenfold. A point has converged when its next step and its
+amplitude change are below ``rtol·|x| + atol`` (optimistix's Cauchy test on the variables) with λ ≤ 1, so that
+damping cannot fake a small step, or with its last trial changing the cost by at most ``rtol·cost + atol`` (the
+Cauchy test on the cost: at the optimum, rounding rejects every trial and λ grows). It stops at ``max_steps``, or
+when λ exceeds 1e12 (no step of any length lowers the cost: a kink, or the optimum itself); the pipeline's
+Karush-Kuhn-Tucker test (`brdffit.fitting.status`) then tells a stall from an optimum. A problem without outer
+parameters (Lambert) converges after one projection. Parameters the pipeline holds (on a bound, or where a dead lobe
+left them) simply do not move.
 
 The transforms of `brdffit.params` reach a bound only where their slope is 0, so an outer scalar whose optimum lies
 on a bound walks towards it in ever shorter steps, and its flat direction then keeps λ climbing to `MAX_DAMPING`
@@ -534,9 +534,9 @@ def _step(batch: _Batch, state: _State, damping, held, secant):
 
 def _secant(batch: _Batch, old: _State, new: _State, accepted, secant, still):
     """The secant terms ``(M, S, P, P)`` after the step from ``old`` to ``new`` where ``accepted`` ``(M, S)``
-    (elsewhere ``secant`` as it was): Dennis, Gay & Welsch's update (1981, Eq. 3.6; the NL2SOL algorithm) of
-    S ≈ Σ rᵢ∇²rᵢ in the unconstrained variables, with its sizing factor τ = min(1, |sᵀy♯| / |sᵀSs|) (their §3)
-    applied first:
+    (elsewhere ``secant`` as it was): Dennis, Gay & Welsch's update (ACM TOMS 7(3), 1981: the NL2SOL algorithm)
+    of S ≈ Σ rᵢ∇²rᵢ in the unconstrained variables, with their sizing factor τ = min(1, |sᵀy♯| / |sᵀSs|) applied
+    first:
 
         S₊ = τS + (w yᵀ + y wᵀ) / (yᵀs) − (wᵀs) y yᵀ / (yᵀs)²,   w = y♯ − τS s,
 
@@ -628,8 +628,8 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         snap, bound = batch.onto_bounds(state, barred | on_bound)
         snap &= active[..., None]
         still = hold | on_bound | snap
-        step, u, relative_offset, predicted, decrement = _step(batch, state, lam, still,
-                                                    np.where(augment[..., None, None], secant, 0.0))
+        step, u, relative_offset, predicted, decrement = _step(
+            batch, state, lam, still, np.where(augment[..., None, None], secant, 0.0))
         # Both models' predictions of this step's cost change, for NL2SOL's choice of the next step's model.
         with np.errstate(invalid="ignore", over="ignore"):
             slope = batch.slopes(u)
