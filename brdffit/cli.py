@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from . import __version__
+from ._memory import keep_freed_memory
 from .compilation_cache import cache_dir, enable_compilation_cache
 from .criteria import CRITERIA
 from .defaults import FIT, POSTERIOR, TABULATED
@@ -1296,9 +1297,11 @@ def run() -> None:
     standard streams are flushed; a process with a non-daemon thread still running exits the usual way.
 
     The process is the command's own, so its cyclic garbage collector runs less often (`COLLECTOR_THRESHOLDS`) and
-    skips the objects of the imports (`_engine_loaded`)."""
+    skips the objects of the imports (`_engine_loaded`), and its malloc keeps freed memory for the next pass
+    (`brdffit._memory.keep_freed_memory`)."""
     global _own_process
     _own_process = True
+    keep_freed_memory()
     gc.set_threshold(*COLLECTOR_THRESHOLDS)
     code = main()
     if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
