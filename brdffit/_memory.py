@@ -14,9 +14,9 @@ its mmap threshold (at most 32 MiB), or one larger than a thread arena's 64 MiB 
 unmaps when it is freed, so every pass of a fit faults its buffers in again page by page: `brdffit export --to pbrt
 --fit` of the shipped clay's fit took 3.9 million page faults, 16 s of system time of its 52 s of CPU. The console
 script's process (`brdffit.cli.run`) therefore allocates from one heap that keeps what is freed
-(`keep_freed_memory`): 0.3 million faults and 2.3 s of system time for that export, 2.0 → 1.2 s for the RGL-EPFL
+(`keep_freed_memory`): 0.25 million faults and 2.2 s of system time for that export, 2.0 → 1.2 s for the RGL-EPFL
 paper's default fit (docs/benchmarks.md), at the price of the freed memory, up to `KEPT_HEAP`, staying with the
-process until it ends. A process that imports brdffit as a library keeps its malloc as it is.
+process until it ends (that export's peak resident memory 808 → 884 MB). A process that imports brdffit as a library keeps its malloc as it is.
 """
 
 from __future__ import annotations
@@ -27,7 +27,8 @@ __all__ = ["cap_malloc_arenas", "keep_freed_memory", "ARENAS_UNDER_LIMIT", "KEPT
 
 ARENAS_UNDER_LIMIT = 2
 # The free memory at the top of the heap that `keep_freed_memory` leaves to the process (M_TRIM_THRESHOLD): more
-# than a pass's buffers on the shipped and shared files (a coated conductor's pass on 2,000 pairs peaks near 0.3 GB).
+# than a pass's buffers need, so that the heap is not trimmed between passes (every command stays under the 2 GiB
+# address-space limit of tests/test_memory_limits.py with it).
 KEPT_HEAP = 1 << 30
 _M_TRIM_THRESHOLD, _M_MMAP_MAX, _M_ARENA_MAX = -1, -4, -8  # <malloc.h>
 # The environment variables through which a user tunes glibc's malloc: where any is set, brdffit leaves it alone.
