@@ -62,6 +62,7 @@ same optimum.
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
@@ -260,10 +261,11 @@ class _State:
     ``spread`` ``(M, S)`` is the magnitude of the terms of the projection's predicted cost change (`_TRUSTED_SPREAD`,
     0 where it did not move)."""
 
-    def __init__(self, x, sums: NormalEquations, delta, evaluated=None, values=None, spread=None):
+    def __init__(self, x, sums: NormalEquations, delta, evaluated=None, values=None, spread=None, transformed=None):
         self.x, self.sums, self.delta, self.values = x, sums, delta, values
         self.evaluated = sums.cost if evaluated is None else evaluated  # the pass's own cost, before projecting
         self.spread = np.zeros(np.shape(sums.cost)) if spread is None else spread
+        self.transformed = transformed  # (u, dp/du) of ``x``, once `_Batch.transformed` has computed them
 
     def where(self, take, other: "_State") -> "_State":
         """This state where ``take (M, S)`` is True, ``other`` elsewhere."""
@@ -280,9 +282,12 @@ class _State:
             tangents, values = np.reshape(take, take.shape + (1, 1, 1)), take[..., None, None]
             values = [(np.where(tangents, a, c), np.where(values, np.asarray(f), np.asarray(g)))
                       for (a, f), (c, g) in zip(self.values, other.values)]
+        transformed = None
+        if self.transformed is not None and other.transformed is not None:
+            transformed = tuple(pick(a, b) for a, b in zip(self.transformed, other.transformed))
         return _State(pick(self.x, other.x), NormalEquations(*(pick(a, b) for a, b in zip(self.sums, other.sums))),
                       pick(self.delta, other.delta), pick(self.evaluated, other.evaluated), values,
-                      pick(self.spread, other.spread))
+                      pick(self.spread, other.spread), transformed)
 
 
 class _Batch:
@@ -477,23 +482,48 @@ class _Batch:
             out[..., self.offsets[name]] = self.layout[name].spec.transform_slope(u[..., self.offsets[name]])
         return out
 
+    def transformed(self, state: _State):
+        """``(u, dp/du)`` of the state's points (`unconstrained`, `slopes`), computed once per state."""
+        if state.transformed is None:
+            u = self.unconstrained(state.x)
+            state.transformed = (u, self.slopes(u))
+        return state.transformed
 
-def _step(batch: _Batch, state: _State, damping, held, secant):
-    """The damped step of every point in the unconstrained variables ``(M, S, P)`` (0 where a scalar does not
-    move: held, or an amplitude on its bound), the unconstrained variables it starts from, the relative offset
-    of each point ``(M, S)`` (`RELATIVE_OFFSET`) over the scalars that move, the cost change the step's model
-    predicts ``(M, S)`` and Gauss-Newton's decrement gᵀ(JᵀJ)⁻¹g over those scalars ``(M, S)`` (inf where the system
-    is not finite; `PROPORTIONING`).
+
+class _Step(NamedTuple):
+    """Every point's damped step (`_step`), each field ``(M, S)`` unless said.
+
+    Fields:
+        step: ``(M, S, P)``, the step in the unconstrained variables (0 where a scalar does not move: held, or an
+            amplitude on its bound).
+        u: ``(M, S, P)``, the unconstrained variables it starts from.
+        offset: the relative offset (`RELATIVE_OFFSET`) over the scalars that move, Gauss-Newton's.
+        predicted: the cost change that the model the step used predicts (the gain ratio's denominator).
+        gauss_newton, with_secant: the cost change that Gauss-Newton's model, and that model with the secant term,
+            predict for the step (NL2SOL's choice of the next step's model).
+        decrement: Gauss-Newton's decrement gᵀ(JᵀJ)⁻¹g over the scalars that move (`PROPORTIONING`).
+        Where a point's system is not finite, its offset and decrement are inf.
+    """
+
+    step: np.ndarray
+    u: np.ndarray
+    offset: np.ndarray
+    predicted: np.ndarray
+    gauss_newton: np.ndarray
+    with_secant: np.ndarray
+    decrement: np.ndarray
+
+
+def _step(batch: _Batch, state: _State, damping, held, secant, augment) -> _Step:
+    """The damped step of every point (`_Step`).
 
     Arguments:
-        secant: ``(M, S, P, P)``, the secant term S added to each point's JᵀJ in the unconstrained variables
-            (`_secant`; zeros where the point steps by Gauss-Newton). A point whose JᵀJ + S is not positive
-            definite (`_SECANT_DEFINITE`) steps by Gauss-Newton. The prediction is that of the model the step
-            used, the offset Gauss-Newton's.
+        secant: ``(M, S, P, P)``, each point's secant term S in the unconstrained variables (`_secant`).
+        augment: ``(M, S)``: the points whose step adds S to JᵀJ; a point whose JᵀJ + S is not positive definite
+            (`_SECANT_DEFINITE`) steps by Gauss-Newton all the same.
     """
     x = state.x
-    u = batch.unconstrained(x)
-    slope = batch.slopes(u)
+    u, slope = batch.transformed(state)
     moving = batch.is_outer & ~held
     if batch.amplitudes.size:
         on_box = (x > batch.lower + 1e-12) & (x < batch.upper - 1e-12)
@@ -506,7 +536,7 @@ def _step(batch: _Batch, state: _State, damping, held, secant):
         both = moving[..., :, None] & moving[..., None, :]
         eye = np.eye(batch.size)
         scaling = scale[..., :, None] * scale[..., None, :]
-        augmented = np.where(both, (jtj + secant) / scaling, eye)
+        augmented = np.where(both, (jtj + np.where(augment[..., None, None], secant, 0.0)) / scaling, eye)
         definite = np.all(np.isfinite(augmented), axis=(-1, -2))
         definite[definite] = np.linalg.eigvalsh(augmented[definite])[..., 0] > _SECANT_DEFINITE
         model = np.where(definite[..., None, None], augmented, np.where(both, jtj / scaling, eye))
@@ -528,8 +558,11 @@ def _step(batch: _Batch, state: _State, damping, held, secant):
         z = np.where(moving, step * scale, 0.0)
         predicted = -2.0 * np.sum(rhs * z, axis=-1) + np.einsum("...i,...ij,...j->...", z,
                                                                 np.where(finite[..., None, None], model, eye), z)
-    return np.where(moving, step, 0.0), u, np.where(finite & (p > 0), offset, np.inf), predicted, \
-        np.where(finite, decrement, np.inf)
+        step = np.where(moving, step, 0.0)
+        gauss_newton = 2.0 * np.sum(jtr * step, axis=-1) + np.einsum("...i,...ij,...j->...", step, jtj, step)
+        with_secant = gauss_newton + np.einsum("...i,...ij,...j->...", step, secant, step)
+    return _Step(step, u, np.where(finite & (p > 0), offset, np.inf), predicted, gauss_newton, with_secant,
+                 np.where(finite, decrement, np.inf))
 
 
 def _secant(batch: _Batch, old: _State, new: _State, accepted, secant, still):
@@ -543,8 +576,7 @@ def _secant(batch: _Batch, old: _State, new: _State, accepted, secant, still):
     where s is the step (the scalars in ``still`` ``(M, S, P)``, which did not move by a step, excluded), y the
     change of Jᵀr and y♯ = y − J₊ᵀJ₊ s, so that J₊ᵀJ₊ + S₊ meets the secant equation (J₊ᵀJ₊ + S₊) s = y. A
     step with yᵀs ≤ 0 (no positive curvature along it) leaves S as it was."""
-    u0, u1 = batch.unconstrained(old.x), batch.unconstrained(new.x)
-    slope0, slope1 = batch.slopes(u0), batch.slopes(u1)
+    (u0, slope0), (u1, slope1) = batch.transformed(old), batch.transformed(new)
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         s = np.where(still, 0.0, u1 - u0)
         y = np.where(still, 0.0, new.sums.jtr * slope1 - old.sums.jtr * slope0)
@@ -628,14 +660,8 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         snap, bound = batch.onto_bounds(state, barred | on_bound)
         snap &= active[..., None]
         still = hold | on_bound | snap
-        step, u, relative_offset, predicted, decrement = _step(
-            batch, state, lam, still, np.where(augment[..., None, None], secant, 0.0))
-        # Both models' predictions of this step's cost change, for NL2SOL's choice of the next step's model.
-        with np.errstate(invalid="ignore", over="ignore"):
-            slope = batch.slopes(u)
-            gauss_newton = 2.0 * np.sum(state.sums.jtr * slope * step, axis=-1) + np.einsum(
-                "...i,...ij,...j->...", step * slope, state.sums.jtj, step * slope)
-            with_secant = gauss_newton + np.einsum("...i,...ij,...j->...", step, secant, step)
+        trial_step = _step(batch, state, lam, still, secant, augment)
+        step, u, relative_offset, decrement = trial_step.step, trial_step.u, trial_step.offset, trial_step.decrement
         outer = batch.is_outer
         small = (np.linalg.norm(np.where(outer, step, 0.0), axis=-1)
                  <= rtol * np.linalg.norm(np.where(outer, u, 0.0), axis=-1) + atol)
@@ -682,11 +708,11 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         candidate = batch.refresh(candidate, better)
         better &= np.isfinite(candidate.sums.cost) & (candidate.sums.cost <= state.sums.cost)
         with np.errstate(invalid="ignore", divide="ignore"):
-            poor = (candidate.sums.cost - state.sums.cost) / predicted < GAIN_RATIO
+            poor = (candidate.sums.cost - state.sums.cost) / trial_step.predicted < GAIN_RATIO
         actual = candidate.sums.cost - state.sums.cost
         with np.errstate(invalid="ignore"):
-            augment = np.where(active & np.isfinite(actual),
-                               np.abs(actual - with_secant) < np.abs(actual - gauss_newton), augment)
+            augment = np.where(active & np.isfinite(actual), np.abs(actual - trial_step.with_secant)
+                               < np.abs(actual - trial_step.gauss_newton), augment)
         secant = _secant(batch, state, candidate, better, secant, still)
         state = candidate.where(better, state)
         on_bound |= snap & better[..., None]
