@@ -596,6 +596,12 @@ def _secant(batch: _Batch, old: _State, new: _State, accepted, secant, still):
     return np.where(ok[..., None, None], updated, secant)
 
 
+def _moved_little(state: _State, atol: float) -> np.ndarray:
+    """``(M, S)``: the points whose last projection moved every amplitude by at most `EXACT_MOVE` of itself (+
+    ``atol``), so that their sums stand for those of the points themselves."""
+    return np.all(np.abs(state.delta) <= EXACT_MOVE * np.abs(state.x) + atol, axis=-1)
+
+
 def silenced(jtj, trial_jtj) -> np.ndarray:
     """``(..., P)``: the free scalars that act on the residuals at the current point (a nonzero diagonal of JᵀJ) and
     not at all at the trial point (an exactly zero one), from the two points' ``JᵀJ`` ``(..., P, P)``."""
@@ -733,11 +739,22 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
                               state.sums)
         state.delta = np.where(answers[..., None], 0.0, state.delta)
     elif metrics:
-        tangents, values = [a for a, _ in state.values], [f for _, f in state.values]
-        state.sums = state.sums._replace(meat=meat_of(problem, tangents), metric_sums=metric_sums_of(values, pieces),
-                                         noise_grams=noise_grams_of(problem, tangents, values, pieces))
+        # The meat and the metric sums serve an answer whose sums are its own (`exact` below; the pipeline passes
+        # again at any other, `brdffit.fitting.api`), so they are formed at those answers alone.
+        own = np.flatnonzero((answers & _moved_little(state, atol)).ravel())
+        if own.size:
+            m = own // count
+            tangents = [np.reshape(a, (-1, 1) + np.shape(a)[2:])[own] for a, _ in state.values]
+            values = [np.reshape(np.asarray(f), (-1, 1) + np.shape(f)[2:])[own] for _, f in state.values]
+            parts = (meat_of(problem, tangents), metric_sums_of(values, pieces, materials=m),
+                     noise_grams_of(problem, tangents, values, pieces, materials=m))
+            meat, metric_sums, noise_grams = (np.reshape(a, (own.size,) + np.shape(a)[2:]) for a in parts)
+            placed = _scatter(NormalEquations(None, None, None, meat, None, metric_sums, noise_grams), own,
+                              answers.shape, None)
+            state.sums = state.sums._replace(meat=placed.meat, metric_sums=placed.metric_sums,
+                                             noise_grams=placed.noise_grams)
     finite = np.isfinite(state.sums.cost)
-    exact = (answers | (not compact)) & np.all(np.abs(state.delta) <= EXACT_MOVE * np.abs(state.x) + atol, axis=-1)
+    exact = (answers | (not compact)) & _moved_little(state, atol)
     out = []
     for m, material in enumerate(starts):
         row = []

@@ -299,7 +299,7 @@ def chunks(data: FitData, size: int = CHUNK_SAMPLES) -> list[FitData]:
 
 
 def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bool = False,
-               values: bool = False, meat: bool = True, materials=None):
+               values: bool = False, meat: bool = True, materials=None, first: int | None = None):
     """JᵀJ, Jᵀr, rᵀr, Jᵀ diag(r²) J and the per-channel rᵀr over all of the data, for every point of a batch.
 
     Arguments:
@@ -313,6 +313,8 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
         meat: form Jᵀ diag(r²) J (else the field is None): a sizeable share of the host's work in a pass.
         materials: integer indices ``(M,)``: point row i is evaluated on material ``materials[i]`` of the pieces
             (gathered on the device, `pass_program`); None: the pieces have the M materials of ``trees``.
+        first: form the sums of the first ``first`` points of each material only (S = ``first`` in what is
+            returned): the others are copies evaluated so that the pass has a shape another solve compiled.
 
     Returns:
         The `NormalEquations`, each field with leading axes ``(M, S)``; with ``values``, the pair
@@ -349,6 +351,8 @@ def accumulate(problem: Problem, trees: dict, pieces: list[FitData], metrics: bo
                 joined = np.ascontiguousarray(np.moveaxis(a, 1, -2))
                 a = joined.reshape(a.shape[:1] + (1,) + a.shape[2:-1] + (-1,))
                 f = jnp.reshape(f, (1, 1, -1, f.shape[-1]))
+            if first is not None:
+                a, f = a[:, :first], f[:, :first]
             kept.append((a, f))
             gram = gram + _grams(a)  # (M, S, C, Q+1, Q+1): tangents and residuals
         grams = noise_grams_of(problem, [a for a, _ in kept], [f for _, f in kept], pieces, materials,

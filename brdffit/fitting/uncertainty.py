@@ -51,7 +51,7 @@ def normal_equations_at(problem: Problem, params: dict, data: FitData, width: in
     data = data._replace(fixed={k: jnp.asarray(v) for k, v in params.items() if k not in problem.free})
     trees = {k: np.broadcast_to(np.asarray(params[k], dtype=float), (1, width) + np.shape(params[k])).copy()
              for k in problem.free}
-    return accumulate(problem, trees, chunks(data), metrics=True).at_point(0, 0)
+    return accumulate(problem, trees, chunks(data), metrics=True, first=1).at_point(0, 0)
 
 
 class Uncertainty:
