@@ -126,6 +126,28 @@ def test_a_scalar_whose_optimum_lies_on_a_bound_is_put_on_it_in_one_solve():
     assert out.cost <= costs.min() * (1 + 1e-9)
 
 
+def test_metric_sums_are_formed_at_an_exact_answer_alone(misspecified):
+    """A solve asked for metrics forms the meat, the metric sums and the noise forms' Gram matrices at its answer,
+    whose last projection left its amplitudes (``exact``), and at no other start; there they equal those of a fresh
+    pass at the answer (`brdffit.fitting.uncertainty.normal_equations_at`) to the order of that last move
+    (`EXACT_MOVE`: the sums are the pass's at the point before it)."""
+    from brdffit.fitting.uncertainty import normal_equations_at
+
+    problem, base, data = _problem_and_data(misspecified, "lambert+cook-torrance")
+    starts = [dict(base, m=np.asarray(m), f0=np.asarray(0.1)) for m in (0.1, 0.3, 0.5, 0.7)]
+    out = marquardt.solve(problem, [starts], [data], rtol=1e-10, atol=1e-14, max_steps=200, metrics=True)[0]
+    answer = [o for o in out if o.answer]
+    assert len(answer) == 1 and answer[0].exact
+    for o in out:
+        formed = [o.normal.meat is not None, o.normal.metric_sums is not None, o.normal.noise_grams is not None]
+        assert formed == [o.answer] * 3
+    fresh = normal_equations_at(problem, answer[0].params, jax.tree_util.tree_map(lambda a: a[0], data), width=4)
+    for name in ("jtj", "jtr", "meat", "metric_sums", "noise_grams"):
+        got, want = np.asarray(getattr(answer[0].normal, name)), np.asarray(getattr(fresh, name))
+        np.testing.assert_allclose(got, want, rtol=10 * marquardt.EXACT_MOVE,
+                                   atol=10 * marquardt.EXACT_MOVE * np.max(np.abs(want)), err_msg=name)
+
+
 def test_the_secant_term_meets_the_secant_equation(misspecified):
     """Dennis, Gay & Welsch's update (`marquardt._secant`), from a symmetric S of the wrong size, between a start
     and the optimum of Lambert + Cook-Torrance on the misspecified data: S₊ is symmetric and J₊ᵀJ₊ + S₊ maps the

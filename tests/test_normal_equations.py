@@ -63,6 +63,20 @@ def test_a_batch_of_points_gives_each_point_its_own_sums():
             np.testing.assert_allclose(g, w, rtol=1e-9, atol=1e-12 * np.max(np.abs(w)))
 
 
+def test_first_forms_the_sums_of_the_first_points_alone():
+    # A batch of four copies of one point (the pass at an answer, in the polish's compiled shape) reduced with
+    # first=1: every field, the meat, metric sums and noise forms' Gram matrices included, is the full batch's first
+    # point's, bit for bit, with one point left on the points axis.
+    problem, physical, data = _setup("lambert+cook-torrance")
+    trees = {k: np.broadcast_to(np.asarray(physical[k]), (1, 4) + np.shape(physical[k])).copy() for k in problem.free}
+    full = accumulate(problem, trees, chunks(data), metrics=True)
+    first = accumulate(problem, trees, chunks(data), metrics=True, first=1)
+    assert first.cost.shape == (1, 1)
+    for name, g, w in zip(full._fields, first.at_point(0, 0), full.at_point(0, 0)):
+        assert g is not None, name
+        np.testing.assert_array_equal(g, w, err_msg=name)
+
+
 def test_matches_dense_jacobian_for_a_sum_of_lobes():
     # The assembly is lobe-agnostic (one tangent per parameter name), so one sum covers what differs between
     # lobes: per-channel colour and shared shape parameters, an anisotropic pair, numbered Lafortune sub-lobes

@@ -738,16 +738,18 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         state.sums = _scatter(batch.gathered_sums(state.x, chosen, metrics=metrics), chosen, answers.shape,
                               state.sums)
         state.delta = np.where(answers[..., None], 0.0, state.delta)
-    elif metrics:
-        # The meat and the metric sums serve an answer whose sums are its own (`exact` below; the pipeline passes
-        # again at any other, `brdffit.fitting.api`), so they are formed at those answers alone.
-        own = np.flatnonzero((answers & _moved_little(state, atol)).ravel())
+    formed = answers & metrics  # the points whose meat and metric sums are formed; the others' are left None
+    if metrics and not compact:
+        # They serve an answer whose sums are its own (`exact` below; the pipeline passes again at any other,
+        # `brdffit.fitting.api`), so they are formed at those answers alone.
+        formed = answers & _moved_little(state, atol)
+        own = np.flatnonzero(formed.ravel())
         if own.size:
-            m = own // count
+            material_of = own // count
             tangents = [np.reshape(a, (-1, 1) + np.shape(a)[2:])[own] for a, _ in state.values]
             values = [np.reshape(np.asarray(f), (-1, 1) + np.shape(f)[2:])[own] for _, f in state.values]
-            parts = (meat_of(problem, tangents), metric_sums_of(values, pieces, materials=m),
-                     noise_grams_of(problem, tangents, values, pieces, materials=m))
+            parts = (meat_of(problem, tangents), metric_sums_of(values, pieces, materials=material_of),
+                     noise_grams_of(problem, tangents, values, pieces, materials=material_of))
             meat, metric_sums, noise_grams = (np.reshape(a, (own.size,) + np.shape(a)[2:]) for a in parts)
             placed = _scatter(NormalEquations(None, None, None, meat, None, metric_sums, noise_grams), own,
                               answers.shape, None)
@@ -761,10 +763,12 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         for s, start in enumerate(material):
             values = layout.unflatten(state.x[m, s], free, xp=np)
             params = dict(start, **{k: np.asarray(v) for k, v in values.items()})
+            normal = state.sums.at_point(m, s)
+            if metrics and not formed[m, s]:
+                normal = normal._replace(meat=None, metric_sums=None, noise_grams=None)
             row.append(SolveOutcome(
                 params, float(state.sums.cost[m, s]), steps=int(steps[m, s]),
                 max_steps=bool(finite[m, s] and not converged[m, s] and steps[m, s] >= max_steps),
-                nonfinite=not finite[m, s], normal=state.sums.at_point(m, s), exact=bool(exact[m, s]),
-                answer=bool(answers[m, s])))
+                nonfinite=not finite[m, s], normal=normal, exact=bool(exact[m, s]), answer=bool(answers[m, s])))
         out.append(row)
     return out
