@@ -16,7 +16,8 @@ unmaps when it is freed, so every pass of a fit faults its buffers in again page
 script's process (`brdffit.cli.run`) therefore allocates from one heap that keeps what is freed
 (`keep_freed_memory`): 0.25 million faults and 2.2 s of system time for that export, 2.0 → 1.2 s for the RGL-EPFL
 paper's default fit (docs/benchmarks.md), at the price of the freed memory, up to `KEPT_HEAP`, staying with the
-process until it ends (that export's peak resident memory 808 → 884 MB). A process that imports brdffit as a library keeps its malloc as it is.
+process until it ends (that export's peak resident memory 808 → 884 MB). A process that imports brdffit as a
+library keeps its malloc as it is.
 """
 
 from __future__ import annotations

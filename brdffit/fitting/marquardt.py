@@ -738,11 +738,12 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         state.sums = _scatter(batch.gathered_sums(state.x, chosen, metrics=metrics), chosen, answers.shape,
                               state.sums)
         state.delta = np.where(answers[..., None], 0.0, state.delta)
+    moved_little = _moved_little(state, atol)
     formed = answers & metrics  # the points whose meat and metric sums are formed; the others' are left None
     if metrics and not compact:
         # They serve an answer whose sums are its own (`exact` below; the pipeline passes again at any other,
         # `brdffit.fitting.api`), so they are formed at those answers alone.
-        formed = answers & _moved_little(state, atol)
+        formed = answers & moved_little
         own = np.flatnonzero(formed.ravel())
         if own.size:
             material_of = own // count
@@ -756,7 +757,7 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
             state.sums = state.sums._replace(meat=placed.meat, metric_sums=placed.metric_sums,
                                              noise_grams=placed.noise_grams)
     finite = np.isfinite(state.sums.cost)
-    exact = (answers | (not compact)) & _moved_little(state, atol)
+    exact = (answers | (not compact)) & moved_little
     out = []
     for m, material in enumerate(starts):
         row = []
