@@ -7,7 +7,8 @@ selection over the standard candidates) with an empty and a warm cache, the READ
 default fit of a real RGL-EPFL file (report included) with an empty and a warm cache, where ../shared is, and the
 default fit of a 31-band ASTM E1392 file of 1,500 rows (report included) with an empty and a warm cache. The
 host is shared, so each light command is run ``--repeats`` times and the median reported, and ``python -c
-"import jax"`` is timed in the same run as the machine's baseline.
+"import jax"`` is timed in the same run as the machine's baseline. The package's bytecode is compiled first, as
+``pip install`` compiles it.
 
 Usage: ``python scripts/bench_latency.py [--repeats 3] [--skip-selection]``; prints a Markdown table.
 """
@@ -15,6 +16,7 @@ Usage: ``python scripts/bench_latency.py [--repeats 3] [--skip-selection]``; pri
 from __future__ import annotations
 
 import argparse
+import compileall
 import os
 import statistics
 import subprocess
@@ -89,6 +91,10 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error("--repeats must be at least 1")
+    # Every process starts from compiled bytecode, as an installed package does (pip compiles it at install). In a
+    # checkout each module's is written at its first import, except under PYTHONDONTWRITEBYTECODE: every process
+    # would then compile the modules edited since their bytecode was last written.
+    compileall.compile_dir(str(ROOT / "brdffit"), quiet=1)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         big, other = _data(tmp)
