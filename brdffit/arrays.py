@@ -4,13 +4,14 @@
 ``jit(convert_element_type)`` when it changes the dtype), and ``jnp.stack``, ``jnp.full`` and the like one each:
 one compilation per shape and dtype in a new process (lowering included), and still a lowering and a cache
 lookup each in a warm one. A first fit made dozens of them, a sizeable share of its time in a new process or a warm
-one (docs/benchmarks.md). ``jax.device_put`` of a NumPy array compiles nothing, so the fitting pipeline
-builds its data's arrays (their fields, subsamples, stacks and pieces) and its other small arrays in NumPy on the
-host and moves them with `to_device` / `on_device`: only the model's own maths is compiled
-(`brdffit.programs.Program`), since a compiled program of the data's few operations adds its compilation to
-every first fit. Host-side maths on columns of samples in JAX functions (the readers'
-and the report's angle conversions, the synthesised data) goes through `padded_columns`: a jitted function called on
-lengths padded to a power of two, so that files of any length share a few compilations.
+one (docs/benchmarks.md). So the fitting pipeline builds its data's arrays (their fields, subsamples, stacks and
+pieces) and its other small arrays in NumPy on the host, and only the model's own maths is compiled
+(`brdffit.programs.Program`): a compiled program of the data's few operations would add its compilation to every
+first fit. It hands those arrays to the compiled programs as they are, each call moving its arguments in JAX's C++
+dispatch, or, where many calls read the same large arrays, moves them once with `on_device` (``jax.device_put``,
+which compiles nothing but dispatches in Python; `for_calls`). Host-side maths on columns of samples in JAX
+functions (the readers' and the report's angle conversions, the synthesised data) goes through `padded_columns`: a
+jitted function called on lengths padded to a power of two, so that files of any length share a few compilations.
 """
 
 from __future__ import annotations
@@ -23,10 +24,16 @@ from ._lazy import module
 
 jax = module("jax")  # loaded on first use: the readers import this module, and `brdffit info` loads no JAX
 
-__all__ = ["to_device", "on_device", "on_host", "host_arrays", "traced", "jitted", "padded_columns", "COLUMN_CHUNK"]
+__all__ = ["to_device", "on_device", "on_host", "host_arrays", "for_calls", "traced", "jitted", "padded_columns",
+           "COLUMN_CHUNK", "RECOPY_BYTES"]
 
 # The most samples of one call of `padded_columns` (bounds the memory of a MERL-size table's intermediates).
 COLUMN_CHUNK = 1 << 18
+
+# `for_calls`: the bytes that, copied again by the later calls of compiled programs, cost about what one
+# ``jax.device_put`` costs beyond its own copy. On the 2-core CPU host a ``device_put`` of a few arrays took 0.3-0.45 ms
+# (its dispatch runs in Python), and a call copied NumPy arguments at about 5 GB/s, 0.2 ms a MB (docs/fitting.md).
+RECOPY_BYTES = 2 << 20
 
 
 def to_device(value, dtype=None):
@@ -53,7 +60,8 @@ def to_device(value, dtype=None):
 
 def host_arrays(tree):
     """Every leaf of ``tree`` as a NumPy array of the dtype `to_device` would give it on the device (float64 ->
-    float32 without float64 mode): data that a pipeline stacks or cuts on the host before it moves them once."""
+    float32 without float64 mode): the fitting pipeline's data, which it stacks and cuts on the host and hands to
+    compiled programs as they are (`for_calls`)."""
     def host(leaf):
         array = np.asarray(leaf)
         return array.astype(jax.dtypes.canonicalize_dtype(array.dtype), copy=False)
@@ -79,6 +87,24 @@ def on_device(tree):
             out[i] = moved
     moved = structure.unflatten(out)
     return {key: moved[key] for key in tree} if type(tree) is dict else moved
+
+
+def for_calls(tree, calls: int):
+    """``tree``'s leaves as the ``calls`` calls of compiled programs that read them take them most cheaply: NumPy
+    arrays (`host_arrays`), which each call copies to the device itself, in JAX's C++ dispatch (microseconds an
+    array), or device arrays (`on_device`) where those copies would cost more than one ``jax.device_put``: more than
+    `RECOPY_BYTES` copied again by the calls after the first.
+
+    Arguments:
+        tree: a pytree of NumPy arrays, numbers or JAX arrays.
+        calls: how many program calls will read every leaf.
+
+    Returns:
+        The same tree, of NumPy arrays or of JAX arrays.
+    """
+    host = host_arrays(tree)
+    size = sum(np.asarray(leaf).nbytes for leaf in jax.tree_util.tree_leaves(host))
+    return on_device(host) if (calls - 1) * size > RECOPY_BYTES else host
 
 
 def on_host(tree):

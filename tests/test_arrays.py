@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import brdffit  # noqa: F401  (float64)
-from brdffit.arrays import jitted, on_device, padded_columns, to_device
+from brdffit.arrays import RECOPY_BYTES, for_calls, jitted, on_device, padded_columns, to_device
 
 
 @pytest.mark.parametrize("value, dtype", [(np.arange(5.0), None), (np.arange(4), None), (np.arange(4), float),
@@ -110,3 +110,17 @@ def test_on_device_moves_a_dict_and_keeps_its_order_of_keys():
     assert list(moved) == ["rho_d", "ks", "alpha"]
     assert all(isinstance(v, jax.Array) for v in moved.values())
     np.testing.assert_array_equal(moved["rho_d"], np.ones(3))
+
+
+def test_for_calls_moves_arrays_once_only_where_the_later_calls_would_copy_more_than_recopy_bytes():
+    # (calls − 1) × bytes against RECOPY_BYTES: a piece that one call reads, or a few calls of a small piece,
+    # stay NumPy (each call copies them in JAX's C++ dispatch); a large piece read by several calls is moved once.
+    small = {"values": np.ones((1, 4096, 3)), "mask": np.ones((1, 4096, 3), bool)}  # 110,592 bytes
+    large = {"values": np.ones((1, RECOPY_BYTES // 8, 1)), "mask": np.ones((1, 8, 1), bool)}  # just over
+    for tree, calls, moved in [(small, 1, False), (small, 19, False), (small, 20, True), (large, 1, False),
+                               (large, 2, True)]:
+        out = for_calls(tree, calls)
+        assert all(isinstance(v, jax.Array) == moved for v in out.values()), (calls, moved)
+        assert all(isinstance(v, np.ndarray) != moved for v in out.values())
+        np.testing.assert_array_equal(out["values"], tree["values"])
+        assert out["mask"].dtype == np.bool_

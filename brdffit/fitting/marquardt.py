@@ -66,6 +66,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..arrays import on_device
 from ..defaults import FIT
 from ..params import bound_margin
 from .moments import applies, moment_sums
@@ -257,7 +258,8 @@ def _scatter(sums: NormalEquations, chosen, shape: tuple, base: NormalEquations 
 class _State:
     """The batch's current points: physical values ``x (M, S, P)`` with their amplitudes projected, the pass's
     sums moved with them (see the module doc), and, when the solve keeps them, the pass's arrays of each piece
-    (`accumulate` with ``values=True``), at the evaluated point, before the projection moved ``x`` by ``delta``;
+    at the evaluated point, before the projection moved ``x`` by ``delta`` (`_point_arrays`: each point's own
+    arrays, referenced, so that choosing between two states copies no array);
     ``spread`` ``(M, S)`` is the magnitude of the terms of the projection's predicted cost change (`_TRUSTED_SPREAD`,
     0 where it did not move)."""
 
@@ -278,16 +280,29 @@ class _State:
             values = self.values
         elif not take.any():
             values = other.values
-        else:  # on the host, where the metric sums of the kept model values are formed (`metric_sums_of`)
-            tangents, values = np.reshape(take, take.shape + (1, 1, 1)), take[..., None, None]
-            values = [(np.where(tangents, a, c), np.where(values, np.asarray(f), np.asarray(g)))
-                      for (a, f), (c, g) in zip(self.values, other.values)]
+        else:
+            values = [(np.where(take, a, c), np.where(take, f, g)) for (a, f), (c, g) in zip(self.values, other.values)]
         transformed = None
         if self.transformed is not None and other.transformed is not None:
             transformed = tuple(pick(a, b) for a, b in zip(self.transformed, other.transformed))
         return _State(pick(self.x, other.x), NormalEquations(*(pick(a, b) for a, b in zip(self.sums, other.sums))),
                       pick(self.delta, other.delta), pick(self.evaluated, other.evaluated), values,
                       pick(self.spread, other.spread), transformed)
+
+
+def _point_arrays(kept: list) -> list:
+    """A pass's arrays of each piece (`accumulate` with ``values=True``: tangents and residuals ``(M, S, C, Q + 1,
+    N)`` and model values ``(M, S, N, C)``) as ``(M, S)`` object arrays of each point's own arrays (views, on the
+    host, where the meat and the metric sums of the kept values are formed): `_State.where` then picks a point's
+    arrays without copying them, at every step of a solve that keeps them."""
+    out = []
+    for a, f in kept:
+        f = np.asarray(f)
+        tangents, values = np.empty(a.shape[:2], object), np.empty(f.shape[:2], object)
+        for m, s in np.ndindex(a.shape[:2]):
+            tangents[m, s], values[m, s] = a[m, s], f[m, s]
+        out.append((tangents, values))
+    return out
 
 
 class _Batch:
@@ -385,7 +400,7 @@ class _Batch:
         if not self.compact:
             # A solve that keeps its passes' arrays forms the meat of its answer only (`solve`).
             out = accumulate(self.problem, self.trees(x), self.pieces, values=self.keep, meat=not self.keep)
-            return out if self.keep else (out, None)
+            return (out[0], _point_arrays(out[1])) if self.keep else (out, None)
         chosen = np.flatnonzero(points.ravel())
         return _scatter(self.gathered_sums(x, chosen), chosen, points.shape, base.sums if base is not None else None), \
             None
@@ -637,6 +652,8 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         the material's answer (`answer`, True for one point a material).
     """
     layout, free = problem.layout, problem.free
+    # Every pass reads the pieces: on the device once (the pipeline keeps its data on the host, docs/fitting.md).
+    pieces = [on_device(piece) for piece in pieces]
     materials, count = len(starts), len(starts[0])
     compact = materials > 1 and materials * count > _COMPACT_POINTS
     batch = _Batch(problem, pieces, keep=metrics and not compact, compact=compact)
@@ -747,8 +764,8 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         own = np.flatnonzero(formed.ravel())
         if own.size:
             material_of = own // count
-            tangents = [np.reshape(a, (-1, 1) + np.shape(a)[2:])[own] for a, _ in state.values]
-            values = [np.reshape(np.asarray(f), (-1, 1) + np.shape(f)[2:])[own] for _, f in state.values]
+            tangents = [np.stack(list(a.ravel()[own]))[:, None] for a, _ in state.values]
+            values = [np.stack(list(f.ravel()[own]))[:, None] for _, f in state.values]
             parts = (meat_of(problem, tangents), metric_sums_of(values, pieces, materials=material_of),
                      noise_grams_of(problem, tangents, values, pieces, materials=material_of))
             meat, metric_sums, noise_grams = (np.reshape(a, (own.size,) + np.shape(a)[2:]) for a in parts)

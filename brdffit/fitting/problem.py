@@ -223,20 +223,21 @@ def take_samples(data: FitData, rows) -> FitData:
 
 def stack_data(items: list[FitData]) -> FitData:
     """Stack equally shaped `FitData` along a new leading axis (for the vmapped `fit_many`; one item: an axis of
-    1)."""
-    return on_device(jax.tree_util.tree_map(lambda *xs: np.stack(xs), *on_host(list(items))))
+    1), as NumPy arrays: each call of a compiled program moves its arguments itself, in JAX's C++ dispatch, far
+    cheaper than a ``jax.device_put`` (docs/fitting.md)."""
+    return host_arrays(jax.tree_util.tree_map(lambda *xs: np.stack(xs), *on_host(list(items))))
 
 
 def take_materials(data: FitData, materials) -> FitData:
     """The materials ``materials`` (integer indices, repeats allowed) of stacked ``data`` (`stack_data`), stacked
-    in that order."""
+    in that order (NumPy arrays, as `stack_data` gives them)."""
     materials = np.asarray(materials, dtype=np.intp)
-    return on_device(jax.tree_util.tree_map(lambda a: a[materials], on_host(data)))
+    return host_arrays(jax.tree_util.tree_map(lambda a: a[materials], on_host(data)))
 
 
 def sample_pieces(data: FitData, size: int) -> list[FitData]:
     """Stacked ``data`` (`stack_data`: a leading material axis) in pieces of ``size`` samples, every material in
-    each piece, on the device; the last piece is padded with masked samples so that every piece has the same shape
+    each piece, as NumPy arrays (`stack_data`); the last piece is padded with masked samples so that every piece has the same shape
     (one compilation serves all). Data of at most ``size`` samples is one piece.
 
     Arguments:
@@ -254,7 +255,7 @@ def sample_pieces(data: FitData, size: int) -> list[FitData]:
         part = a[:, start:start + width]
         return np.concatenate([part, np.zeros((a.shape[0], width - part.shape[1]) + a.shape[2:], a.dtype)], axis=1)
 
-    return [FitData(**on_device(dict(fields, **{k: jax.tree_util.tree_map(lambda a: cut(a, start), fields[k])
+    return [FitData(**host_arrays(dict(fields, **{k: jax.tree_util.tree_map(lambda a: cut(a, start), fields[k])
                                                  for k in PER_SAMPLE})))
             for start in range(0, max(n, 1), width)]
 

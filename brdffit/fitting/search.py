@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..arrays import on_device
+from ..arrays import for_calls, host_arrays
 from ..params import bound_margin
 from .losses import get_loss
 from .problem import FitData, Problem, residual_fn, sample_pieces
@@ -301,11 +301,13 @@ def score(problem: Problem, candidates: list, data: FitData, width: int = SCORE_
     specs = problem.specs
     lower, upper = [specs[a].lower for a in names], [specs[a].upper for a in names]
     materials, n = np.shape(data.values)[:2]
-    pieces = sample_pieces(data, n if piece is None else piece)
     batches = _batches(candidates, materials, width)
+    # Each piece is read by every batch's call of the sums' program and, scored by the loss itself, of the cost's.
+    calls = len(batches) * (bool(names) + (not (names and quadratic)))
+    pieces = [for_calls(p, calls) for p in sample_pieces(data, n if piece is None else piece)]
 
     def added(program, params):  # a program's outputs summed over the pieces, on the host, cut to the chunk
-        params = on_device(params)
+        params = host_arrays(params)
         outputs = [program(params, p) for p in pieces]
         return [sum(np.asarray(out[j], dtype=float) for out in outputs) for j in range(len(outputs[0]))]
 
