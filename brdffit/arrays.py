@@ -122,7 +122,7 @@ def traced(tree) -> bool:
 def jitted(fn):
     """``jax.jit(fn)`` with brdffit's compiler options (`brdffit.programs.compiler_options`), made once per function
     so that its compilations are reused across calls."""
-    from .programs import compiler_options  # here: brdffit.programs imports this module
+    from .programs import compiler_options  # here: brdffit.programs loads JAX, which `brdffit info` does not
 
     return jax.jit(fn, compiler_options=compiler_options())
 

@@ -38,9 +38,9 @@ import threading
 from pathlib import Path
 
 import jax
+import numpy as np
 from jax._src import config as _jax_config  # its options as thread-local context managers
 
-from .arrays import traced
 
 __all__ = ["Program", "program_directory", "compiler_options", "prefetch", "record"]
 
@@ -119,24 +119,25 @@ class Program:
         static = tuple(args[i] for i in self._static)
         dynamic = tuple(a for i, a in enumerate(args) if i not in self._static)
         leaves, tree = jax.tree_util.tree_flatten(dynamic)
-        if traced(leaves):
+        kinds = _kinds(leaves)
+        if kinds is None:
             return self._jit(*args)
-        signature = (static, tree, tuple(jax.api_util.shaped_abstractify(leaf) for leaf in leaves))
-        executable = self._compiled.get(signature)
+        key = (static, tree, kinds)
+        executable = self._compiled.get(key)
         if executable is not None:
             return executable(*leaves)
-        with self._locks.setdefault(signature, threading.Lock()):  # one thread compiles a signature
-            executable = self._compiled.get(signature)
+        with self._locks.setdefault(key, threading.Lock()):  # one thread compiles a signature
+            executable = self._compiled.get(key)
             if executable is not None:
                 return executable(*leaves)
-            path, text = self._path(signature)
+            path, text = self._path((static, tree, tuple(jax.api_util.shaped_abstractify(leaf) for leaf in leaves)))
             if path is not None:
                 _used(path)
             executable = _load(path, text) if path is not None else None
             out = _run(executable, leaves)
             if out is None:  # nothing kept, or a kept file that does not run: compile (and keep)
                 executable, out = self._compile(static, tree, leaves, path, text)
-            self._compiled[signature] = executable
+            self._compiled[key] = executable
         return out
 
     def _of_leaves(self, static: tuple, tree):
@@ -180,6 +181,25 @@ class Program:
             compiled = program.lower(*leaves).compile(compiler_options=compiler_options())
         out = _keep(path, text, compiled, leaves)
         return compiled, (compiled(*leaves) if out is None else out)
+
+
+def _kinds(leaves) -> tuple | None:
+    """What of each array argument decides the executable in this process: its shape, its dtype as JAX takes it
+    (canonical: float64 is float32 without float64 mode) and whether its type is weak; None where a leaf is a tracer
+    (the call is being traced). Cheaper than ``jax.api_util.shaped_abstractify``, which took 9 µs for a NumPy array
+    (a pass has some twenty), and used as the in-memory key only: the file's key text is formed from the abstract
+    values, once per signature."""
+    kinds = []
+    for leaf in leaves:
+        if isinstance(leaf, np.ndarray):
+            kinds.append((leaf.shape, jax.dtypes.canonicalize_dtype(leaf.dtype), False))
+        elif isinstance(leaf, jax.core.Tracer):
+            return None
+        elif isinstance(leaf, jax.Array):
+            kinds.append((leaf.shape, leaf.dtype, leaf.weak_type))
+        else:  # a number or a NumPy scalar
+            kinds.append(jax.api_util.shaped_abstractify(leaf))
+    return tuple(kinds)
 
 
 def _run(executable, leaves):

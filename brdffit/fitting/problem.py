@@ -7,6 +7,7 @@ amplitudes are projected out); `FitData` holds the arrays.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any, NamedTuple
 
 import jax
@@ -75,9 +76,10 @@ class Problem:
         (the key of the compiled passes and of the search's scoring, shared by every solver and stage)."""
         return dataclasses.replace(self, solver=None, max_steps=0)
 
-    @property
+    @functools.cached_property
     def layout(self) -> Layout:
-        """The model's parameter layout."""
+        """The model's parameter layout (`brdffit.models.layout.layout`, kept on the problem: a solve asks for it
+        thousands of times, and each lookup of the shared cache hashes the lobes)."""
         return layout(self.lobes, self.channels)
 
     @property

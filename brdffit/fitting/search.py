@@ -107,12 +107,14 @@ def _from_unit(u, spec) -> float:
     return float(lo + u * (hi - lo))
 
 
-def _to_unit(value, spec) -> float:
+def _to_units(values, spec) -> np.ndarray:
+    """Where ``values`` (one a candidate; a colour parameter's channels averaged) lie in ``spec``'s search range,
+    as fractions of it (of its logarithm for a scale parameter), clipped to [0, 1]."""
     lo, hi = search_range(spec)
-    value = float(np.mean(value))
+    values = np.asarray(values, dtype=float)
     if _log_axis(spec):
-        return float(np.clip((np.log(max(value, lo)) - np.log(lo)) / (np.log(hi) - np.log(lo)), 0.0, 1.0))
-    return float(np.clip((value - lo) / (hi - lo), 0.0, 1.0))
+        return np.clip((np.log(np.maximum(values, lo)) - np.log(lo)) / (np.log(hi) - np.log(lo)), 0.0, 1.0)
+    return np.clip((values - lo) / (hi - lo), 0.0, 1.0)
 
 
 def _grid_units(d: int, seed: int, count: int = MAX_CANDIDATES) -> np.ndarray:
@@ -418,7 +420,9 @@ def search(problem: Problem, base: dict, data: FitData, seed: int, candidates: l
         full.append(params)
     # Equivalent settings (Lafortune lobes in another order) are one candidate: put each in canonical order.
     full = [canonical(problem, p) for p in full]
-    units = np.array([[_to_unit(p[s.name], s) for s in outer] for p in full]).reshape(len(full), len(outer))
+    units = np.zeros((len(full), len(outer)))
+    for k, s in enumerate(outer):
+        units[:, k] = _to_units([np.mean(p[s.name]) for p in full], s)
     if screen is not None and len(full) > SCREEN_ABOVE:
         costs, amplitudes = _screened(scoring, full, data, screen, units, starts, separation)
     else:

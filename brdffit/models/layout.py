@@ -68,6 +68,7 @@ class Layout:
     def __init__(self, lobes: tuple, channels: int):
         self.lobes = tuple(lobes)
         self.channels = int(channels)
+        self._incidence: dict = {}  # `channel_incidence` by names
         declared = {spec.name for lobe in self.lobes for spec in lobe.param_specs()}
         seen: Counter[str] = Counter()
         taken: set[str] = set()
@@ -166,7 +167,14 @@ class Layout:
 
     def channel_incidence(self, names) -> tuple[np.ndarray, np.ndarray]:
         """For each scalar of ``names`` (flattened order): the index of its name, and the channels it acts on
-        ``(P, C)`` (every channel for a shape parameter, its own for a colour parameter)."""
+        ``(P, C)`` (every channel for a shape parameter, its own for a colour parameter). Read-only arrays, made once
+        per ``names`` (every pass of a solve asks)."""
+        key = tuple(names)
+        if key not in self._incidence:
+            self._incidence[key] = self._channel_incidence(key)
+        return self._incidence[key]
+
+    def _channel_incidence(self, names: tuple) -> tuple[np.ndarray, np.ndarray]:
         index, incidence = [], []
         for q, name in enumerate(names):
             if self[name].shape:
@@ -175,7 +183,9 @@ class Layout:
             else:
                 index.append(q)
                 incidence.append(np.ones(self.channels))
-        return np.asarray(index, dtype=int), np.asarray(incidence).reshape(-1, self.channels)
+        index, incidence = np.asarray(index, dtype=int), np.asarray(incidence).reshape(-1, self.channels)
+        index.flags.writeable = incidence.flags.writeable = False
+        return index, incidence
 
 
 def _check_shared(j: int, lobe, specs, latest: dict) -> None:
