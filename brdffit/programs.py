@@ -41,7 +41,6 @@ import jax
 import numpy as np
 from jax._src import config as _jax_config  # its options as thread-local context managers
 
-
 __all__ = ["Program", "program_directory", "compiler_options", "prefetch", "record"]
 
 _FOLDER = "brdffit-programs"

@@ -101,6 +101,27 @@ def test_each_signature_is_compiled_once_and_kept(kept_in):
     assert TRACES == [(5,)]
 
 
+def test_numpy_and_device_arguments_share_an_executable_and_dtype_or_weak_type_keys_another(kept_in):
+    # The in-memory key (`programs._kinds`): shape, canonical dtype and weak type, whatever holds the array.
+    program = Program(polynomial(), "polynomial")
+    x, data = arguments(5)
+    expected = np.sin(np.asarray(x)) * 2.0 + np.arange(5) ** 2
+    host = (np.asarray(x), {k: np.asarray(v) for k, v in data.items()})
+    for args in (host, (x, data), host):
+        out = program(*args)
+        assert out.dtype == np.float64
+        np.testing.assert_allclose(out, expected, rtol=1e-15)
+    assert TRACES == [(5,)]
+    single = program(host[0].astype(np.float32), {k: v.astype(np.float32) for k, v in host[1].items()})
+    assert single.dtype == np.float32 and TRACES == [(5,), (5,)]
+    np.testing.assert_allclose(single, expected, rtol=1e-6)
+    weak = program(0.5, {"a": 2.0, "b": 3.0})  # Python numbers: weakly typed scalars
+    assert TRACES == [(5,), (5,), ()]
+    np.testing.assert_allclose(weak, np.sin(0.5) * 2.0 + 9.0, rtol=1e-15)
+    program(np.float64(0.5), {"a": np.asarray(2.0), "b": np.asarray(3.0)})  # the same shapes, strongly typed
+    assert TRACES == [(5,), (5,), (), ()]
+
+
 def test_a_damaged_file_is_compiled_again(kept_in):
     Program(polynomial(), "polynomial")(*arguments(6))
     (path,) = kept_in.glob("*.bin")

@@ -239,8 +239,8 @@ def take_materials(data: FitData, materials) -> FitData:
 
 def sample_pieces(data: FitData, size: int) -> list[FitData]:
     """Stacked ``data`` (`stack_data`: a leading material axis) in pieces of ``size`` samples, every material in
-    each piece, as NumPy arrays (`stack_data`); the last piece is padded with masked samples so that every piece has the same shape
-    (one compilation serves all). Data of at most ``size`` samples is one piece.
+    each piece, as NumPy arrays (`stack_data`); the last piece is padded with masked samples so that every piece has
+    the same shape (one compilation serves all). Data of at most ``size`` samples is one piece.
 
     Arguments:
         data: `FitData` with leading axes (materials, samples) on the per-sample fields.
