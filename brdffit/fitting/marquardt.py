@@ -66,11 +66,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..arrays import on_device
 from ..defaults import FIT
 from ..params import bound_margin
 from .moments import applies, moment_sums
-from .normal_equations import NormalEquations, accumulate, meat_of, metric_sums_of, noise_grams_of, timed
+from .normal_equations import (NormalEquations, accumulate, meat_of, metric_sums_of, noise_grams_of, pass_pieces,
+                               timed)
 from .outcome import SolveOutcome
 from .problem import FitData, Problem
 from .search import POLISH_STARTS
@@ -652,9 +652,8 @@ def solve(problem: Problem, starts: list[list[dict]], pieces: list[FitData], *, 
         the material's answer (`answer`, True for one point a material).
     """
     layout, free = problem.layout, problem.free
-    # Every pass reads the pieces: on the device once (the pipeline keeps its data on the host, docs/fitting.md).
-    pieces = [on_device(piece) for piece in pieces]
     materials, count = len(starts), len(starts[0])
+    pieces = pass_pieces(pieces, (materials, count))  # every pass reads them
     compact = materials > 1 and materials * count > _COMPACT_POINTS
     batch = _Batch(problem, pieces, keep=metrics and not compact, compact=compact)
     x = np.stack([np.stack([layout.flatten(s, free) for s in material]) for material in starts]).astype(float)

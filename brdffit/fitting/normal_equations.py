@@ -37,7 +37,7 @@ from .search import POLISH_STARTS
 
 __all__ = ["NormalEquations", "pass_program", "chunks", "accumulate", "compile_seconds", "timed_first_calls",
            "shape_key", "metric_sums_of", "meat_of", "noise_grams_of", "NOISE_FORMS", "CHUNK_SAMPLES", "SLOTS",
-           "SLOT_ROWS"]
+           "SLOT_ROWS", "pass_pieces"]
 
 CHUNK_SAMPLES = BUCKET_CHUNK  # padded data then splits into whole chunks
 # A pass over one material's data of at most SLOTS × SLOT_ROWS samples runs on SLOTS slots of rows (`_slots`): the
@@ -382,6 +382,15 @@ def _slots(batch: tuple, pieces: list[FitData], materials) -> str | None:
     if batch[1] == 1 and rows % SLOTS == 0 and rows <= SLOTS * SLOT_ROWS:
         return "rows"
     return None
+
+
+def pass_pieces(pieces: list[FitData], batch: tuple) -> list[FitData]:
+    """The pieces as the passes over a batch of shape ``batch`` ``(M, S)`` read them at every step of a solve: as they
+    are where the passes lay them out on slots (`_slotted` moves that layout to the device once), else on the device
+    (the pipeline keeps its data on the host, docs/fitting.md)."""
+    if _slots(batch, pieces, None) is not None:
+        return pieces
+    return [on_device(piece) for piece in pieces]
 
 
 _SLOTTED = threading.local()  # per thread: the last pieces laid out on slots, with the pieces themselves
